@@ -1,0 +1,44 @@
+# The two commands: `make run` (console on the simulator) and `make test` (the whole suite).
+# Each creates .venv when missing and keeps it in step with pyproject.toml.
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+HOST   ?= 127.0.0.1
+PORT   ?= 8000
+ARGS   ?=
+
+.PHONY: run test bench lint node-deps clean
+
+$(VENV)/.installed-run: pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e .
+	touch $@
+
+$(VENV)/.installed-test: pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $(VENV)/.installed-run $@
+
+tests/node/node_modules/.installed: tests/node/package.json tests/node/package-lock.json
+	cd tests/node && npm ci --no-audit --no-fund --loglevel=error
+	touch $@
+
+node-deps: tests/node/node_modules/.installed
+
+run: $(VENV)/.installed-run
+	$(VENV)/bin/uav-console serve --host $(HOST) --port $(PORT) $(ARGS)
+
+test: $(VENV)/.installed-test node-deps
+	$(PY) -m pytest $(ARGS)
+
+bench: $(VENV)/.installed-test
+	$(VENV)/bin/uav-console bench $(ARGS)
+
+lint: $(VENV)/.installed-test
+	$(VENV)/bin/ruff check server drone tests bench tools
+	$(VENV)/bin/ruff format --check server drone tests bench tools
+
+clean:
+	rm -rf $(VENV) tests/node/node_modules .pytest_cache .ruff_cache .mypy_cache

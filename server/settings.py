@@ -1,0 +1,82 @@
+"""One Settings object, read once from flags and ``UAVC_*`` environment variables, passed down."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+class SettingsError(ValueError):
+    """A setting has a value that cannot be used; the message names it."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    host: str = "127.0.0.1"
+    port: int = 8000
+    rosbridge_port: int | None = None  # also serve rosbridge on its own port (9090 by custom)
+    drone: str = "sim"  # "sim" or the IP of a real AR.Drone 2.0
+    world: str = "indoor"  # indoor | outdoor | path to a world file
+    fleet: int = 1
+    sim_base_addr: str = "127.0.0.2"  # first simulated drone's loopback address
+    token: str | None = None  # pilot token; generated and stored on first start if None
+    observer_token: str | None = None
+    allow_origins: tuple[str, ...] = ()
+    data_dir: Path = field(default_factory=lambda: Path.home() / ".local/share/uav-console")
+    grammar_dir: Path = ROOT / "grammars"
+    model_dir: Path = ROOT / "models" / "captioner"
+    max_frame_bytes: int = 16 * 1024 * 1024
+    rate_limit_per_s: float = 2000.0  # frames per second per connection (token bucket)
+    rate_burst: int = 4000
+    heartbeat_timeout_s: float = 1.0  # operator lost while jogging -> hover (DESIGN §5)
+    link_timeout_s: float = 0.5  # no navdata for this long -> link lost (DESIGN §5)
+    confidence_threshold: float = 0.5
+    battery_low_pct: float = 25.0
+    battery_critical_pct: float = 12.0
+    altitude_ceiling_m: float = 2.8
+    ans_period_s: float = 0.5
+    search_after_s: float = 1.5
+    seed: int = 1
+    sim_speed: float = 1.0  # real-time factor of a socket-served simulator
+    open_browser: bool = False
+
+    def with_(self, **changes: Any) -> Settings:
+        return replace(self, **changes)
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str] | None = None, **overrides: Any) -> Settings:
+        """Read ``UAVC_<FIELD>`` variables (e.g. ``UAVC_PORT=9000``), then apply ``overrides``."""
+        env = os.environ if env is None else env
+        values: dict[str, Any] = {}
+        for f in fields(cls):
+            raw = env.get(f"UAVC_{f.name.upper()}")
+            if raw is None:
+                continue
+            values[f.name] = _cast(f.name, f.type, raw)
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(**values)
+
+
+def _cast(name: str, type_: Any, raw: str) -> Any:
+    kind = str(type_)
+    try:
+        if "tuple" in kind:
+            return tuple(s.strip() for s in raw.split(",") if s.strip())
+        if "Path" in kind:
+            return Path(raw).expanduser()
+        if kind.startswith("bool"):
+            if raw.lower() not in {"1", "0", "true", "false", "yes", "no"}:
+                raise ValueError(raw)
+            return raw.lower() in {"1", "true", "yes"}
+        if kind.startswith("int"):
+            return int(raw)
+        if kind.startswith("float"):
+            return float(raw)
+        return raw
+    except ValueError as exc:
+        raise SettingsError(f"UAVC_{name.upper()}={raw!r} is not a valid {kind}") from exc
