@@ -1,0 +1,217 @@
+"""Simulator and AR.Drone codec benchmarks; prints a table of medians and ratios.
+
+Rows:
+  lockstep RTF (no camera)   simulated seconds per wall second: DriverProtocol ↔ InMemoryLink ↔
+                             SimDrone at 100 Hz with navdata at 15 Hz; baseline: physics alone
+                             (SimDrone.step without the wire) in the same run. Target ≥ 100×.
+  lockstep RTF (camera)      the same plus a 640×360 render every 1/15 s. Target ≥ 10×.
+  camera                     ms per rendered frame (drone.sim.camera); budget 5 ms.
+  navdata decode / encode    µs per demo packet; baseline: pyardrone's ctypes parser.
+  AT encode / parse          µs per AT*PCMD; baseline: pyardrone's ATCommand._pack.
+  H.264 encode+decode        ms per 640×360 frame (drone.ardrone.video); budget 66.7 ms (15 fps).
+
+Usage: ``python bench/sim.py [--repeats N] [--seconds S]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from drone.ardrone import at
+from drone.ardrone.driver import DriverProtocol
+from drone.ardrone.navdata import (
+    CtrlState,
+    Demo,
+    DroneState,
+    Navdata,
+    decode_navdata,
+    encode_navdata,
+)
+from drone.sim.drone import SimDrone
+from drone.sim.link import InMemoryLink
+
+DT = 0.01
+CAMERA_PERIOD_S = 1.0 / 15.0
+
+
+def _world() -> object | None:
+    try:
+        from drone.sim.world import load_world
+
+        return load_world("indoor")
+    except Exception as exc:  # the world module is another engineer's; report, do not crash
+        print(f"(no indoor world: {exc}; camera rows skipped)", file=sys.stderr)
+        return None
+
+
+def _flight(link: InMemoryLink, proto: DriverProtocol, seconds: float, camera: bool) -> float:
+    """Scripted flight; returns simulated seconds per wall second."""
+    sim = link.sim
+    script = [(0.0, "takeoff"), (5.0, "fwd"), (8.0, "yaw"), (11.0, "hover"), (13.0, "back")]
+    next_frame = 0.0
+    t0 = time.perf_counter()
+    start = sim.time
+    i = 0
+    while sim.time - start < seconds:
+        rel = (sim.time - start) % 20.0
+        while i < len(script) and rel >= script[i][0]:
+            cmd = script[i][1]
+            if cmd == "takeoff":
+                proto.takeoff()
+            elif cmd == "fwd":
+                proto.move(0.0, -0.4, 0.0, 0.0)
+            elif cmd == "yaw":
+                proto.move(0.1, 0.0, 0.1, 0.5)
+            elif cmd == "hover":
+                proto.hover()
+            else:
+                proto.move(0.0, 0.4, -0.1, 0.0)
+            i += 1
+        if rel < DT:
+            i = 0
+        link.step(sim.time, DT)
+        if camera and sim.time >= next_frame:
+            sim.render_frame()
+            next_frame += CAMERA_PERIOD_S
+    return (sim.time - start) / (time.perf_counter() - t0)
+
+
+def rtf(seconds: float, camera: bool, world: object | None) -> float:
+    sim = SimDrone(world, seed=1)
+    proto = DriverProtocol()
+    link = InMemoryLink(proto, sim)
+    link.start()
+    link.run(1.0)
+    return _flight(link, proto, seconds, camera)
+
+
+def physics_only_rtf(seconds: float) -> float:
+    sim = SimDrone(seed=1)
+    sim.physics.takeoff()
+    n = round(seconds / DT)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        sim.step(DT)
+    return seconds / (time.perf_counter() - t0)
+
+
+def per_call(fn: Callable[[], object], n: int) -> float:
+    """Seconds per call of ``fn`` over ``n`` calls."""
+    t0 = time.perf_counter()
+    for _ in range(n):
+        fn()
+    return (time.perf_counter() - t0) / n
+
+
+def median_of(repeats: int, fn: Callable[[], float]) -> float:
+    return statistics.median(fn() for _ in range(repeats))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per run")
+    args = ap.parse_args(argv)
+    r = args.repeats
+    world = _world()
+    rows: list[tuple[str, float, str, str, float | None, str]] = []
+
+    base = median_of(r, lambda: physics_only_rtf(args.seconds))
+    lock = median_of(r, lambda: rtf(args.seconds, False, world))
+    rows.append(("lockstep RTF, no camera", lock, "x", "target 100x", lock / 100.0, "x target"))
+    rows.append(("  physics only (baseline)", base, "x", "", lock / base, "lockstep/physics"))
+    if world is not None:
+        cam = median_of(r, lambda: rtf(args.seconds / 4, True, world))
+        rows.append(("lockstep RTF, camera 15 fps", cam, "x", "target 10x", cam / 10.0, "x target"))
+        sim = SimDrone(world, seed=1)
+        sim.render_frame()  # warm the renderer's caches
+        ms = median_of(r, lambda: per_call(sim.render_frame, 50)) * 1e3
+        rows.append(("camera render", ms, "ms/frame", "budget 5 ms", ms / 5.0, "x budget"))
+
+    demo = Demo(CtrlState.FLYING << 16, 80, 1234.5, -321.0, 45000.0, 812, 250.0, -30.0, 12.0, 7)
+    packet = encode_navdata(Navdata(DroneState.FLY | DroneState.NAVDATA_DEMO, 42, 0, demo))
+    dec = median_of(r, lambda: per_call(lambda: decode_navdata(packet), 20000)) * 1e6
+    nav = decode_navdata(packet)
+    enc = median_of(r, lambda: per_call(lambda: encode_navdata(nav), 20000)) * 1e6
+    try:
+        from pyardrone.navdata import NavData
+
+        theirs = median_of(r, lambda: per_call(lambda: NavData(packet), 20000)) * 1e6
+        rows.append(
+            (
+                "navdata decode (demo)",
+                dec,
+                "us/msg",
+                f"pyardrone {theirs:.1f} us",
+                dec / theirs,
+                "ours/theirs",
+            )
+        )
+    except ImportError:
+        rows.append(("navdata decode (demo)", dec, "us/msg", "", None, ""))
+    rows.append(("navdata encode (demo)", enc, "us/msg", "", None, ""))
+
+    enc_at = at.ATEncoder()
+    pcmd = at.Pcmd(1, -0.25, 0.5, 0.1, -0.75)
+    at_us = median_of(r, lambda: per_call(lambda: enc_at.encode(pcmd), 20000)) * 1e6
+    wire = at.encode_command(pcmd, 5)
+    parse_us = median_of(r, lambda: per_call(lambda: at.parse_at(wire), 20000)) * 1e6
+    try:
+        from pyardrone import at as pat
+
+        their = pat.PCMD(1, -0.25, 0.5, 0.1, -0.75)
+        theirs_at = median_of(r, lambda: per_call(lambda: their._pack(5), 20000)) * 1e6
+        rows.append(
+            (
+                "AT encode (PCMD)",
+                at_us,
+                "us/msg",
+                f"pyardrone {theirs_at:.1f} us",
+                at_us / theirs_at,
+                "ours/theirs",
+            )
+        )
+    except ImportError:
+        rows.append(("AT encode (PCMD)", at_us, "us/msg", "", None, ""))
+    rows.append(("AT parse (PCMD)", parse_us, "us/msg", "", None, ""))
+
+    try:
+        from drone.ardrone import video
+
+        if world is not None:
+            sim = SimDrone(world, seed=1)
+            frames = [sim.render_frame() for _ in range(30)]
+
+            def codec() -> float:
+                e, d = video.H264Encoder(), video.H264Decoder()
+                t0 = time.perf_counter()
+                for f in frames:
+                    for p in e.encode(f):  # type: ignore[arg-type]
+                        d.decode_packet(video.VideoPacket(p.header, p.payload))
+                return (time.perf_counter() - t0) / len(frames)
+
+            h264 = median_of(r, codec) * 1e3
+            rows.append(
+                ("H.264 encode+decode", h264, "ms/frame", "budget 66.7 ms", h264 / 66.7, "x budget")
+            )
+    except ImportError:
+        print("(no drone.ardrone.video: H.264 row skipped)", file=sys.stderr)
+
+    print(f"bench/sim.py — medians of {r} runs, {args.seconds:.0f} s simulated per lockstep run")
+    print(f"{'metric':32} {'median':>10} {'unit':9} {'baseline':22} {'ratio':>8}  ")
+    print("-" * 100)
+    for name, value, unit, baseline, ratio, how in rows:
+        rs = f"{ratio:8.2f}  {how}" if ratio is not None else ""
+        print(f"{name:32} {value:10.2f} {unit:9} {baseline:22} {rs}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
