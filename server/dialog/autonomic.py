@@ -1,0 +1,169 @@
+"""ANS: autonomic monitors, each with its own period, that preempt voluntary tasks.
+
+Each monitor looks at a :class:`VehicleSnapshot` and may raise an :class:`Alarm` (a sentence, a
+level and optionally a command that preempts the task manager). Monitors latch: an alarm fires
+once when its condition starts and re-arms only when the condition has cleared (with hysteresis
+for the battery), so the operator is told once, not every period.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from server.dialog.ports import VehicleSnapshot
+from server.dialog.states import FLYING, State
+
+
+@dataclass(frozen=True)
+class Alarm:
+    monitor: str
+    level: str  # info | warn | alert
+    text: str
+    action: Mapping[str, Any] | None = None
+
+
+@dataclass
+class BatteryMonitor:
+    """Low: tell the operator and return home; critical: land (DESIGN §5)."""
+
+    low_pct: float
+    critical_pct: float
+    period_s: float = 1.0
+    hysteresis_pct: float = 2.0
+    name: str = "battery"
+    _level: int = 0  # 0 ok, 1 low reported, 2 critical reported
+
+    def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
+        b = snap.battery_pct
+        if b > self.low_pct + self.hysteresis_pct:
+            self._level = 0
+        elif self._level == 2 and b > self.critical_pct + self.hysteresis_pct:
+            self._level = 1
+        flying = state in FLYING and snap.flying
+        if b <= self.critical_pct and self._level < 2:
+            self._level = 2
+            if flying:
+                return Alarm(
+                    self.name,
+                    "alert",
+                    f"Battery critical at {b:.0f} percent. Landing now.",
+                    {"action": "land"},
+                )
+            return Alarm(
+                self.name, "alert", f"Battery critical at {b:.0f} percent. Do not take off."
+            )
+        if b <= self.low_pct and self._level < 1:
+            self._level = 1
+            if flying and state is not State.RETURNING:
+                return Alarm(
+                    self.name,
+                    "warn",
+                    f"Battery low at {b:.0f} percent. Returning home.",
+                    {"action": "return_home"},
+                )
+            return Alarm(self.name, "warn", f"Battery low at {b:.0f} percent.")
+        return None
+
+
+@dataclass
+class AltitudeMonitor:
+    """Above the ceiling: warn and descend back under it."""
+
+    ceiling_m: float
+    period_s: float = 0.5
+    margin_m: float = 0.2
+    name: str = "altitude"
+    _over: bool = False
+
+    def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
+        if not snap.flying or snap.altitude_m <= self.ceiling_m:
+            if snap.altitude_m < self.ceiling_m - self.margin_m:
+                self._over = False
+            return None
+        if self._over:
+            return None
+        self._over = True
+        down = round(snap.altitude_m - self.ceiling_m + self.margin_m, 2)
+        return Alarm(
+            self.name,
+            "warn",
+            f"Altitude {snap.altitude_m:.1f} meters is above the ceiling of "
+            f"{self.ceiling_m:g} meters. Descending.",
+            {"action": "move", "direction": "down", "distance": down},
+        )
+
+
+@dataclass
+class LinkMonitor:
+    """No navdata: alert (the AR.Drone's own watchdog hovers it); tell when it comes back."""
+
+    period_s: float = 0.25
+    name: str = "link"
+    _lost: bool = False
+
+    def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
+        if not snap.link_ok and not self._lost:
+            self._lost = True
+            return Alarm(
+                self.name, "alert", "I lost the link to the drone. It will hover on its own."
+            )
+        if snap.link_ok and self._lost:
+            self._lost = False
+            return Alarm(self.name, "info", "The link to the drone is back.")
+        return None
+
+
+@dataclass
+class MarkersLostMonitor:
+    """While carrying out a task, no marker seen for ``after_s``: warn once."""
+
+    after_s: float
+    period_s: float = 0.5
+    name: str = "markers"
+    _since: float | None = None
+    _told: bool = False
+
+    def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
+        if snap.visible_markers or state not in (State.EXECUTING, State.SEARCHING):
+            self._since = None
+            self._told = False
+            return None
+        if self._since is None:
+            self._since = now
+        if not self._told and now - self._since >= self.after_s:
+            self._told = True
+            return Alarm(self.name, "warn", "I can no longer see any marker; searching.")
+        return None
+
+
+class Monitor:  # pragma: no cover - typing aid only
+    name: str
+    period_s: float
+
+    def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None: ...
+
+
+@dataclass
+class Autonomic:
+    """Runs each monitor on its own period; :meth:`step` returns the alarms now due."""
+
+    monitors: Sequence[Any]
+    _due: dict[str, float] = field(default_factory=dict)
+
+    def step(self, snap: VehicleSnapshot, state: State, now: float) -> list[Alarm]:
+        alarms: list[Alarm] = []
+        for m in self.monitors:
+            due = self._due.get(m.name, now)
+            if now + 1e-9 < due:
+                continue
+            # absolute deadlines: no drift; skip missed periods rather than bursting
+            nxt = due + m.period_s
+            self._due[m.name] = nxt if nxt > now else now + m.period_s
+            alarm = m.check(snap, state, now)
+            if alarm is not None:
+                alarms.append(alarm)
+        # the most severe first: a critical battery outranks an altitude warning
+        order = {"alert": 0, "warn": 1, "info": 2}
+        return sorted(alarms, key=lambda a: order.get(a.level, 3))

@@ -1,0 +1,93 @@
+"""ANS monitors: thresholds, latching, periods, and the SNS transition table."""
+
+from __future__ import annotations
+
+import pytest
+
+from server.dialog.autonomic import (
+    AltitudeMonitor,
+    Autonomic,
+    BatteryMonitor,
+    LinkMonitor,
+    MarkersLostMonitor,
+)
+from server.dialog.errors import IllegalTransition
+from server.dialog.ports import VehicleSnapshot
+from server.dialog.states import TRANSITIONS, State, next_state
+from server.language.nlu import NLU
+
+
+def snap(**kw: object) -> VehicleSnapshot:
+    base = {"battery_pct": 80.0, "altitude_m": 1.0, "flying": True}
+    base.update(kw)
+    return VehicleSnapshot(**base)  # type: ignore[arg-type]
+
+
+def test_battery_low_then_critical_fire_once_each() -> None:
+    m = BatteryMonitor(25, 12)
+    assert m.check(snap(battery_pct=30), State.EXECUTING, 0) is None
+    low = m.check(snap(battery_pct=24), State.EXECUTING, 1)
+    assert low is not None and low.level == "warn" and low.action == {"action": "return_home"}
+    assert m.check(snap(battery_pct=23), State.RETURNING, 2) is None  # latched
+    crit = m.check(snap(battery_pct=11), State.RETURNING, 3)
+    assert crit is not None and crit.level == "alert" and crit.action == {"action": "land"}
+    assert m.check(snap(battery_pct=10), State.LANDING, 4) is None
+    # recharged above low + hysteresis: re-armed
+    assert m.check(snap(battery_pct=90, flying=False), State.LANDED, 5) is None
+    again = m.check(snap(battery_pct=20, flying=False), State.LANDED, 6)
+    assert again is not None and again.action is None  # on the ground: tell, do not fly home
+
+
+def test_altitude_ceiling_descends_under_it() -> None:
+    m = AltitudeMonitor(2.8)
+    a = m.check(snap(altitude_m=3.2), State.EXECUTING, 0)
+    assert a is not None and a.action == {"action": "move", "direction": "down", "distance": 0.6}
+    assert m.check(snap(altitude_m=3.1), State.EXECUTING, 1) is None
+    assert m.check(snap(altitude_m=2.0), State.EXECUTING, 2) is None
+    assert m.check(snap(altitude_m=3.0), State.EXECUTING, 3) is not None
+
+
+def test_link_loss_and_recovery() -> None:
+    m = LinkMonitor()
+    lost = m.check(snap(link_ok=False), State.EXECUTING, 0)
+    assert lost is not None and lost.level == "alert"
+    assert m.check(snap(link_ok=False), State.EXECUTING, 1) is None
+    back = m.check(snap(link_ok=True), State.EXECUTING, 2)
+    assert back is not None and back.level == "info"
+
+
+def test_markers_lost_after_delay_only_while_executing() -> None:
+    m = MarkersLostMonitor(1.5)
+    assert m.check(snap(), State.EXECUTING, 0.0) is None
+    assert m.check(snap(), State.EXECUTING, 1.0) is None
+    assert m.check(snap(), State.EXECUTING, 1.6) is not None
+    assert m.check(snap(), State.EXECUTING, 2.0) is None
+    assert m.check(snap(visible_markers=(3,)), State.EXECUTING, 2.5) is None
+    assert m.check(snap(), State.AIRBORNE_IDLE, 9.0) is None
+
+
+def test_each_monitor_runs_on_its_own_period() -> None:
+    calls: dict[str, list[float]] = {"a": [], "b": []}
+
+    class Counting:
+        def __init__(self, name: str, period_s: float) -> None:
+            self.name, self.period_s = name, period_s
+
+        def check(self, s: VehicleSnapshot, st: State, now: float) -> None:
+            calls[self.name].append(now)
+
+    ans = Autonomic([Counting("a", 0.5), Counting("b", 1.0)])
+    for i in range(21):
+        ans.step(snap(), State.EXECUTING, i * 0.1)
+    assert calls["a"] == pytest.approx([0.0, 0.5, 1.0, 1.5, 2.0])
+    assert calls["b"] == pytest.approx([0.0, 1.0, 2.0])
+
+
+def test_transition_table_is_complete_and_strict() -> None:
+    assert set(TRANSITIONS) == set(State)
+    assert next_state(State.LANDED, "takeoff") is State.TAKING_OFF
+    with pytest.raises(IllegalTransition) as exc:
+        next_state(State.LANDED, "land")
+    assert exc.value.reason == "I am already on the ground."
+    # every state of the machine has its active grammars in states.xml
+    assert set(NLU().grammar.states) == {s.value for s in State}

@@ -1,0 +1,219 @@
+"""The dialog manager with fakes that behave like the real ports, on a virtual clock."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+
+from server.dialog.manager import DialogManager, DialogParams
+from server.dialog.states import State
+from server.graph import Graph
+from server.language.nlu import NLU
+from server.settings import Settings
+from tests.dialog.fakes import FakeDescriber, FakeFlight, FakeStore
+
+NLU_ = NLU()
+
+
+class Rig:
+    def __init__(self, **flight: Any) -> None:
+        self.graph = Graph()
+        self.t = 0.0
+        self.flight = FakeFlight(**flight)
+        self.store = FakeStore()
+        self.describer = FakeDescriber()
+        self.replies: list[dict[str, Any]] = []
+        self.states: list[dict[str, Any]] = []
+        self.dm = DialogManager(
+            self.graph,
+            Settings(),
+            self.flight,
+            self.flight,
+            self.describer,
+            self.store,
+            lambda: self.t,
+            nlu=NLU_,
+        )
+        self.graph.subscribe("/console/reply", self.replies.append)
+        self.graph.subscribe("/console/state", self.states.append)
+
+    def run(self, seconds: float, dt: float = 0.1) -> None:
+        for _ in range(round(seconds / dt)):
+            self.t = round(self.t + dt, 6)
+            self.flight.step(self.t)
+            self.dm.step(self.t)
+
+
+async def test_move_while_landed_is_refused_with_reason() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("go up 1 meter")
+    assert not res.accepted
+    assert res.reply == "I need to take off first."
+    assert res.commands == [{"action": "move", "direction": "up", "distance": 1}]
+    assert rig.flight.log == []
+    assert rig.replies[-1]["level"] == "warn" and rig.replies[-1]["speak"] is True
+
+
+async def test_compound_sentence_runs_in_order_and_confirms_values() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("take off, climb one meter and then fly to marker 3")
+    assert res.accepted
+    assert res.reply == "Taking off, then climbing 1 meter, then flying to marker 3."
+    assert [e[1]["action"] for e in rig.flight.log] == ["takeoff", "move", "goto"]
+    assert rig.dm.state is State.TAKING_OFF
+    rig.run(2.2)
+    assert rig.dm.state is State.EXECUTING
+    rig.run(4.2)
+    texts = [r["text"] for r in rig.replies]
+    assert "Reached marker 3." in texts
+    assert rig.dm.state is State.AIRBORNE_IDLE
+    assert json.loads(rig.replies[0]["commands"])[2] == {"action": "goto", "marker": 3}
+
+
+async def test_unknown_marker_is_refused() -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off")
+    rig.run(2.1)
+    res = await rig.dm.handle_utterance("fly to marker 42")
+    assert not res.accepted and res.reply == "There is no marker 42."
+
+
+async def test_cancel_clears_the_queue() -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off")
+    rig.run(2.1)
+    await rig.dm.handle_utterance("fly to marker 1 then marker 2 then marker 3")
+    assert len(rig.flight.queue) == 3
+    res = await rig.dm.handle_utterance("cancel that")
+    assert res.accepted and res.reply == "OK, cancelled."
+    assert rig.flight.queue == [] and rig.dm.state is State.AIRBORNE_IDLE
+
+
+async def test_low_confidence_speech_asks_again_and_does_nothing() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("take off", confidence=0.3, source="speech")
+    assert not res.accepted and "repeat" in res.reply
+    assert rig.flight.log == []
+    assert rig.store.rows[-1]["action"] == "asked_repeat"
+    ok = await rig.dm.handle_utterance("take off", confidence=0.9, source="speech")
+    assert ok.accepted
+
+
+async def test_queries_answer_with_numbers_and_describe() -> None:
+    rig = Rig(battery_pct=76.0)
+    res = await rig.dm.handle_utterance("how much battery is left")
+    assert res.reply == "Battery is at 76 percent."
+    res = await rig.dm.handle_utterance("what do you see")
+    assert res.reply == "A room with a red marker on the wall." and rig.describer.calls == 1
+    res = await rig.dm.handle_utterance("what's your altitude")
+    assert res.reply == "I am on the ground."
+
+
+async def test_not_understood_and_partly_understood() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("make me a sandwich")
+    assert not res.accepted and res.commands == [] and "rephrase" in res.reply
+    res = await rig.dm.handle_utterance("take off and do a barrel roll")
+    assert not res.accepted and "do barrel roll" in res.reply
+    assert rig.flight.log == []
+
+
+async def test_observer_may_only_ask() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("take off", role="observer")
+    assert not res.accepted and res.reply == "Only the pilot may command the drone."
+    res = await rig.dm.handle_utterance("status", role="observer")
+    assert res.accepted
+
+
+async def test_emergency_and_leading_land_preempt() -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off")
+    rig.run(2.1)
+    await rig.dm.handle_utterance("go to marker 1 then marker 2")
+    await rig.dm.handle_utterance("land")
+    assert rig.flight.log[-1] == ("preempt", {"action": "land"})
+    assert rig.dm.state is State.LANDING
+    res = await rig.dm.handle_utterance("emergency")
+    assert res.accepted and rig.dm.state is State.EMERGENCY
+    res = await rig.dm.handle_utterance("take off")
+    assert not res.accepted and "emergency" in res.reply
+
+
+async def test_audit_log_rows_and_state_topic() -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off", role="pilot", source="rest")
+    row = rig.store.rows[-1]
+    assert row["utterance"] == "take off" and row["action"] == "executed"
+    assert row["commands"] == [{"action": "takeoff"}] and row["role"] == "pilot"
+    assert rig.states[-1]["state"] == "TAKING_OFF"
+    assert "motion" in rig.states[-1]["grammars"]
+    assert rig.graph.latched("/console/state")["state"] == "TAKING_OFF"
+
+
+async def test_utterance_topic_and_interpret_service() -> None:
+    rig = Rig()
+    rig.graph.publish(
+        "/console/utterance",
+        {"text": "take off", "confidence": 0.95, "source": "speech", "drone": "uav1"},
+    )
+    for task in list(rig.dm._pending):
+        await task
+    assert rig.dm.state is State.TAKING_OFF
+    rig.graph.publish(
+        "/console/utterance", {"text": "land", "confidence": 1.0, "source": "text", "drone": "uav7"}
+    )
+    assert not rig.dm._pending  # another drone's utterance is ignored
+    ans = await rig.graph.call_service(
+        "/console/interpret", {"text": "go up 2 m", "state": "LANDED"}
+    )
+    assert ans == {"commands": []}
+    ans = await rig.graph.call_service("/console/interpret", {"text": "go up 2 m"})
+    assert ans == {"commands": [{"action": "move", "direction": "up", "distance": 2}]}
+
+
+async def test_ans_battery_low_mid_task_alerts_and_returns_home() -> None:
+    rig = Rig(battery_pct=27.0, drain_pct_per_s=0.5, task_s=10.0)
+    await rig.dm.handle_utterance("take off and patrol markers 1, 2 and 3")
+    rig.run(10.2)
+    assert rig.dm.state is State.EXECUTING
+    rig.run(5.0)
+    warn = [r for r in rig.replies if r["level"] == "warn" and "Battery low" in r["text"]]
+    assert len(warn) == 1 and "Returning home" in warn[0]["text"]
+    assert ("preempt", {"action": "return_home"}) in rig.flight.log
+    assert rig.dm.state is State.RETURNING
+    assert rig.store.rows[-1]["role"] == "system"
+    rig.flight.running = None
+    rig.flight.queue.clear()
+    rig.run(30.0)  # keeps draining to critical: land
+    alerts = [r for r in rig.replies if r["level"] == "alert"]
+    assert any("critical" in r["text"] for r in alerts)
+    assert ("preempt", {"action": "land"}) in rig.flight.log
+
+
+def test_params_from_settings() -> None:
+    p = DialogParams.from_settings(Settings(confidence_threshold=0.7))
+    assert p.confidence_threshold == 0.7 and p.battery_low_pct == Settings().battery_low_pct
+
+
+@pytest.mark.parametrize("text", ["take off", "land", "stop"])
+async def test_every_reply_is_logged(text: str) -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance(text)
+    assert len(rig.store.rows) == 1 and rig.store.rows[0]["outcome"] == rig.replies[-1]["text"]
+
+
+def test_utterance_topic_without_a_loop_is_handled_at_once() -> None:
+    """Lockstep: no event loop runs; an utterance published on the graph is handled in place."""
+    rig = Rig()
+    rig.graph.publish(
+        "/console/utterance", {"text": "take off", "confidence": 0.2, "source": "speech"}
+    )
+    assert rig.replies[-1]["text"].startswith("Sorry, I am not sure")
+    rig.graph.publish(
+        "/console/utterance", {"text": "take off", "confidence": 0.8, "source": "speech"}
+    )
+    assert rig.dm.state is State.TAKING_OFF
+    assert rig.replies[-1]["utterance"] == "take off"
