@@ -1,0 +1,3 @@
+"""uav-console: the operator console server."""
+
+__version__ = "0.1.0"

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import itertools
 import json
 import threading
@@ -204,10 +205,9 @@ class Graph:
             self._deliver(subscriptions, msg)
         else:
             assert self._loop is not None
-            try:
+            # RuntimeError: the loop closed while a worker thread was finishing.
+            with contextlib.suppress(RuntimeError):
                 self._loop.call_soon_threadsafe(self._deliver, subscriptions, msg)
-            except RuntimeError:  # loop closed while a worker thread was finishing
-                pass
 
     @staticmethod
     def _deliver(subscriptions: list[Subscription], msg: Message) -> None:

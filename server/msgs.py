@@ -181,7 +181,7 @@ def stamp(now: float | None = None) -> dict[str, int]:
     """A ``builtin_interfaces/Time`` for ``now`` (seconds since the epoch; wall clock if None)."""
     t = time.time() if now is None else now
     sec = math.floor(t)
-    return {"sec": int(sec), "nanosec": int(round((t - sec) * 1e9)) % 1_000_000_000}
+    return {"sec": int(sec), "nanosec": round((t - sec) * 1e9) % 1_000_000_000}
 
 
 def header(frame_id: str = "map", now: float | None = None) -> dict[str, Any]:

@@ -151,8 +151,13 @@ class Autonomic:
 
     monitors: Sequence[Any]
     _due: dict[str, float] = field(default_factory=dict)
+    _heard: bool = False  # the drone has answered at least once
 
     def step(self, snap: VehicleSnapshot, state: State, now: float) -> list[Alarm]:
+        # Before the first navdata nothing is known (battery 0, link down): no false alarms.
+        self._heard = self._heard or snap.link_ok
+        if not self._heard:
+            return []
         alarms: list[Alarm] = []
         for m in self.monitors:
             due = self._due.get(m.name, now)

@@ -26,7 +26,7 @@ from server.dialog.autonomic import (
     MarkersLostMonitor,
 )
 from server.dialog.errors import IllegalTransition
-from server.dialog.ports import DescribePort, TaskEvent, TaskPort, VehiclePort
+from server.dialog.ports import DescribePort, TaskEvent, TaskPort, VehiclePort, VehicleSnapshot
 from server.dialog.states import MOTION, STATELESS, State, next_state
 from server.language.nlu import NLU, Interpretation, default_nlu
 from server.msgs import header
@@ -345,6 +345,7 @@ class DialogManager:
     def step(self, now: float) -> list[Alarm]:
         """Run the monitors due at ``now`` (lockstep); alarms are spoken and may preempt."""
         snap = self.vehicle.snapshot()
+        self._reconcile(snap)
         alarms = self.ans.step(snap, self._state, now)
         for alarm in alarms:
             if alarm.action is not None:
@@ -360,6 +361,22 @@ class DialogManager:
                 source="ans",
             )
         return alarms
+
+    def _reconcile(self, snap: VehicleSnapshot) -> None:
+        """Follow the drone where it changed without the dialog.
+
+        Buttons, ``/ardrone/*`` topics, other clients and the drone itself (its own landing,
+        an emergency cut-out) change what it is doing; the dialog state must follow, or a
+        spoken "land" would be refused while the drone flies.
+        """
+        if not snap.link_ok:
+            return
+        grounded = (State.LANDED, State.EMERGENCY)
+        airborne = (State.AIRBORNE_IDLE, State.EXECUTING, State.SEARCHING, State.RETURNING)
+        if snap.flying and self._state in grounded:
+            self._set_state(State.AIRBORNE_IDLE)
+        elif not snap.flying and self._state in airborne:
+            self._set_state(State.LANDED)
 
     async def run(self, period_s: float | None = None) -> None:
         """Real-time ANS runner: step on absolute deadlines until cancelled."""

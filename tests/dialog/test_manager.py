@@ -217,3 +217,39 @@ def test_utterance_topic_without_a_loop_is_handled_at_once() -> None:
     )
     assert rig.dm.state is State.TAKING_OFF
     assert rig.replies[-1]["utterance"] == "take off"
+
+
+async def test_state_follows_a_take_off_and_landing_made_outside_the_dialog() -> None:
+    """A button or /ardrone/takeoff flies the drone without the dialog: "land" still works."""
+    from dataclasses import replace
+
+    rig = Rig()
+    rig.flight.snap = replace(rig.flight.snap, flying=True, altitude_m=0.8)
+    rig.run(0.5)
+    assert rig.dm.state is State.AIRBORNE_IDLE
+    res = await rig.dm.handle_utterance("land")
+    assert res.accepted, res.reply
+    rig.run(3.0)
+    assert rig.dm.state is State.LANDED
+    # and the other way: the drone landed by itself (e.g. its own low-battery landing)
+    rig.flight.snap = replace(rig.flight.snap, flying=True)
+    rig.run(0.5)
+    rig.flight.snap = replace(rig.flight.snap, flying=False)
+    rig.run(0.5)
+    assert rig.dm.state is State.LANDED
+
+
+async def test_no_alarms_before_the_drone_first_answers() -> None:
+    from dataclasses import replace
+
+    rig = Rig(battery_pct=0.0)
+    rig.flight.snap = replace(rig.flight.snap, link_ok=False)
+    rig.run(3.0)
+    assert rig.replies == []
+    rig.flight.battery_pct = 90.0
+    rig.flight.snap = replace(rig.flight.snap, link_ok=True)
+    rig.run(1.0)
+    assert rig.replies == []
+    rig.flight.snap = replace(rig.flight.snap, link_ok=False)
+    rig.run(1.0)
+    assert [r["level"] for r in rig.replies] == ["alert"]

@@ -1,0 +1,61 @@
+"""FastAPI dependencies shared by the REST routers: the runtime and the caller's role."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request
+
+from server.runtime import DroneStack, Runtime
+
+
+def get_runtime(request: Request) -> Runtime:
+    return request.app.state.runtime  # type: ignore[no-any-return]
+
+
+def _token_from(request: Request) -> str | None:
+    auth = request.headers.get("authorization", "")
+    if auth.lower().startswith("bearer "):
+        return auth[7:].strip()
+    return request.query_params.get("token")
+
+
+def caller_role(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]) -> str:
+    """The caller's role from a bearer token (or ``?token=``); 401 without a valid one."""
+    role = runtime.security.role_for(_token_from(request))
+    if role is None:
+        raise HTTPException(
+            status_code=401,
+            detail="a valid token is required (Authorization: Bearer <token>)",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    return str(role)
+
+
+def pilot_role(role: Annotated[str, Depends(caller_role)]) -> str:
+    """Only a pilot may command; observers get 403 naming their role."""
+    if role != "pilot":
+        raise HTTPException(status_code=403, detail=f"role '{role}' may not command the drones")
+    return role
+
+
+def role_by_method(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]) -> str:
+    """Reading needs any role; changing anything (POST, PUT, PATCH, DELETE) needs a pilot."""
+    role = caller_role(request, runtime)
+    if request.method not in ("GET", "HEAD", "OPTIONS"):
+        return pilot_role(role)
+    return role
+
+
+def drone_stack(drone_id: str, runtime: Annotated[Runtime, Depends(get_runtime)]) -> DroneStack:
+    stack = runtime.drones.get(drone_id)
+    if stack is None:
+        known = ", ".join(runtime.drones) or "none"
+        raise HTTPException(status_code=404, detail=f"no drone '{drone_id}' (known: {known})")
+    return stack
+
+
+RuntimeDep = Annotated[Runtime, Depends(get_runtime)]
+RoleDep = Annotated[str, Depends(caller_role)]
+PilotDep = Annotated[str, Depends(pilot_role)]
+DroneDep = Annotated[DroneStack, Depends(drone_stack)]

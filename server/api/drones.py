@@ -1,0 +1,72 @@
+"""Drones: telemetry, direct actions (take off, land, hover, emergency, reset), describe, video."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from typing import Any, Literal
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import StreamingResponse
+
+from server.api.deps import DroneDep, PilotDep, RoleDep, RuntimeDep
+from server.api.models import ActionResult, Describe
+
+router = APIRouter(prefix="/drones", tags=["drones"])
+
+Action = Literal["takeoff", "land", "hover", "emergency", "reset"]
+MJPEG_BOUNDARY = "frame"
+
+
+@router.get("")
+def list_drones(runtime: RuntimeDep, _role: RoleDep) -> list[dict[str, Any]]:
+    """Every drone with its telemetry, state, task and link."""
+    return [stack.telemetry() for stack in runtime.drones.values()]
+
+
+@router.get("/{drone_id}")
+def get_drone(stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
+    """One drone: telemetry, pose estimate, control state, task, link and controller timing."""
+    return stack.telemetry()
+
+
+@router.post("/{drone_id}/describe", response_model=Describe)
+async def describe(stack: DroneDep, runtime: RuntimeDep, _role: RoleDep) -> Describe:
+    """Caption the latest camera frame with the ONNX captioner (503 when it is unavailable)."""
+    status = runtime.captioner_status()
+    if status != "ready":
+        raise HTTPException(status_code=503, detail=status)
+    text, ms = await runtime.describe(stack.name)
+    return Describe(drone=stack.name, text=text, ms=ms)
+
+
+@router.post("/{drone_id}/{action}", response_model=ActionResult)
+def act(action: Action, stack: DroneDep, _role: PilotDep) -> ActionResult:
+    """Direct control; land and emergency reach the wire ahead of anything queued."""
+    detail = stack.direct(action)
+    return ActionResult(drone=stack.name, action=action, accepted=True, detail=detail)
+
+
+@router.get("/{drone_id}/video.mjpg")
+async def video(request: Request, stack: DroneDep, _role: RoleDep) -> StreamingResponse:
+    """The front camera with the tracking overlay as an MJPEG stream (at most 15 fps)."""
+
+    async def frames() -> AsyncIterator[bytes]:
+        last = -1
+        while not await request.is_disconnected():
+            seq, jpeg = stack.latest_jpeg()
+            if jpeg is not None and seq != last:
+                last = seq
+                yield (
+                    (
+                        f"--{MJPEG_BOUNDARY}\r\nContent-Type: image/jpeg\r\n"
+                        f"Content-Length: {len(jpeg)}\r\n\r\n"
+                    ).encode()
+                    + jpeg
+                    + b"\r\n"
+                )
+            await asyncio.sleep(1 / 15)
+
+    return StreamingResponse(
+        frames(), media_type=f"multipart/x-mixed-replace; boundary={MJPEG_BOUNDARY}"
+    )

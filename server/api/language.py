@@ -1,0 +1,35 @@
+"""``POST /interpret`` (NLU only) and ``POST /command`` (through the dialog manager)."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, HTTPException
+
+from server.api.deps import PilotDep, RoleDep, RuntimeDep
+from server.api.models import CommandRequest, CommandResponse, InterpretRequest, InterpretResponse
+
+router = APIRouter(tags=["language"])
+
+
+@router.post("/interpret", response_model=InterpretResponse)
+def interpret(body: InterpretRequest, runtime: RuntimeDep, _role: RoleDep) -> InterpretResponse:
+    """What the NLU understands in ``text`` (in ``state``'s grammars if given); acts on nothing."""
+    try:
+        commands = runtime.interpret(body.text, body.state)
+    except KeyError as exc:
+        raise HTTPException(status_code=422, detail=f"unknown dialog state {exc}") from exc
+    return InterpretResponse(text=body.text, commands=commands)
+
+
+@router.post("/command", response_model=CommandResponse)
+async def command(body: CommandRequest, runtime: RuntimeDep, role: PilotDep) -> CommandResponse:
+    """Say ``text`` to a drone's dialog manager, as if spoken with ``confidence``."""
+    name = body.drone or runtime.default_drone
+    dialog = runtime.dialogs.get(name)
+    if dialog is None:
+        raise HTTPException(status_code=404, detail=f"no drone '{name}'")
+    # A stated confidence means recognised speech: below the threshold it is not executed.
+    source = "speech" if "confidence" in body.model_fields_set else "rest"
+    result = await dialog.handle_utterance(
+        body.text, confidence=body.confidence, source=source, role=role
+    )
+    return CommandResponse(reply=result.reply, commands=result.commands, accepted=result.accepted)

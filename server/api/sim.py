@@ -1,0 +1,32 @@
+"""Simulator only: ground truth and fault injection (``/sim/{id}/truth``, ``/sim/{id}/fault``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, HTTPException
+
+from server.api.deps import DroneDep, PilotDep, RoleDep
+from server.api.models import FaultRequest
+
+router = APIRouter(prefix="/sim", tags=["simulator"])
+
+
+@router.get("/{drone_id}/truth")
+def truth(stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
+    """The simulated drone's true pose, velocity, battery and control state."""
+    if stack.sim is None:
+        raise HTTPException(404, detail=f"{stack.name} is a real drone: no ground truth")
+    return stack.truth()
+
+
+@router.post("/{drone_id}/fault")
+def fault(body: FaultRequest, stack: DroneDep, _role: PilotDep) -> dict[str, Any]:
+    """Inject a fault: link loss for a while, battery drained to a level, a wind gust, or clear."""
+    if stack.sim is None:
+        raise HTTPException(status_code=404, detail=f"{stack.name} is a real drone: no faults")
+    try:
+        stack.inject_fault(body)
+    except ValueError as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from exc
+    return {"drone": stack.name, "fault": body.kind, "applied": True}

@@ -1,0 +1,79 @@
+"""The FastAPI application: REST under /api/v1, rosbridge at /rosbridge, the console at /."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+from fastapi import Depends, FastAPI, Request
+from fastapi.responses import HTMLResponse, RedirectResponse
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+
+from server import __version__
+from server.api import drones, language, sim, system
+from server.api.deps import role_by_method
+from server.runtime import Runtime
+from server.settings import ROOT, Settings
+
+WEB = ROOT / "web"
+
+
+def create_app(settings: Settings | None = None, *, announce: bool = False) -> FastAPI:
+    """Build the app; drones, dialog and the rest start in the lifespan and stop with it.
+
+    Args:
+        settings: read once by the caller (``Settings.from_env()`` if None).
+        announce: print the pilot's clickable URL at start-up (``uav-console serve``).
+    """
+    settings = settings or Settings.from_env()
+    runtime = Runtime(settings)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        await runtime.start()
+        if announce:
+            for line in runtime.announcement():
+                print(line, file=sys.stderr if line.startswith(" ") else sys.stdout, flush=True)
+        try:
+            yield
+        finally:
+            await runtime.stop()
+
+    app = FastAPI(
+        title="uav-console",
+        version=__version__,
+        description="Operator console for autonomous drones. REST for scripts; the same "
+        "topics and services are on the rosbridge v2 WebSocket at /rosbridge.",
+        lifespan=lifespan,
+    )
+    app.state.runtime = runtime
+    for router in (system.router, language.router, drones.router, sim.router):
+        app.include_router(router, prefix="/api/v1")
+    app.include_router(
+        runtime.fleet.router(dependencies=[Depends(role_by_method)]), prefix="/api/v1"
+    )
+    for router in runtime.extra_routers():
+        app.include_router(router)
+
+    templates = Jinja2Templates(directory=str(WEB / "templates"))
+    if (WEB / "static").is_dir():
+        app.mount("/static", StaticFiles(directory=str(WEB / "static")), name="static")
+
+    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
+    def console(request: Request) -> HTMLResponse:
+        return templates.TemplateResponse(
+            request, "index.html", {"version": __version__, "settings": settings}
+        )
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon() -> RedirectResponse:
+        return RedirectResponse("/static/icons/favicon.svg")
+
+    return app
+
+
+def web_root() -> Path:
+    return WEB

@@ -1,0 +1,501 @@
+"""The central task manager (CTM): missions, roles and battery handoff, sans-I/O.
+
+Inputs: ``on_status(LtmStatus, now)`` from each LTM, ``on_plan_result(...)`` when an LTM
+answers a plan, ``add_mission``/``mission_from_request``. Output: ``step(now)`` returns the
+``Dispatch`` (drone, flight plan) list to send; ``fleet_status(now)`` is the
+``uav_console/FleetStatus`` message. No sockets, no clock of its own: the in-process node, the
+rosbridge server and the lockstep experiment all drive the same object.
+
+Per mission (issue 8): one drone *patrols*; when its battery will reach the mission's threshold
+within the lead time of the best idle drone (planner.lead_time_s), that drone is sent
+(*relieving*) on the same patrol plan from the route point nearest its station; the moment it
+is on the route the tired drone gets a return plan (*returning*), lands at its station
+(*charging*, restored by the station) and becomes *idle* when ready. The active drone never
+leaves before its relief is on the route unless its battery is down to the reserve it needs to
+get home. A drone silent for ``lost_after_s``, in emergency, or not hearing its own drone is
+*lost*, and whatever it did is given to another.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from server.fleet.errors import MissionError, NotFoundError
+from server.fleet.geo import Enu, Geo, to_enu, to_geo
+from server.fleet.messages import (
+    FlightPlan,
+    LtmStatus,
+    Mission,
+    MissionRequest,
+    PlanKind,
+    Role,
+)
+from server.fleet.planner import (
+    FlightModel,
+    StationModel,
+    lead_time_s,
+    reserve_pct,
+    should_dispatch,
+)
+
+DRAIN_WINDOW_S = 60.0  # battery is reported in whole percent: estimate slope over a minute
+
+
+@dataclass(frozen=True)
+class Dispatch:
+    """Send ``plan`` to drone ``drone``."""
+
+    drone: str
+    plan: FlightPlan
+
+
+@dataclass
+class DroneRecord:
+    """What the CTM knows about one drone."""
+
+    name: str
+    status: LtmStatus | None = None
+    last_heard: float = -math.inf
+    role: Role = Role.IDLE
+    mission: str = ""
+    plan: FlightPlan | None = None
+    plan_sent_t: float = -math.inf
+    lost_reason: str = ""
+    samples: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=400))
+
+    def drain_pct_s(self, default: float) -> float:
+        """Observed battery drain in flight (%/s); ``default`` until a window is long enough."""
+        if len(self.samples) < 2:
+            return default
+        t0, b0 = self.samples[0]
+        t1, b1 = self.samples[-1]
+        if t1 - t0 < DRAIN_WINDOW_S / 2 or b0 <= b1:
+            return default
+        return max((b0 - b1) / (t1 - t0), default * 0.5)
+
+
+@dataclass
+class MissionState:
+    mission: Mission
+    active: str | None = None
+    relief: str | None = None
+    handoffs: int = 0
+    replacements: int = 0
+    started_t: float | None = None
+    state: str = "waiting"  # waiting (no drone yet), running, stopped
+
+
+class CentralTaskManager:
+    """See the module docstring.
+
+    Args:
+        model: flight model for lead times and reserves.
+        stations: the station model (restore time) for readiness and the bound.
+        lost_after_s: an LTM silent this long is lost.
+        corridor_m: a drone this close (horizontally) to the route, at route height ±1.5 m,
+            is on the route.
+        origin: GPS origin for lat/lon missions and status.
+        world: for marker-id routes (``world.marker(id).position``).
+        resend_s: a plan the LTM has not confirmed (status ``plan_id``) is sent again.
+    """
+
+    def __init__(
+        self,
+        *,
+        model: FlightModel | None = None,
+        stations: StationModel | None = None,
+        lost_after_s: float = 3.0,
+        corridor_m: float = 2.5,
+        origin: Geo | None = None,
+        world: Any | None = None,
+        resend_s: float = 3.0,
+    ) -> None:
+        self.model = model or FlightModel()
+        self.stations = stations or StationModel()
+        self.lost_after_s = lost_after_s
+        self.corridor_m = corridor_m
+        self.origin = origin
+        self.world = world
+        self.resend_s = resend_s
+        self.drones: dict[str, DroneRecord] = {}
+        self.missions: dict[str, MissionState] = {}
+        self.events: deque[tuple[float, str]] = deque(maxlen=200)
+        self._plan_ids = itertools.count(1)
+        self._mission_ids = itertools.count(1)
+        self.decisions = 0
+
+    # ------------------------------------------------------------------ inputs
+    def event(self, now: float, text: str) -> None:
+        self.events.append((now, text))
+
+    def on_status(self, status: LtmStatus, now: float) -> None:
+        """An LTM report (from any transport)."""
+        rec = self.drones.get(status.name)
+        if rec is None:
+            rec = self.drones[status.name] = DroneRecord(status.name)
+            self.event(now, f"{status.name} joined")
+        rec.status = status
+        rec.last_heard = now
+        if status.flying:
+            rec.samples.append((now, status.battery_pct))
+            while rec.samples and now - rec.samples[0][0] > DRAIN_WINDOW_S:
+                rec.samples.popleft()
+        else:
+            rec.samples.clear()
+
+    def on_plan_result(self, name: str, plan_id: int, ok: bool, reason: str, now: float) -> None:
+        """An LTM's answer to a plan; a refusal or a transport failure is retried by ``step``."""
+        rec = self.drones.get(name)
+        if rec is None or rec.plan is None or rec.plan.plan_id != plan_id:
+            return
+        if not ok:
+            self.event(now, f"{name} refused plan {plan_id}: {reason}")
+            rec.plan_sent_t = -math.inf if "refused" not in reason else now
+
+    # ------------------------------------------------------------------ missions
+    def add_mission(
+        self,
+        route: Sequence[Enu],
+        *,
+        now: float,
+        loop: bool = True,
+        threshold: float = 0.30,
+        mission_id: str | None = None,
+    ) -> Mission:
+        """Hold a new patrol mission; drones are assigned at the next ``step``.
+
+        Raises:
+            MissionError: an empty route, a threshold outside (0, 1), or a duplicate id.
+        """
+        if not route:
+            raise MissionError("a mission needs at least one waypoint")
+        if not 0.0 < threshold < 1.0:
+            raise MissionError(f"handoff threshold must be in (0, 1), got {threshold}")
+        mid = mission_id or f"m{next(self._mission_ids)}"
+        if mid in self.missions:
+            raise MissionError(f"mission {mid!r} exists")
+        geo: tuple[tuple[float, float, float], ...] = ()
+        if self.origin is not None:
+            gs = [to_geo(p, self.origin) for p in route]
+            geo = tuple((g.lat_deg, g.lon_deg, g.alt_m) for g in gs)
+        m = Mission(mid, tuple(route), loop, threshold, now, geo)
+        self.missions[mid] = MissionState(m)
+        self.event(now, f"mission {mid}: {len(route)} waypoints, handoff at {threshold:.0%}")
+        return m
+
+    def mission_from_request(self, req: MissionRequest, now: float) -> Mission:
+        """Resolve a REST request (lat/lon/alt or marker ids) to map-frame waypoints.
+
+        Raises:
+            MissionError: lat/lon with no GPS origin, or an unknown marker id.
+        """
+        route: list[Enu] = []
+        if req.waypoints:
+            if self.origin is None:
+                raise MissionError("this world has no GPS origin: give marker ids instead")
+            for w in req.waypoints:
+                alt = self.origin.alt_m + req.altitude_m if w.alt is None else w.alt
+                route.append(to_enu(Geo(w.lat, w.lon, alt), self.origin))
+        else:
+            if self.world is None:
+                raise MissionError("no world is loaded to resolve marker ids")
+            for mid in req.markers or ():
+                try:
+                    p = self.world.marker(mid).position
+                except KeyError:
+                    raise MissionError(f"unknown marker id {mid}") from None
+                route.append(Enu(float(p[0]), float(p[1]), req.altitude_m))
+        return self.add_mission(
+            route, now=now, loop=req.loop, threshold=req.handoff_threshold, mission_id=req.name
+        )
+
+    def stop_mission(self, mission_id: str, now: float) -> None:
+        """Stop a mission: its drones return to their stations.
+
+        Raises:
+            NotFoundError: no such mission.
+        """
+        ms = self.missions.get(mission_id)
+        if ms is None:
+            raise NotFoundError(f"no mission {mission_id!r}")
+        ms.state = "stopped"
+        for name in (ms.active, ms.relief):
+            if name is not None:
+                self._send_home(self.drones[name], now, ms.mission)
+        ms.active = ms.relief = None
+        self.event(now, f"mission {mission_id} stopped")
+
+    def mission_info(self, mission_id: str) -> dict[str, Any]:
+        """The mission as ``GET /missions/{id}`` returns it.
+
+        Raises:
+            NotFoundError: no such mission.
+        """
+        ms = self.missions.get(mission_id)
+        if ms is None:
+            raise NotFoundError(f"no mission {mission_id!r}")
+        m = ms.mission
+        return {
+            "id": m.id,
+            "state": ms.state,
+            "loop": m.loop,
+            "handoff_threshold": m.threshold,
+            "route": [{"x": p.x, "y": p.y, "z": p.z} for p in m.route],
+            "route_geo": [{"lat": a, "lon": b, "alt": c} for a, b, c in m.geo],
+            "active": ms.active,
+            "relief": ms.relief,
+            "handoffs": ms.handoffs,
+            "replacements": ms.replacements,
+        }
+
+    # ------------------------------------------------------------------ geometry
+    def on_route(self, p: Enu, mission: Mission) -> bool:
+        """Within ``corridor_m`` of the route polyline (closed if looping), at route height."""
+        if abs(p.z - mission.altitude_m) > 1.5:
+            return False
+        return route_distance(p, mission.route, mission.loop) <= self.corridor_m
+
+    @staticmethod
+    def entry_index(station: Enu, route: Sequence[Enu]) -> int:
+        return min(range(len(route)), key=lambda i: station.dist_xy(route[i]))
+
+    # ------------------------------------------------------------------ decisions
+    def step(self, now: float) -> list[Dispatch]:
+        """Decide; returns the plans to send now."""
+        self.decisions += 1
+        out: list[Dispatch] = []
+        for rec in self.drones.values():
+            self._update_role(rec, now, out)
+        for ms in self.missions.values():
+            if ms.state != "stopped":
+                self._run_mission(ms, now, out)
+        for rec in self.drones.values():  # resend unconfirmed plans
+            st, plan = rec.status, rec.plan
+            if (
+                plan is not None
+                and st is not None
+                and rec.role is not Role.LOST
+                and st.plan_id != plan.plan_id
+                and now - rec.plan_sent_t >= self.resend_s
+                and all(d.drone != rec.name for d in out)
+            ):
+                rec.plan_sent_t = now
+                out.append(Dispatch(rec.name, plan))
+        return out
+
+    def _failure(self, rec: DroneRecord, now: float) -> str:
+        st = rec.status
+        if st is None or now - rec.last_heard > self.lost_after_s:
+            return "silent"
+        if st.emergency:
+            return "emergency"
+        if not st.link_ok:
+            return "drone link lost"
+        return ""
+
+    def _update_role(self, rec: DroneRecord, now: float, out: list[Dispatch]) -> None:
+        why = self._failure(rec, now)
+        if why:
+            if rec.role is not Role.LOST:
+                self.event(now, f"{rec.name} lost ({why})")
+                rec.role, rec.lost_reason = Role.LOST, why
+            return
+        st = rec.status
+        assert st is not None
+        if rec.role is Role.LOST:
+            self.event(now, f"{rec.name} back ({rec.lost_reason} over)")
+            rec.lost_reason = ""
+            rec.mission = ""
+            if st.flying:
+                self._send_home(rec, now, None, out)
+            else:
+                rec.role = Role.CHARGING
+            return
+        if rec.role is Role.RETURNING and not st.flying and st.state in ("LANDED", "DEFAULT"):
+            rec.role = Role.CHARGING
+            self.event(now, f"{rec.name} landed at its station ({st.battery_pct:.0f} %)")
+        elif rec.role is Role.CHARGING and st.battery_pct >= self.stations.ready_pct:
+            rec.role = Role.IDLE
+            self.event(now, f"{rec.name} ready ({st.battery_pct:.0f} %)")
+        elif (
+            rec.role is Role.IDLE
+            and st.flying
+            and not rec.mission
+            and st.autonomous == ""
+            and rec.plan is not None
+            and rec.plan.kind is not PlanKind.RETURN
+        ):
+            # A fleet drone flying with nothing left to do (its post went to another): bring it
+            # home. A drone the CTM never sent anywhere is someone's manual flight: left alone.
+            self._send_home(rec, now, None, out)
+        if st.autonomous and rec.role in (Role.PATROLLING, Role.RELIEVING):
+            # the LTM flew home on its own (CTM silent, battery reserve): free its post
+            self.event(now, f"{rec.name} left on its own ({st.autonomous})")
+            self._release(rec, now)
+            rec.role = Role.RETURNING
+
+    def _release(self, rec: DroneRecord, now: float) -> None:
+        for ms in self.missions.values():
+            if ms.active == rec.name:
+                ms.active = None
+            if ms.relief == rec.name:
+                ms.relief = None
+        rec.mission = ""
+
+    def _candidates(self, exclude: Iterable[str] = ()) -> list[DroneRecord]:
+        ex = set(exclude)
+        return [
+            r
+            for r in self.drones.values()
+            if r.role is Role.IDLE and r.name not in ex and r.status is not None
+        ]
+
+    def _best(self, ms: MissionState) -> tuple[DroneRecord, float] | None:
+        """The idle drone that reaches the route first (ties: fuller battery), with its lead."""
+        best: tuple[float, float, DroneRecord] | None = None
+        for r in self._candidates():
+            assert r.status is not None
+            i = self.entry_index(r.status.station, ms.mission.route)
+            lead = lead_time_s(r.status.position, ms.mission.route[i], self.model)
+            key = (lead, -r.status.battery_pct)
+            if best is None or key < (best[0], best[1]):
+                best = (lead, -r.status.battery_pct, r)
+        return None if best is None else (best[2], best[0])
+
+    def _run_mission(self, ms: MissionState, now: float, out: list[Dispatch]) -> None:
+        m = ms.mission
+        for slot in ("active", "relief"):
+            name = getattr(ms, slot)
+            if name is not None and self.drones[name].role is Role.LOST:
+                why = self.drones[name].lost_reason
+                self.event(now, f"{name} failed on {m.id} ({why}); replacing it")
+                self.drones[name].mission = ""
+                setattr(ms, slot, None)
+                ms.replacements += 1
+        # relief on the route: hand over
+        if ms.relief is not None:
+            rr = self.drones[ms.relief]
+            assert rr.status is not None
+            if self.on_route(rr.status.position, m):
+                old = ms.active
+                ms.active, ms.relief = ms.relief, None
+                rr.role = Role.PATROLLING
+                if ms.started_t is None:
+                    ms.started_t = now
+                    ms.state = "running"
+                if old is not None:
+                    ms.handoffs += 1
+                    orec = self.drones[old]
+                    b = orec.status.battery_pct if orec.status else float("nan")
+                    self.event(now, f"handoff on {m.id}: {rr.name} relieves {old} ({b:.0f} %)")
+                    self._send_home(orec, now, m, out)
+                else:
+                    self.event(now, f"{rr.name} patrolling {m.id}")
+        # the active drone must go home now (reserve), relief or not
+        if ms.active is not None:
+            ar = self.drones[ms.active]
+            st = ar.status
+            assert st is not None
+            need = reserve_pct(st.position, st.station, self.model)
+            if st.battery_pct <= need:
+                self.event(
+                    now, f"{ar.name} at reserve ({st.battery_pct:.0f} %) leaves {m.id} unrelieved"
+                )
+                ms.active = None
+                self._send_home(ar, now, m, out)
+        # dispatch a relief (or the first drone)
+        if ms.relief is None:
+            choice = self._best(ms)
+            if choice is None:
+                return
+            rec, lead = choice
+            if ms.active is not None:
+                ast = self.drones[ms.active].status
+                assert ast is not None
+                drain = self.drones[ms.active].drain_pct_s(self.model.drain_pct_s)
+                if not should_dispatch(ast.battery_pct, 100.0 * m.threshold, drain, lead):
+                    return
+            self._dispatch(rec, ms, now, out)
+
+    def _dispatch(
+        self, rec: DroneRecord, ms: MissionState, now: float, out: list[Dispatch]
+    ) -> None:
+        assert rec.status is not None
+        m = ms.mission
+        start = self.entry_index(rec.status.station, m.route)
+        plan = FlightPlan(
+            next(self._plan_ids),
+            PlanKind.PATROL,
+            mission=m.id,
+            route=m.route,
+            loop=m.loop,
+            start_index=start,
+            cruise_z=m.altitude_m,
+        )
+        rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, Role.RELIEVING, m.id
+        ms.relief = rec.name
+        who = f"to relieve {ms.active}" if ms.active else "to patrol"
+        self.event(now, f"{rec.name} dispatched {who} on {m.id} ({rec.status.battery_pct:.0f} %)")
+        out.append(Dispatch(rec.name, plan))
+
+    def _send_home(
+        self,
+        rec: DroneRecord,
+        now: float,
+        mission: Mission | None,
+        out: list[Dispatch] | None = None,
+    ) -> None:
+        # Return one layer above the route so it does not meet the relief climbing to it.
+        z = (mission.altitude_m if mission else (rec.status.z if rec.status else 5.0)) + 2.0
+        plan = FlightPlan(next(self._plan_ids), PlanKind.RETURN, cruise_z=max(z, 1.0))
+        rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, Role.RETURNING, ""
+        if out is not None:
+            out.append(Dispatch(rec.name, plan))
+        else:
+            rec.plan_sent_t = -math.inf  # sent by the next step's resend pass
+
+    # ------------------------------------------------------------------ output
+    def fleet_status(self, now: float, stamp: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The ``uav_console/FleetStatus`` message (``/fleet/status``)."""
+        drones = []
+        for rec in sorted(self.drones.values(), key=lambda r: r.name):
+            st = rec.status
+            p = st.position if st else Enu(0.0, 0.0, 0.0)
+            drones.append(
+                {
+                    "name": rec.name,
+                    "role": rec.role.value,
+                    "position": {"x": p.x, "y": p.y, "z": p.z},
+                    "yaw_deg": st.yaw_deg if st else 0.0,
+                    "latitude": st.lat if st else 0.0,
+                    "longitude": st.lon if st else 0.0,
+                    "battery": st.battery_pct if st else 0.0,
+                    "state": st.state if st else "UNKNOWN",
+                    "mission": rec.mission,
+                    "link": rec.role is not Role.LOST,
+                }
+            )
+        header = {"stamp": stamp or {"sec": int(now), "nanosec": 0}, "frame_id": "map"}
+        events = [f"{t:.1f} {text}" for t, text in list(self.events)[-20:]]
+        return {"header": header, "drones": drones, "events": events}
+
+
+def segment_distance(p: Enu, a: Enu, b: Enu) -> float:
+    """Horizontal distance from ``p`` to segment ``ab``."""
+    dx, dy = b.x - a.x, b.y - a.y
+    L2 = dx * dx + dy * dy
+    t = 0.0 if L2 == 0 else max(0.0, min(1.0, ((p.x - a.x) * dx + (p.y - a.y) * dy) / L2))
+    return math.hypot(p.x - (a.x + t * dx), p.y - (a.y + t * dy))
+
+
+def route_distance(p: Enu, route: Sequence[Enu], loop: bool) -> float:
+    """Horizontal distance from ``p`` to the route polyline (closed when ``loop``)."""
+    if len(route) == 1:
+        return p.dist_xy(route[0])
+    n = len(route) if loop else len(route) - 1
+    return min(segment_distance(p, route[i], route[(i + 1) % len(route)]) for i in range(n))

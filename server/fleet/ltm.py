@@ -1,0 +1,228 @@
+"""The local task manager (LTM): one drone's end of the fleet, on the drone's host computer.
+
+It reports ``LtmStatus`` every ``period_s``, turns the CTM's flight plans into task-manager
+commands (take off, fly the route from its start index, loop; or fly to the station at cruise
+height and land), and keeps the drone safe on its own: if it hears nothing from the CTM for
+``ctm_timeout_s`` while flying, or its battery falls to the reserve it needs to get home, it
+flies home and lands (``autonomous`` in the status says why). Sans-I/O: ``step(now)`` returns
+the status to publish when one is due; the transport (in-process graph, rosbridge client,
+lockstep link) does the sending.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from server.fleet.geo import Enu, Geo, to_enu, to_geo
+from server.fleet.messages import FlightPlan, LtmStatus, PlanKind
+from server.fleet.planner import FlightModel, reserve_pct
+
+ALTITUDE_MAX_MM = 20000  # control:altitude_max for outdoor flight (firmware default 3000 mm)
+# general:navdata_options: demo (tag 0) + GPS (tag 27, firmware 2.4 flight recorder)
+NAVDATA_OPTIONS = (1 << 0) | (1 << 27)
+GPS_PERIOD_S = 1.0  # fuse one GPS fix a second (the flight recorder's rate)
+GPS_SIGMA_M = 1.5  # horizontal σ of a fix at HDOP 1 (consumer GPS, ~1.5 m UERE)
+
+
+class LocalTaskManager:
+    """See the module docstring.
+
+    Args:
+        name: the drone's name (``uav2``).
+        vehicle: ``drone.vehicle.Vehicle``.
+        tasks: its ``server.tasks.manager.TaskManager`` (stepped by its owner).
+        station: the home station (map frame) it lands on.
+        origin: GPS origin, for lat/lon in the status when navdata carries no GPS.
+        period_s: status period.
+        ctm_timeout_s: silence from the CTM after which a flying drone goes home.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        vehicle: Any,
+        tasks: Any,
+        station: Enu,
+        *,
+        origin: Geo | None = None,
+        period_s: float = 1.0,
+        ctm_timeout_s: float = 15.0,
+        model: FlightModel | None = None,
+        home_cruise_z: float = 5.0,
+    ) -> None:
+        self.name = name
+        self.vehicle = vehicle
+        self.tasks = tasks
+        self.station = station
+        self.origin = origin
+        self.period_s = period_s
+        self.ctm_timeout_s = ctm_timeout_s
+        self.model = model or FlightModel()
+        self.home_cruise_z = home_cruise_z
+        self.plan: FlightPlan | None = None
+        self.autonomous = ""
+        self.last_ctm: float | None = None
+        self._next_status = -math.inf
+        self._seq = 0
+        self._configured = False
+        self._next_gps = -math.inf
+        self.gps_fixes = 0
+        self._last_gps: Any | None = None
+        if origin is not None and hasattr(vehicle, "add_navdata_listener"):
+            vehicle.add_navdata_listener(self._on_navdata)
+
+    # ------------------------------------------------------------------ inputs
+    def heard_ctm(self, now: float) -> None:
+        """Anything from the CTM (a plan, a ``/fleet/status`` message) counts as a heartbeat."""
+        self.last_ctm = now
+        if self.autonomous == "ctm_silent":
+            self.autonomous = ""  # back in touch: the CTM decides again
+
+    def configure_drone(self) -> None:
+        """Raise ``control:altitude_max`` so outdoor routes above 3 m can be flown."""
+        config = getattr(self.vehicle.commander, "config", None)
+        if config is not None and not self._configured:
+            config("control:altitude_max", str(ALTITUDE_MAX_MM))
+            if self.origin is not None:
+                config("general:navdata_options", str(NAVDATA_OPTIONS))
+            self._configured = True
+
+    def _on_navdata(self, nav: Any, now: float) -> None:
+        """GPS aiding: dead reckoning on optical-flow speeds drifts (~0.5 m/min); a GPS fix a
+        second, fused as a position-only measurement (yaw σ huge), holds the estimate."""
+        gps = getattr(nav, "gps", None)
+        if gps is None or not gps.data_available:
+            return
+        self._last_gps = gps
+        if now < self._next_gps or self.origin is None:
+            return
+        self._next_gps = now + GPS_PERIOD_S
+        import numpy as np
+
+        from drone.perception.ekf import MarkerFix
+
+        p = to_enu(Geo(gps.latitude_deg, gps.longitude_deg, gps.elevation_m), self.origin)
+        est = self.vehicle.ekf.latest
+        sig = GPS_SIGMA_M * max(float(gps.hdop), 1.0)
+        R = np.diag([sig**2, sig**2, 25.0, 1e4])  # height: the ultrasound rules; yaw: unknown
+        fix = MarkerFix(now, p.x, p.y, p.z, est.yaw_rad, R, marker_id=-27)
+        if self.vehicle.ekf.update_marker(fix):
+            self.gps_fixes += 1
+
+    def apply_plan(self, plan: FlightPlan, now: float) -> tuple[bool, str]:
+        """Execute ``plan`` (replacing what runs). Returns (accepted, reason)."""
+        self.heard_ctm(now)
+        if self.plan is not None and plan.plan_id == self.plan.plan_id:
+            return True, "already flying this plan"
+        self.configure_drone()
+        commands = self._commands(plan)
+        if plan.kind is PlanKind.NONE:
+            self.tasks.cancel("plan cancelled by the central task manager")
+            self.plan, self.autonomous = plan, ""
+            return True, "cancelled"
+        if not commands:
+            self.plan, self.autonomous = plan, ""
+            return True, "nothing to do"
+        decisions = self.tasks.submit(commands, replace=True)
+        refused = [d for d in decisions if not d.accepted]
+        if refused:
+            return False, f"refused: {refused[0].reason}"
+        self.plan, self.autonomous = plan, ""
+        return True, f"flying plan {plan.plan_id} ({plan.kind.value})"
+
+    def apply_plan_dict(self, obj: Mapping[str, Any], now: float) -> dict[str, Any]:
+        """Service handler body: parse (``MessageError`` propagates) and apply."""
+        plan = FlightPlan.from_dict(obj)
+        ok, reason = self.apply_plan(plan, now)
+        return {"accepted": ok, "reason": reason, "plan_id": plan.plan_id}
+
+    def _commands(self, plan: FlightPlan) -> list[dict[str, Any]]:
+        s = self.vehicle.snapshot()
+        cmds: list[dict[str, Any]] = []
+        if plan.kind is PlanKind.PATROL:
+            if not s.flying:
+                cmds.append({"action": "takeoff"})
+            n = len(plan.route)
+            order = [plan.route[(plan.start_index + k) % n] for k in range(n)]
+            cmds.append(
+                {
+                    "action": "waypoints",
+                    "waypoints": [{"x": p.x, "y": p.y, "z": p.z} for p in order],
+                    "loop": plan.loop,
+                    "tolerance_m": plan.tolerance_m,
+                }
+            )
+        elif plan.kind is PlanKind.RETURN:
+            if s.flying:
+                cmds.extend(self._home_commands(plan.cruise_z, s))
+        elif plan.kind is PlanKind.HOLD and s.flying:
+            cmds.append({"action": "hover"})
+        return cmds
+
+    def _home_commands(self, cruise_z: float, s: Any) -> list[dict[str, Any]]:
+        st = self.station
+        z = max(cruise_z, 1.0)
+        return [
+            {
+                "action": "waypoints",
+                # climb (or descend) in place to the transit layer, then over the station
+                "waypoints": [{"x": s.x, "y": s.y, "z": z}, {"x": st.x, "y": st.y, "z": z}],
+                "tolerance_m": 0.5,
+            },
+            {"action": "land"},
+        ]
+
+    # ------------------------------------------------------------------ step
+    def step(self, now: float) -> LtmStatus | None:
+        """Safety checks; returns a status when one is due."""
+        s = self.vehicle.snapshot()
+        # Only a drone flying for the fleet (a plan from the CTM) acts on its own: a drone the
+        # operator flies by hand in a single-drone console is never taken over.
+        if s.flying and self.autonomous == "" and self.plan is not None:
+            silent = self.last_ctm is None or now - self.last_ctm > self.ctm_timeout_s
+            here = Enu(s.x, s.y, s.z)
+            low = s.battery_pct <= reserve_pct(here, self.station, self.model, extra_pct=0.0)
+            going_home = self.plan is not None and self.plan.kind is PlanKind.RETURN
+            if (silent or low) and not going_home:
+                self.autonomous = "ctm_silent" if silent else "battery_reserve"
+                self.tasks.submit(self._home_commands(self.home_cruise_z, s), replace=True)
+        if now < self._next_status:
+            return None
+        self._next_status = now + self.period_s
+        return self.status(now)
+
+    def status(self, now: float) -> LtmStatus:
+        s = self.vehicle.snapshot()
+        lat = lon = 0.0
+        gps = self._last_gps
+        if gps is not None:
+            lat, lon = float(gps.latitude_deg), float(gps.longitude_deg)
+        elif self.origin is not None:
+            g = to_geo(Enu(s.x, s.y, s.z), self.origin)
+            lat, lon = g.lat_deg, g.lon_deg
+        ts = self.tasks.status
+        self._seq += 1
+        return LtmStatus(
+            name=self.name,
+            t=now,
+            seq=self._seq,
+            x=s.x,
+            y=s.y,
+            z=s.z,
+            yaw_deg=math.degrees(s.yaw_rad),
+            lat=lat,
+            lon=lon,
+            battery_pct=float(s.battery_pct),
+            flying=bool(s.flying),
+            state="EMERGENCY" if s.emergency else s.ctrl_state,
+            link_ok=bool(s.link_ok),
+            emergency=bool(s.emergency),
+            station=self.station,
+            plan_id=self.plan.plan_id if self.plan else 0,
+            task=ts.name,
+            task_state=ts.state,
+            progress=float(ts.progress),
+            autonomous=self.autonomous,
+        )

@@ -1,0 +1,251 @@
+"""Typed fleet messages: LTM status, flight plans, missions, and their JSON forms.
+
+On the graph and over rosbridge they travel as ``std_msgs/String`` whose ``data`` is the JSON of
+``to_dict()`` (status topic ``/NAME/fleet/ltm_status``) or as the args of the flight-plan service
+``/NAME/fleet/flight_plan``; ``from_dict`` checks every field and raises ``MessageError`` naming
+the first bad one, so nothing malformed gets past the door.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from pydantic import BaseModel, Field, model_validator
+
+from server.fleet.errors import MessageError
+from server.fleet.geo import Enu
+
+STATUS_TOPIC = "fleet/ltm_status"  # prefixed /NAME/
+PLAN_SERVICE = "fleet/flight_plan"  # prefixed /NAME/
+STATUS_TYPE = "std_msgs/String"
+PLAN_SERVICE_TYPE = "uav_console/FlightPlan"
+FLEET_TOPIC = "/fleet/status"
+FLEET_TYPE = "uav_console/FleetStatus"
+
+
+class Role(enum.Enum):
+    """What the CTM has a drone doing (``/fleet/status`` roles)."""
+
+    PATROLLING = "patrolling"
+    RELIEVING = "relieving"
+    RETURNING = "returning"
+    CHARGING = "charging"
+    IDLE = "idle"
+    LOST = "lost"
+
+
+class PlanKind(enum.Enum):
+    PATROL = "patrol"  # take off if needed, fly the route (loop) from ``start_index``
+    RETURN = "return"  # fly to the station at ``cruise_z`` and land
+    HOLD = "hold"  # hover where it is
+    NONE = "none"  # cancel; hover if flying
+
+
+def _num(d: Mapping[str, Any], key: str, *, default: float | None = None) -> float:
+    v = d.get(key, default)
+    if v is None:
+        raise MessageError(f"missing field {key!r}")
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise MessageError(f"field {key!r} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _str(d: Mapping[str, Any], key: str, default: str | None = None) -> str:
+    v = d.get(key, default)
+    if not isinstance(v, str):
+        raise MessageError(f"field {key!r} must be a string, got {v!r}")
+    return v
+
+
+def _bool(d: Mapping[str, Any], key: str, default: bool | None = None) -> bool:
+    v = d.get(key, default)
+    if not isinstance(v, bool):
+        raise MessageError(f"field {key!r} must be true or false, got {v!r}")
+    return v
+
+
+def _mapping(obj: Any, what: str) -> Mapping[str, Any]:
+    if not isinstance(obj, Mapping):
+        raise MessageError(f"{what} must be a JSON object, got {type(obj).__name__}")
+    return obj
+
+
+def _point(obj: Any, what: str) -> Enu:
+    d = _mapping(obj, what)
+    return Enu(_num(d, "x"), _num(d, "y"), _num(d, "z"))
+
+
+@dataclass(frozen=True)
+class LtmStatus:
+    """What an LTM reports about its drone, periodically (default 1 Hz)."""
+
+    name: str
+    t: float  # LTM clock, seconds
+    seq: int
+    x: float
+    y: float
+    z: float
+    yaw_deg: float
+    lat: float
+    lon: float
+    battery_pct: float
+    flying: bool
+    state: str  # ctrl state (LANDED, FLYING, HOVERING…) or EMERGENCY
+    link_ok: bool  # the LTM hears its drone
+    emergency: bool
+    station: Enu
+    plan_id: int = 0  # last plan applied (0: none)
+    task: str = ""  # running task name
+    task_state: str = "idle"
+    progress: float = 0.0
+    autonomous: str = ""  # what the LTM did on its own ("ctm_silent", "battery_reserve")
+
+    @property
+    def position(self) -> Enu:
+        return Enu(self.x, self.y, self.z)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, obj: Any) -> LtmStatus:
+        d = _mapping(obj, "status")
+        seq = d.get("seq", 0)
+        if isinstance(seq, bool) or not isinstance(seq, int) or seq < 0:
+            raise MessageError(f"field 'seq' must be a non-negative integer, got {seq!r}")
+        pid = d.get("plan_id", 0)
+        if isinstance(pid, bool) or not isinstance(pid, int):
+            raise MessageError(f"field 'plan_id' must be an integer, got {pid!r}")
+        name = _str(d, "name")
+        if not name:
+            raise MessageError("field 'name' must not be empty")
+        return cls(
+            name=name,
+            t=_num(d, "t"),
+            seq=seq,
+            x=_num(d, "x"),
+            y=_num(d, "y"),
+            z=_num(d, "z"),
+            yaw_deg=_num(d, "yaw_deg", default=0.0),
+            lat=_num(d, "lat", default=0.0),
+            lon=_num(d, "lon", default=0.0),
+            battery_pct=_num(d, "battery_pct"),
+            flying=_bool(d, "flying"),
+            state=_str(d, "state"),
+            link_ok=_bool(d, "link_ok"),
+            emergency=_bool(d, "emergency", False),
+            station=_point(d.get("station"), "station"),
+            plan_id=pid,
+            task=_str(d, "task", ""),
+            task_state=_str(d, "task_state", "idle"),
+            progress=_num(d, "progress", default=0.0),
+            autonomous=_str(d, "autonomous", ""),
+        )
+
+
+@dataclass(frozen=True)
+class FlightPlan:
+    """A plan the CTM sends an LTM; the LTM turns it into task-manager commands."""
+
+    plan_id: int
+    kind: PlanKind
+    mission: str = ""
+    route: tuple[Enu, ...] = ()
+    loop: bool = True
+    start_index: int = 0
+    cruise_z: float = 5.0  # transit height to and from the station
+    tolerance_m: float = 1.0  # waypoint arrival radius outdoors
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "plan_id": self.plan_id,
+            "kind": self.kind.value,
+            "mission": self.mission,
+            "route": [{"x": p.x, "y": p.y, "z": p.z} for p in self.route],
+            "loop": self.loop,
+            "start_index": self.start_index,
+            "cruise_z": self.cruise_z,
+            "tolerance_m": self.tolerance_m,
+        }
+
+    @classmethod
+    def from_dict(cls, obj: Any) -> FlightPlan:
+        d = _mapping(obj, "flight plan")
+        try:
+            kind = PlanKind(d.get("kind"))
+        except ValueError:
+            kinds = ", ".join(k.value for k in PlanKind)
+            raise MessageError(
+                f"field 'kind' must be one of {kinds}, got {d.get('kind')!r}"
+            ) from None
+        raw = d.get("route", [])
+        if not isinstance(raw, list):
+            raise MessageError("field 'route' must be a list of {x, y, z}")
+        route = tuple(_point(p, f"route[{i}]") for i, p in enumerate(raw))
+        if kind is PlanKind.PATROL and not route:
+            raise MessageError("a patrol plan needs a non-empty 'route'")
+        pid = d.get("plan_id")
+        if isinstance(pid, bool) or not isinstance(pid, int):
+            raise MessageError(f"field 'plan_id' must be an integer, got {pid!r}")
+        start = d.get("start_index", 0)
+        if isinstance(start, bool) or not isinstance(start, int):
+            raise MessageError(f"field 'start_index' must be an integer, got {start!r}")
+        if route and not 0 <= start < len(route):
+            raise MessageError(f"field 'start_index' {start} is outside the route")
+        tol = _num(d, "tolerance_m", default=1.0)
+        if tol <= 0:
+            raise MessageError("field 'tolerance_m' must be > 0")
+        return cls(
+            plan_id=pid,
+            kind=kind,
+            mission=_str(d, "mission", ""),
+            route=route,
+            loop=_bool(d, "loop", True),
+            start_index=start,
+            cruise_z=_num(d, "cruise_z", default=5.0),
+            tolerance_m=tol,
+        )
+
+
+class GeoWaypoint(BaseModel):
+    lat: float = Field(ge=-90, le=90)
+    lon: float = Field(ge=-180, le=180)
+    alt: float | None = Field(default=None, description="metres above the ellipsoid")
+
+
+class MissionRequest(BaseModel):
+    """``POST /api/v1/missions``: a patrol route as lat/lon/alt waypoints or marker ids."""
+
+    waypoints: list[GeoWaypoint] | None = None
+    markers: list[int] | None = None
+    altitude_m: float = Field(default=5.0, gt=0.3, le=100, description="height over the origin")
+    loop: bool = True
+    handoff_threshold: float = Field(default=0.30, gt=0.0, lt=1.0)
+    name: str | None = None
+
+    @model_validator(mode="after")
+    def _one_route(self) -> MissionRequest:
+        has_w, has_m = bool(self.waypoints), bool(self.markers)
+        if has_w == has_m:
+            raise ValueError("give exactly one non-empty route: 'waypoints' or 'markers'")
+        return self
+
+
+@dataclass(frozen=True)
+class Mission:
+    """A mission the CTM holds: a route in the map frame, loop, handoff threshold."""
+
+    id: str
+    route: tuple[Enu, ...]
+    loop: bool = True
+    threshold: float = 0.30  # battery fraction at which the patrolling drone must leave
+    created_t: float = 0.0
+    geo: tuple[tuple[float, float, float], ...] = field(default=())
+
+    @property
+    def altitude_m(self) -> float:
+        return sum(p.z for p in self.route) / len(self.route)

@@ -1,0 +1,68 @@
+"""REST doors onto the CTM: ``POST /missions``, ``GET /missions``, ``GET /missions/{id}``,
+``DELETE /missions/{id}``, ``GET /fleet`` (mounted by the app under ``/api/v1``)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from fastapi import APIRouter, HTTPException, params
+
+from server.fleet.ctm import CentralTaskManager
+from server.fleet.errors import MissionError, NotFoundError
+from server.fleet.messages import MissionRequest
+
+
+def make_fleet_router(
+    ctm: CentralTaskManager,
+    *,
+    clock: Callable[[], float] = time.monotonic,
+    dependencies: Sequence[params.Depends] | None = None,
+    on_change: Callable[[], None] | None = None,
+) -> APIRouter:
+    """The fleet router. ``clock`` must be the clock the CTM is stepped with; ``on_change``
+    is called after a mission is added or stopped (the node steps the CTM at once)."""
+    router = APIRouter(tags=["fleet"], dependencies=list(dependencies or ()))
+
+    def changed() -> None:
+        if on_change is not None:
+            on_change()
+
+    @router.post("/missions", status_code=201)
+    async def create_mission(req: MissionRequest) -> dict[str, Any]:
+        """Start a patrol: route as lat/lon/alt waypoints or marker ids, loop, threshold."""
+        try:
+            m = ctm.mission_from_request(req, clock())
+        except MissionError as exc:
+            raise HTTPException(status_code=422, detail=str(exc)) from exc
+        changed()
+        return ctm.mission_info(m.id)
+
+    @router.get("/missions")
+    async def list_missions() -> list[dict[str, Any]]:
+        return [ctm.mission_info(mid) for mid in ctm.missions]
+
+    @router.get("/missions/{mission_id}")
+    async def get_mission(mission_id: str) -> dict[str, Any]:
+        try:
+            return ctm.mission_info(mission_id)
+        except NotFoundError as exc:
+            raise HTTPException(status_code=404, detail=str(exc)) from exc
+
+    @router.delete("/missions/{mission_id}")
+    async def stop_mission(mission_id: str) -> dict[str, Any]:
+        """Stop a mission; its drones fly home."""
+        try:
+            ctm.stop_mission(mission_id, clock())
+        except NotFoundError as exc:
+            raise HTTPException(status_code=404, detail=str(exc)) from exc
+        changed()
+        return ctm.mission_info(mission_id)
+
+    @router.get("/fleet")
+    async def fleet() -> dict[str, Any]:
+        """The same content as the ``/fleet/status`` topic."""
+        return ctm.fleet_status(clock())
+
+    return router

@@ -1,0 +1,91 @@
+"""``FleetService``: the fleet inside one server process, for the composition root.
+
+Usage (``server/runtime.py``)::
+
+    fleet = FleetService(graph, world)
+    for stack in drones.values():           # in-process drones (``--fleet N``)
+        fleet.add_local(stack.name, stack.vehicle, stack.tasks)
+    await fleet.start()
+    routers.append(fleet.router())          # mounted under /api/v1: /missions, /fleet
+    ...
+    await fleet.stop()
+
+Remote vehicles (``uav-console vehicle``) need nothing here: they advertise their status topic
+and plan service over rosbridge and ``CtmNode`` discovers them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from fastapi import APIRouter, params
+
+from server.fleet.ctm import CentralTaskManager
+from server.fleet.geo import origin_of
+from server.fleet.ltm import LocalTaskManager
+from server.fleet.node import CtmNode, LtmNode
+from server.fleet.patrol import station_positions
+from server.fleet.planner import FlightModel, StationModel
+from server.fleet.router import make_fleet_router
+from server.graph import Graph
+
+
+class FleetService:
+    """The CTM on the graph plus one in-process LTM per local drone."""
+
+    def __init__(
+        self,
+        graph: Graph,
+        world: Any,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        model: FlightModel | None = None,
+        stations: StationModel | None = None,
+        ltm_rate_hz: float = 5.0,
+    ) -> None:
+        self.graph = graph
+        self.world = world
+        self.clock = clock
+        self.ctm = CentralTaskManager(
+            model=model, stations=stations, origin=origin_of(world), world=world
+        )
+        self.node = CtmNode(graph, self.ctm, clock=clock)
+        self.ltm_nodes: list[LtmNode] = []
+        self.period_s = 1.0 / ltm_rate_hz
+        self._task: asyncio.Task[None] | None = None
+
+    def add_local(self, name: str, vehicle: Any, tasks: Any) -> LocalTaskManager:
+        """An in-process drone joins the fleet (its station: the world's n-th station)."""
+        pad = station_positions(self.world, len(self.ltm_nodes) + 1)[-1]
+        ltm = LocalTaskManager(name, vehicle, tasks, pad, origin=origin_of(self.world))
+        self.ltm_nodes.append(LtmNode(self.graph, ltm, clock=self.clock))
+        return ltm
+
+    def router(self, dependencies: Sequence[params.Depends] | None = None) -> APIRouter:
+        return make_fleet_router(
+            self.ctm, clock=self.clock, dependencies=dependencies, on_change=self.node.poke
+        )
+
+    async def start(self) -> None:
+        await self.node.start()
+        self._task = asyncio.create_task(self._run(), name="ltm-nodes")
+
+    async def _run(self) -> None:
+        while True:
+            now = self.clock()
+            for n in self.ltm_nodes:
+                n.step(now)
+            await asyncio.sleep(self.period_s)
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+        await self.node.stop()
+        for n in self.ltm_nodes:
+            n.close()

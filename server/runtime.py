@@ -1,0 +1,298 @@
+"""The composition root: everything one server process runs, started and stopped together.
+
+``Runtime`` owns the graph, security, the world, one :class:`DroneStack` per drone (simulator if
+any, driver, vehicle, task manager, graph node, dialog manager), the captioner and the fleet's
+central task manager. The FastAPI app and the CLI only talk to it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+from fastapi import APIRouter
+
+from drone.ardrone.driver import ARDroneDriver, DriverConfig
+from drone.sim.camera import CameraModel
+from drone.sim.server import SimServer, sim_endpoint
+from drone.sim.world import World, load_world
+from drone.vehicle import Vehicle
+from server.captioner import BadFrame, Captioner, CaptionerUnavailable, describe_frame
+from server.captioner.service import NOTHING, load_captioner, unavailable_text
+from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+from server.dialog.manager import DialogManager
+from server.fleet.service import FleetService
+from server.graph import Graph
+from server.language.nlu import default_nlu
+from server.rosbridge.context import BridgeContext
+from server.rosbridge.endpoint import make_router, serve_rosbridge_port
+from server.security import Security, TokenStore
+from server.settings import Settings
+from server.store import AuditLog
+from server.tasks.manager import TaskManager
+from server.vehicle_node import VehicleNode
+
+log = logging.getLogger("uav_console")
+
+JPEG_QUALITY = 80
+
+
+@dataclass
+class DroneStack:
+    """One drone as the server sees it."""
+
+    name: str
+    prefix: str  # "" for a single drone, "/uav2" in a fleet
+    vehicle: Vehicle
+    driver: ARDroneDriver
+    sim: SimServer | None = None
+    tasks: Any | None = None
+    node: Any | None = None
+    _jpeg: tuple[int, bytes | None] = (0, None)
+    _jpeg_frame_count: int = -1
+
+    def link_ok(self) -> bool:
+        return bool(self.vehicle.snapshot().link_ok)
+
+    def telemetry(self) -> dict[str, Any]:
+        """JSON-ready telemetry of ``GET /api/v1/drones/{id}``."""
+        snap = self.vehicle.snapshot()
+        out = snapshot_to_dict(snap)
+        out["name"] = self.name
+        out["simulated"] = self.sim is not None
+        if self.tasks is not None:
+            status = self.tasks.status
+            out["task"] = {
+                "name": status.name,
+                "state": str(getattr(status.state, "value", status.state)),
+                "progress": status.progress,
+                "detail": status.detail,
+            }
+        return out
+
+    def direct(self, action: str) -> str:
+        """Direct control from a button or REST; land and emergency bypass every queue."""
+        if action in ("land", "emergency") and self.tasks is not None:
+            self.tasks.preempt(action)
+            return f"{action} sent"
+        if action in ("hover",) and self.tasks is not None:
+            self.tasks.cancel()
+        getattr(self.vehicle, action)()
+        return f"{action} sent"
+
+    def latest_jpeg(self) -> tuple[int, bytes | None]:
+        """(frame counter, JPEG of the latest camera frame with the tracking overlay)."""
+        count = self.vehicle.frames_seen
+        if count != self._jpeg_frame_count:
+            frame = self.vehicle.overlay()
+            if frame is not None:
+                ok, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+                if ok:
+                    self._jpeg = (count, buf.tobytes())
+            self._jpeg_frame_count = count
+        return self._jpeg
+
+    def truth(self) -> dict[str, Any]:
+        assert self.sim is not None
+        t = self.sim.truth
+        out = {k: _jsonable(v) for k, v in vars(t).items()} if hasattr(t, "__dict__") else {}
+        if not out:
+            from dataclasses import asdict
+
+            out = {k: _jsonable(v) for k, v in asdict(t).items()}
+        out["name"] = self.name
+        return out
+
+    def inject_fault(self, body: Any) -> None:
+        assert self.sim is not None
+        params: dict[str, float] = {}
+        if body.duration_s is not None:
+            params["duration_s"] = body.duration_s
+        if body.battery_pct is not None:
+            params["battery_pct"] = body.battery_pct
+        if body.wind_mps is not None:
+            params["wind_x"], params["wind_y"] = body.wind_mps
+        self.sim.inject_fault(body.kind, **params)
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if hasattr(v, "value") and hasattr(v, "name"):
+        return v.name
+    if isinstance(v, tuple | list):
+        return [_jsonable(x) for x in v]
+    return v
+
+
+def snapshot_to_dict(snap: Any) -> dict[str, Any]:
+    """A ``VehicleSnapshot`` as JSON-ready values (enums by name, NaN as null)."""
+    from dataclasses import asdict, is_dataclass
+
+    raw = asdict(snap) if is_dataclass(snap) else dict(vars(snap))
+    return _clean(raw)
+
+
+def _clean(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _clean(x) for k, x in v.items()}
+    return _jsonable(v) if not isinstance(v, list | tuple) else [_clean(x) for x in v]
+
+
+@dataclass
+class Runtime:
+    """Everything one server process runs; ``await start()`` then ``await stop()``."""
+
+    settings: Settings
+    graph: Graph = field(default_factory=Graph)
+    drones: dict[str, DroneStack] = field(default_factory=dict)
+    dialogs: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        s = self.settings
+        self.tokens = TokenStore(s.data_dir, pilot_token=s.token, observer_token=s.observer_token)
+        self.security = Security(s, self.tokens)
+        self.world: World = load_world(s.world)
+        self.bridge = BridgeContext(self.graph, self.security, s)
+        self.nlu = default_nlu(str(s.grammar_dir))
+        self.audit = AuditLog(s.data_dir / "audit.db")
+        self._routers: list[APIRouter] = [make_router(self.bridge)]
+        self.fleet = FleetService(self.graph, self.world)
+        self._tasks: list[asyncio.Task[Any]] = []
+        self._captioner: Captioner | CaptionerUnavailable = load_captioner(s.model_dir)
+        self.started_at = time.time()
+
+    # ------------------------------------------------------------------ lifecycle
+    async def start(self) -> None:
+        self.graph.bind_loop(asyncio.get_running_loop())
+        self.graph.advertise_service(
+            "/console/describe", "uav_console/Describe", self._describe_service
+        )
+        if isinstance(self._captioner, CaptionerUnavailable):
+            log.warning(self.captioner_status())
+        count = 0 if self.settings.drone == "none" else max(1, self.settings.fleet)
+        for index in range(count):
+            name = f"uav{index + 1}"
+            prefix = "" if count == 1 else f"/{name}"
+            self.drones[name] = await self._start_drone(name, prefix, index)
+        for stack in self.drones.values():
+            if stack.tasks is not None:
+                self.fleet.add_local(stack.name, stack.vehicle, stack.tasks)
+        await self.fleet.start()
+        if self.settings.rosbridge_port:
+            port = self.settings.rosbridge_port
+            serving = serve_rosbridge_port(self.settings.host, port, self.bridge)
+            self._tasks.append(asyncio.create_task(serving, name="rosbridge-port"))
+
+    async def _start_drone(self, name: str, prefix: str, index: int) -> DroneStack:
+        s = self.settings
+        sim: SimServer | None = None
+        if s.drone == "sim":
+            addr, ports = sim_endpoint(index, s.sim_base_addr)
+            sim = SimServer(addr, self.world, ports=ports, speed=s.sim_speed, seed=s.seed + index)
+            await sim.start()
+            driver = ARDroneDriver(
+                addr,
+                at_port=ports.at,
+                navdata_port=ports.navdata,
+                video_port=ports.video,
+                config=DriverConfig(link_timeout_s=s.link_timeout_s),
+            )
+        else:
+            driver = ARDroneDriver(s.drone, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+        await driver.start()
+        vehicle = Vehicle(name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
+        await vehicle.start(driver)
+        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
+        node = VehicleNode(
+            self.graph, vehicle, tasks, name, prefix, heartbeat_timeout_s=s.heartbeat_timeout_s
+        )
+        await node.start()
+        dialog = DialogManager(
+            self.graph,
+            s,
+            TaskManagerPort(tasks),
+            VehiclePort(vehicle, self.world),
+            CallableDescriber(lambda: self.describe(name)),
+            self.audit,
+            vehicle.clock.now,
+            nlu=self.nlu,
+            drone=name,
+            prefix=prefix,
+        )
+        self.dialogs[name] = dialog
+        self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
+        return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
+
+    async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        await self.fleet.stop()
+        for stack in self.drones.values():
+            if stack.node is not None:
+                await stack.node.stop()
+                stack.node.close()
+            with contextlib.suppress(Exception):
+                await stack.vehicle.stop(land=True)
+            with contextlib.suppress(Exception):
+                await stack.driver.stop()
+            if stack.sim is not None:
+                await stack.sim.stop()
+        self.audit.close()
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def default_drone(self) -> str:
+        return next(iter(self.drones), "uav1")
+
+    def extra_routers(self) -> list[APIRouter]:
+        return list(self._routers)
+
+    def captioner_status(self) -> str:
+        """'ready', or why scene description is unavailable (said at start-up and in /health)."""
+        if isinstance(self._captioner, CaptionerUnavailable):
+            return unavailable_text(self._captioner.reason)
+        return "ready"
+
+    def interpret(self, text: str, state: str | None) -> list[dict[str, Any]]:
+        """NLU only (raises ``UnknownStateError``, a ``KeyError``, for an unknown state)."""
+        return self.nlu.interpret(text, state or None)
+
+    async def describe(self, drone: str) -> tuple[str, float | None]:
+        """Caption ``drone``'s latest camera frame: (sentence, ms), or (why not, None).
+
+        Raises:
+            LookupError: no such drone.
+        """
+        stack = self.drones.get(drone)
+        if stack is None:
+            raise LookupError(f"no drone '{drone}'")
+        frame = stack.driver.latest_frame
+        if isinstance(self._captioner, Captioner) and frame is not None:
+            try:
+                caption = await self._captioner.describe(frame)
+            except BadFrame as exc:
+                return f"I cannot describe this camera image: {exc}.", None
+            return caption.text or NOTHING, caption.ms
+        return await describe_frame(self._captioner, frame), None
+
+    async def _describe_service(self, args: dict[str, Any]) -> dict[str, Any]:
+        name = str(args.get("drone") or self.default_drone)
+        text, ms = await self.describe(name)
+        return {"drone": name, "text": text, "ms": ms if ms is not None else -1.0}
+
+    def announcement(self) -> list[str]:
+        """The pilot's clickable URL (Jupyter style), then the observer's, indented."""
+        base = f"http://{self.settings.host}:{self.settings.port}/"
+        return [
+            f"{base}?token={self.tokens.pilot_token}",
+            f"  observer (watch only): {base}?token={self.tokens.observer_token}",
+        ]

@@ -1,0 +1,188 @@
+"""The whole server as a third party sees it: ``python -m server serve`` in a subprocess.
+
+One server for the directory (start-up costs a few seconds): the real simulated AR.Drone on
+127.0.0.120 (UAVC_SIM_BASE_ADDR) running at twice real time (UAVC_SIM_SPEED), the real driver,
+vehicle, task manager, dialog manager and rosbridge. Clients are real: roslibpy (PyPI), the
+``websockets`` library, and httpx over TCP. Tests that fly leave the drone landed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+import roslibpy
+
+ROOT = Path(__file__).resolve().parents[2]
+PILOT = "e2e-pilot-token"
+OBSERVER = "e2e-observer-token"
+SIM_ADDR = "127.0.0.120"
+SIM_SPEED = "2"
+TIMEOUT = 10.0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Server:
+    """A running ``uav-console serve`` on loopback, and a pilot-token REST client to it."""
+
+    port: int
+    http: httpx.Client
+    proc: subprocess.Popen[bytes]
+    log_path: Path
+
+    @property
+    def base(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def ws_url(self, token: str | None = PILOT) -> str:
+        query = f"?token={token}" if token else ""
+        return f"ws://127.0.0.1:{self.port}/rosbridge{query}"
+
+    def truth(self) -> dict[str, Any]:
+        r = self.http.get("/api/v1/sim/uav1/truth")
+        r.raise_for_status()
+        return dict(r.json())
+
+    def drone(self) -> dict[str, Any]:
+        r = self.http.get("/api/v1/drones/uav1")
+        r.raise_for_status()
+        return dict(r.json())
+
+    def wait_truth(
+        self, pred: Callable[[dict[str, Any]], bool], timeout: float = 15.0, what: str = ""
+    ) -> dict[str, Any]:
+        """Poll the simulator's ground truth until ``pred`` holds (fails the test otherwise)."""
+        return wait_for(self.truth, pred, timeout, what or "truth")
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")[-4000:]
+
+    def ensure_landed(self) -> None:
+        """Bring the drone to the ground (and out of emergency) before or after a flight."""
+        t = self.truth()
+        if t["emergency"]:
+            self.http.post("/api/v1/drones/uav1/reset")
+        if t["flying"] or t["z"] > 0.05:
+            self.http.post("/api/v1/drones/uav1/land")
+        self.wait_truth(lambda t: not t["flying"] and t["z"] < 0.05, 20.0, "landed")
+
+
+def wait_for(get: Callable[[], Any], pred: Callable[[Any], bool], timeout: float, what: str) -> Any:
+    deadline = time.monotonic() + timeout
+    last: Any = None
+    while time.monotonic() < deadline:
+        last = get()
+        if pred(last):
+            return last
+        time.sleep(0.05)
+    raise AssertionError(f"{what}: condition not met in {timeout} s; last: {last!r}")
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    data = tmp_path_factory.mktemp("e2e-data")
+    port = free_port()
+    env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_SIM_SPEED=SIM_SPEED)
+    log_path = data / "server.log"
+    cmd = [
+        sys.executable,
+        "-m",
+        "server",
+        "serve",
+        "--port",
+        str(port),
+        "--token",
+        PILOT,
+        "--observer-token",
+        OBSERVER,
+        "--data-dir",
+        str(data),
+    ]
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+    http = httpx.Client(
+        base_url=f"http://127.0.0.1:{port}",
+        headers={"Authorization": f"Bearer {PILOT}"},
+        timeout=10.0,
+    )
+    srv = Server(port, http, proc, log_path)
+    try:
+        deadline = time.monotonic() + 40
+        while True:
+            if proc.poll() is not None:
+                raise RuntimeError(f"server exited with {proc.returncode}:\n{srv.log()}")
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"server did not become healthy:\n{srv.log()}")
+            with contextlib.suppress(httpx.TransportError):
+                health = http.get("/api/v1/health")
+                if health.status_code == 200 and health.json()["drones"].get("uav1"):
+                    break
+            time.sleep(0.1)
+        yield srv
+    finally:
+        http.close()
+        proc.terminate()
+        try:
+            proc.wait(15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+
+@pytest.fixture
+def landed(server: Server) -> Iterator[Server]:
+    """The server with the drone on the ground before and after the test."""
+    server.ensure_landed()
+    yield server
+    server.ensure_landed()
+
+
+@pytest.fixture
+def ros(server: Server) -> Iterator[roslibpy.Ros]:
+    """A roslibpy client connected with the pilot token."""
+    client = roslibpy.Ros(server.ws_url(PILOT))
+    client.run(timeout=TIMEOUT)
+    yield client
+    client.close()
+
+
+class Inbox:
+    """Collects callback values from roslibpy's thread; ``wait`` blocks on a condition."""
+
+    def __init__(self) -> None:
+        self.items: list[Any] = []
+        self._cv = threading.Condition()
+
+    def __call__(self, item: Any) -> None:
+        with self._cv:
+            self.items.append(item)
+            self._cv.notify_all()
+
+    def wait(self, n: int = 1, timeout: float = TIMEOUT) -> list[Any]:
+        return self.wait_until(lambda items: len(items) >= n, timeout, f"{n} messages")
+
+    def wait_until(
+        self, pred: Callable[[list[Any]], bool], timeout: float = TIMEOUT, what: str = ""
+    ) -> list[Any]:
+        with self._cv:
+            ok = self._cv.wait_for(lambda: pred(self.items), timeout)
+            items = list(self.items)
+        assert ok, f"inbox: {what or 'condition'} not met in {timeout} s; got {len(items)}"
+        return items

@@ -1,0 +1,62 @@
+"""The docker files cannot be run here (no Docker engine): check that the compose file is valid
+YAML of the right shape, that every command it runs is one ``uav-console`` accepts, and that
+everything the Dockerfile copies exists."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+import yaml
+
+from server.cli import _parser
+from server.settings import ROOT
+
+DOCKER = ROOT / "docker"
+
+
+def compose() -> dict:
+    with (DOCKER / "compose.yaml").open() as f:
+        return yaml.safe_load(f)
+
+
+def test_compose_shape() -> None:
+    c = compose()
+    services = c["services"]
+    assert {"central", "sim1", "sim2", "vehicle1", "vehicle2"} <= set(services)
+    nets = c["networks"]["fleet"]["ipam"]["config"][0]["subnet"]
+    assert nets == "172.28.0.0/24"
+    for name, svc in services.items():
+        assert list(svc["networks"]) == ["fleet"], name
+        assert svc["build"]["dockerfile"] == "docker/Dockerfile"
+    # each vehicle flies its own simulator, addressed by that container's IP
+    for k in (1, 2):
+        sim_ip = services[f"sim{k}"]["networks"]["fleet"]["ipv4_address"]
+        cmd = services[f"vehicle{k}"]["command"]
+        assert cmd[cmd.index("--drone") + 1] == sim_ip
+        assert cmd[cmd.index("--central") + 1] == "ws://central:8000/rosbridge"
+        assert services[f"sim{k}"]["command"][2] == sim_ip
+
+
+@pytest.mark.parametrize("service", ["central", "sim1", "sim2", "vehicle1", "vehicle2"])
+def test_compose_commands_exist(service: str) -> None:
+    cmd = [
+        re.sub(r"\$\{UAVC_TOKEN[^}]*\}", "tok", a)
+        for a in compose()["services"][service]["command"]
+    ]
+    args = _parser().parse_args(cmd)  # exits (SystemExit) on an unknown command or flag
+    assert args.command == cmd[0]
+
+
+def test_dockerfile_copies_existing_paths() -> None:
+    text = (DOCKER / "Dockerfile").read_text()
+    copied = [
+        p for line in text.splitlines() if line.startswith("COPY") for p in shlex.split(line)[1:-1]
+    ]
+    assert copied
+    for p in copied:
+        assert (ROOT / p).exists(), p
+    assert 'ENTRYPOINT ["uav-console"]' in text
+    assert Path(ROOT / "pyproject.toml").read_text().count('uav-console = "server.cli:main"') == 1
