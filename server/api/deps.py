@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
@@ -37,6 +38,36 @@ def pilot_role(role: Annotated[str, Depends(caller_role)]) -> str:
     if role != "pilot":
         raise HTTPException(status_code=403, detail=f"role '{role}' may not command the drones")
     return role
+
+
+SAFETY_ACTIONS = frozenset({"land", "emergency", "hover"})
+
+
+def check_lease(request: Request, runtime: Runtime, actions: set[str]) -> None:
+    """A pilot on REST commands only while no other pilot holds the lease (DESIGN §5).
+
+    Safety actions (land, emergency, hover) always get through. ``?take_over=true`` takes the
+    lease from its holder, who is told, and leaves it free.
+
+    Raises:
+        HTTPException: 409 naming the holder and how to take over.
+    """
+    if actions and actions <= SAFETY_ACTIONS:
+        return
+    lease = runtime.security.lease
+    holder = lease.state.holder
+    if holder is None:
+        return
+    if request.query_params.get("take_over", "").lower() in ("1", "true", "yes"):
+        taker = f"rest:{request.client.host if request.client else 'unknown'}"
+        lease.acquire(taker, time.time(), take_over=True)
+        lease.release(taker)
+        return
+    raise HTTPException(
+        status_code=409,
+        detail=f"another pilot ({holder}) holds the pilot lease; "
+        "repeat with ?take_over=true to take it over",
+    )
 
 
 def role_by_method(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]) -> str:

@@ -9,7 +9,7 @@ from typing import Any, Literal
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import StreamingResponse
 
-from server.api.deps import DroneDep, PilotDep, RoleDep, RuntimeDep
+from server.api.deps import DroneDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import ActionResult, Describe
 
 router = APIRouter(prefix="/drones", tags=["drones"])
@@ -41,8 +41,14 @@ async def describe(stack: DroneDep, runtime: RuntimeDep, _role: RoleDep) -> Desc
 
 
 @router.post("/{drone_id}/{action}", response_model=ActionResult)
-def act(action: Action, stack: DroneDep, _role: PilotDep) -> ActionResult:
-    """Direct control; land and emergency reach the wire ahead of anything queued."""
+def act(
+    action: Action, request: Request, stack: DroneDep, runtime: RuntimeDep, _role: PilotDep
+) -> ActionResult:
+    """Direct control; land and emergency reach the wire ahead of anything queued.
+
+    Anything but land, emergency and hover needs the pilot lease to be free (409 otherwise).
+    """
+    check_lease(request, runtime, {action})
     detail = stack.direct(action)
     return ActionResult(drone=stack.name, action=action, accepted=True, detail=detail)
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, HTTPException, Request
 
-from server.api.deps import PilotDep, RoleDep, RuntimeDep
+from server.api.deps import PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import CommandRequest, CommandResponse, InterpretRequest, InterpretResponse
 
 router = APIRouter(tags=["language"])
@@ -21,8 +21,14 @@ def interpret(body: InterpretRequest, runtime: RuntimeDep, _role: RoleDep) -> In
 
 
 @router.post("/command", response_model=CommandResponse)
-async def command(body: CommandRequest, runtime: RuntimeDep, role: PilotDep) -> CommandResponse:
-    """Say ``text`` to a drone's dialog manager, as if spoken with ``confidence``."""
+async def command(
+    body: CommandRequest, request: Request, runtime: RuntimeDep, role: PilotDep
+) -> CommandResponse:
+    """Say ``text`` to a drone's dialog manager, as if spoken with ``confidence``.
+
+    Needs the pilot lease to be free unless all it asks is land, emergency or hover (409).
+    """
+    check_lease(request, runtime, {c["action"] for c in runtime.interpret(body.text, None)})
     name = body.drone or runtime.default_drone
     dialog = runtime.dialogs.get(name)
     if dialog is None:

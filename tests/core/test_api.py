@@ -187,3 +187,21 @@ async def test_missions_need_a_pilot_and_are_validated(api: httpx.AsyncClient) -
     assert (await api.get("/api/v1/missions/no-such-mission")).status_code == 404
     fleet = (await api.get("/api/v1/fleet")).json()
     assert [d["name"] for d in fleet["drones"]] == ["uav1"]
+
+
+async def test_rest_respects_the_pilot_lease_but_never_blocks_safety(
+    api: httpx.AsyncClient,
+) -> None:
+    runtime = api.app.state.runtime  # type: ignore[attr-defined]
+    told: list[str] = []
+    runtime.security.lease.acquire("browser-pilot", 0.0, on_revoke=told.append)
+    held = await api.post("/api/v1/drones/uav1/takeoff")
+    assert held.status_code == 409 and "take_over" in held.json()["detail"]
+    assert (await api.post("/api/v1/command", json={"text": "take off"})).status_code == 409
+    for safety in ("land", "emergency", "hover"):
+        assert (await api.post(f"/api/v1/drones/uav1/{safety}")).status_code == 200
+    assert (await api.post("/api/v1/command", json={"text": "land now"})).status_code == 200
+    took = await api.post("/api/v1/drones/uav1/reset?take_over=true")
+    assert took.status_code == 200
+    assert told and told[0].startswith("rest:")
+    assert runtime.security.lease.state.holder is None

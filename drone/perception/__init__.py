@@ -1,0 +1,1 @@
+"""Perception: ArUco marker localisation (markers.py) and the pose estimator (ekf.py)."""

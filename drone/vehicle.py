@@ -1,0 +1,576 @@
+"""``Vehicle``: one drone — driver, marker perception, EKF, the paper's PID and a setpoint.
+
+The same object flies in real time and in lockstep (DESIGN §3):
+
+* inputs: ``on_driver_event(event)`` (navdata, link lost/restored from
+  ``drone.ardrone.driver``), ``on_frame(frame, t)`` (camera images), ``control_step(now, dt)``
+  (the controller, called by :class:`~drone.control.loop.ControlLoop` at 100 Hz in real time or
+  by :class:`~drone.lockstep.LockstepRig` on a virtual clock);
+* commands (thread-safe, any thread): ``takeoff() land() emergency() reset() hover()
+  jog(linear_x, linear_y, linear_z, angular_z) set_setpoint(Setpoint | None)``;
+* output: ``snapshot() -> VehicleSnapshot`` (immutable; what telemetry, the task manager and
+  the dialog read) and PCMD commands to the driver.
+
+Jog follows ardrone_autonomy's ``/cmd_vel``: fractions in [−1, 1], PCMD roll = −linear.y,
+pitch = −linear.x, gaz = linear.z, yaw = −angular.z; all zero → hover. A jog replaces the
+setpoint, and ``add_jog_listener`` callbacks learn of it (the task manager cancels its task).
+
+Real time: ``await vehicle.start(driver)`` with the asyncio ``ARDroneDriver`` (already
+started) hooks its ``on_event`` (chaining any existing callback), feeds ``driver.latest_frame``
+to the perception worker thread and starts the 100 Hz control thread; ``await vehicle.stop()``
+lands (or hovers when ``land=False``) and stops them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from drone.ardrone.navdata import CtrlState, Navdata
+from drone.control.clock import Clock, MonotonicClock
+from drone.control.loop import ControlLoop, LoopStats
+from drone.control.pid import DroneLimits, PaperGains, PaperPID, PcmdCommand, Setpoint, wrap_angle
+from drone.perception.ekf import EkfConfig, Estimate, ExtendedKalmanFilter, NavdataInput
+from drone.perception.markers import FrameResult, MarkerLocaliser, PerceptionWorker, draw_overlay
+
+__all__ = ["Commander", "MarkerSeen", "Setpoint", "Vehicle", "VehicleMode", "VehicleSnapshot"]
+
+FLYING_STATES = (CtrlState.FLYING, CtrlState.HOVERING, CtrlState.GOTOFIX)
+
+
+class Commander(Protocol):
+    """What the vehicle needs from a driver (``DriverProtocol`` and ``ARDroneDriver`` both fit)."""
+
+    def takeoff(self) -> None: ...
+    def land(self) -> None: ...
+    def emergency(self) -> None: ...
+    def reset(self) -> None: ...
+    def hover(self) -> None: ...
+    def move(self, roll: float, pitch: float, gaz: float, yaw: float) -> None: ...
+
+
+class VehicleMode(enum.Enum):
+    """Who is flying: nobody (drone's own hover), the position controller, or the operator."""
+
+    IDLE = "idle"  # hover (PCMD flag 0) when flying
+    AUTO = "auto"  # PID towards the setpoint
+    MANUAL = "manual"  # operator jog
+    LANDING = "landing"
+    EMERGENCY = "emergency"
+
+
+@dataclass(frozen=True)
+class MarkerSeen:
+    """One marker in the latest processed frame."""
+
+    id: int
+    distance_m: float
+    x: float  # drone position this marker implies (map frame)
+    y: float
+    z: float
+    yaw_rad: float
+    marker_x: float  # the marker's own map pose
+    marker_y: float
+    marker_z: float
+    marker_yaw_rad: float
+
+
+@dataclass(frozen=True)
+class VehicleSnapshot:
+    """Everything one look at the vehicle tells (immutable)."""
+
+    name: str
+    t: float
+    ctrl_state: str  # CtrlState name: LANDED, TAKEOFF, FLYING, HOVERING, LANDING, DEFAULT…
+    flying: bool
+    emergency: bool
+    battery_pct: float
+    altitude_m: float
+    x: float
+    y: float
+    z: float
+    yaw_rad: float
+    vx: float
+    vy: float
+    vz: float
+    position_sigma_m: float
+    yaw_sigma_rad: float
+    localised: bool
+    markers: tuple[MarkerSeen, ...]
+    last_marker_t: float | None
+    link_ok: bool
+    navdata_age_s: float | None
+    mode: str
+    setpoint: Setpoint | None
+    controller: LoopStats | None
+    state_bits: int = 0
+    command: PcmdCommand | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def yaw_deg(self) -> float:
+        return math.degrees(self.yaw_rad)
+
+    @property
+    def marker_ids(self) -> tuple[int, ...]:
+        return tuple(m.id for m in self.markers)
+
+
+class Vehicle:
+    """One drone; see the module docstring.
+
+    Args:
+        name: ``uav1``…
+        world: the map (``drone.sim.world.World``): marker poses for localisation.
+        commander: the driver to command (``DriverProtocol`` in lockstep, ``ARDroneDriver`` live).
+        camera: front camera model (``drone.sim.camera.CameraModel``); None disables perception.
+        clock: time source for ``snapshot``/ages (virtual in lockstep).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        world: Any,
+        commander: Commander | None = None,
+        *,
+        camera: Any | None = None,
+        clock: Clock | None = None,
+        gains: PaperGains | None = None,
+        limits: DroneLimits | None = None,
+        ekf_config: EkfConfig | None = None,
+        link_timeout_s: float = 0.5,
+    ) -> None:
+        self.name = name
+        self.world = world
+        self.commander = commander
+        self.camera = camera
+        self.clock: Clock = clock or MonotonicClock()
+        self.pid = PaperPID(gains, limits)
+        self.ekf = ExtendedKalmanFilter(ekf_config, t0=self.clock.now())
+        self.localiser = MarkerLocaliser(world, camera) if camera is not None else None
+        self.link_timeout_s = link_timeout_s
+        self._lock = threading.RLock()  # commands vs. the control thread
+        self._mode = VehicleMode.IDLE
+        self._setpoint: Setpoint | None = None
+        self._jog: PcmdCommand | None = None
+        self._jog_listeners: list[Callable[[], None]] = []
+        self._nav_listeners: list[Callable[[Navdata, float], None]] = []
+        self._result_listeners: list[Callable[[FrameResult], None]] = []
+        self._nav: Navdata | None = None
+        self._nav_t: float | None = None
+        self._prev_psi: tuple[float, float] | None = None  # (t, yaw) for the yaw rate
+        self._link_ok = False
+        self._markers: tuple[MarkerSeen, ...] = ()
+        self._last_marker_t: float | None = None
+        self._last_result: FrameResult | None = None
+        self._last_frame: np.ndarray | None = None
+        self._last_cmd: PcmdCommand | None = None
+        self._worker: PerceptionWorker | None = None
+        self._loop: ControlLoop | None = None
+        self._driver: Any | None = None
+        self._frame_task: asyncio.Task[None] | None = None
+        self.frames_seen = 0
+
+    # ------------------------------------------------------------------ commands
+    def _cmd(self) -> Commander:
+        if self.commander is None:
+            raise RuntimeError(f"vehicle {self.name} has no driver")
+        return self.commander
+
+    def takeoff(self) -> None:
+        """Take off (the drone climbs to ~0.8 m and hovers); resets the integral term."""
+        with self._lock:
+            self.pid.reset()
+            self._mode = VehicleMode.IDLE
+            self._setpoint = None
+            self._jog = None
+            self._cmd().takeoff()
+
+    def land(self) -> None:
+        """Land now (jumps the driver's queue, DESIGN §5)."""
+        with self._lock:
+            self._mode = VehicleMode.LANDING
+            self._setpoint = None
+            self._jog = None
+            self._cmd().land()
+
+    def emergency(self) -> None:
+        """Cut the motors now."""
+        with self._lock:
+            self._mode = VehicleMode.EMERGENCY
+            self._setpoint = None
+            self._jog = None
+            self._cmd().emergency()
+
+    def reset(self) -> None:
+        """Leave the emergency state (the drone must be on the floor)."""
+        with self._lock:
+            self._mode = VehicleMode.IDLE
+            self._cmd().reset()
+
+    def hover(self) -> None:
+        """Stop: no setpoint, no jog; the drone holds position on its own (PCMD flag 0)."""
+        with self._lock:
+            if self._mode not in (VehicleMode.LANDING, VehicleMode.EMERGENCY):
+                self._mode = VehicleMode.IDLE
+            self._setpoint = None
+            self._jog = None
+            self._cmd().hover()
+
+    def jog(self, linear_x: float, linear_y: float, linear_z: float, angular_z: float) -> None:
+        """Manual flight with ``/cmd_vel`` fractions (ardrone_autonomy semantics; module doc).
+
+        Raises:
+            ValueError: a value is NaN or infinite.
+        """
+        vals = (linear_x, linear_y, linear_z, angular_z)
+        if not all(math.isfinite(v) for v in vals):
+            raise ValueError(f"jog values must be finite, got {vals}")
+        c = [max(-1.0, min(1.0, float(v))) for v in vals]
+        with self._lock:
+            if self._mode in (VehicleMode.LANDING, VehicleMode.EMERGENCY):
+                return
+            self._setpoint = None
+            if c == [0.0, 0.0, 0.0, 0.0]:
+                self._jog = None
+                self._mode = VehicleMode.IDLE
+                self._cmd().hover()
+            else:
+                self._jog = PcmdCommand(roll=-c[1], pitch=-c[0], gaz=c[2], yaw=-c[3])
+                self._mode = VehicleMode.MANUAL
+            listeners = list(self._jog_listeners)
+        for cb in listeners:
+            cb()
+
+    def add_jog_listener(self, cb: Callable[[], None]) -> None:
+        """Call ``cb()`` after every jog (the task manager cancels its running task)."""
+        self._jog_listeners.append(cb)
+
+    def add_navdata_listener(self, cb: Callable[[Navdata, float], None]) -> None:
+        """Call ``cb(navdata, now)`` after each navdata packet has updated the estimate."""
+        self._nav_listeners.append(cb)
+
+    def add_result_listener(self, cb: Callable[[FrameResult], None]) -> None:
+        """Call ``cb(result)`` after each processed camera frame (perception worker thread)."""
+        self._result_listeners.append(cb)
+
+    def set_setpoint(self, setpoint: Setpoint | None) -> None:
+        """Fly to ``setpoint`` with the PID (None: hover in place)."""
+        with self._lock:
+            if self._mode in (VehicleMode.LANDING, VehicleMode.EMERGENCY):
+                if setpoint is None:
+                    self._setpoint = None
+                return
+            self._setpoint = setpoint
+            self._jog = None
+            self._mode = VehicleMode.AUTO if setpoint is not None else VehicleMode.IDLE
+
+    @property
+    def setpoint(self) -> Setpoint | None:
+        return self._setpoint
+
+    @property
+    def estimate(self) -> Estimate:
+        return self.ekf.latest
+
+    # ------------------------------------------------------------------ inputs
+    def on_driver_event(self, event: Any) -> None:
+        """Feed a ``drone.ardrone.driver`` event (NavdataReceived, LinkLost, LinkRestored…)."""
+        kind = type(event).__name__
+        if kind == "NavdataReceived":
+            self.on_navdata(event.navdata, event.now)
+        elif kind == "LinkLost":
+            self._link_ok = False
+        elif kind in ("LinkRestored", "HandshakeDone"):
+            self._link_ok = True
+
+    def on_navdata(self, nav: Navdata, now: float) -> None:
+        """One navdata packet at ``now``: body state → EKF predict + update."""
+        self._nav = nav
+        self._nav_t = now
+        self._link_ok = True
+        if nav.demo is None:
+            return
+        body = nav.to_body()
+        if self._mode is VehicleMode.LANDING and body.ctrl_state == CtrlState.LANDED:
+            with self._lock:
+                self._mode = VehicleMode.IDLE
+        if self._mode is VehicleMode.EMERGENCY and body.ctrl_state == CtrlState.LANDED:
+            with self._lock:
+                self._mode = VehicleMode.IDLE
+        rate = 0.0
+        if self._prev_psi is not None and now > self._prev_psi[0]:
+            rate = wrap_angle(body.yaw_rad - self._prev_psi[1]) / (now - self._prev_psi[0])
+        self._prev_psi = (now, body.yaw_rad)
+        if not body.flying:
+            rate = 0.0
+        self.ekf.update_navdata(
+            NavdataInput(now, body.vx_m_s, body.vy_m_s, body.vz_m_s, body.altitude_m, rate)
+        )
+        for cb in self._nav_listeners:
+            cb(nav, now)
+
+    def on_frame(self, frame: np.ndarray, t: float) -> None:
+        """A camera frame captured at ``t``: to the worker thread if running, else processed now."""
+        self._last_frame = frame
+        self.frames_seen += 1
+        if self.localiser is None:
+            return
+        if self._worker is not None:
+            self._worker.submit(frame, t)
+        else:
+            self._perceive(frame, t)
+
+    def _attitude(self) -> tuple[float, float]:
+        nav = self._nav
+        if nav is None or nav.demo is None:
+            return 0.0, 0.0
+        b = nav.to_body()
+        return b.roll_rad, b.pitch_rad
+
+    def _perception_context(self) -> tuple[float, float, float | None]:
+        """(roll, pitch) from navdata and the EKF's yaw as a prior (None before localisation)."""
+        roll, pitch = self._attitude()
+        est = self.ekf.latest
+        return roll, pitch, (est.yaw_rad if est.localised else None)
+
+    def _perceive(self, frame: np.ndarray, t: float) -> None:
+        assert self.localiser is not None
+        roll, pitch, prior = self._perception_context()
+        self._on_result(self.localiser.process(frame, t, roll, pitch, prior))
+
+    def _on_result(self, result: FrameResult) -> None:
+        seen = []
+        for det in result.detections:
+            if det.fix is None:
+                continue
+            self.ekf.update_marker(det.fix)
+            m = self.localiser.markers[det.marker_id] if self.localiser else None
+            if m is None:
+                continue
+            seen.append(
+                MarkerSeen(
+                    det.marker_id,
+                    det.distance_m,
+                    det.fix.x,
+                    det.fix.y,
+                    det.fix.z,
+                    det.fix.yaw_rad,
+                    float(m.position[0]),
+                    float(m.position[1]),
+                    float(m.position[2]),
+                    float(m.yaw_rad),
+                )
+            )
+        self._markers = tuple(seen)
+        if seen:
+            self._last_marker_t = result.t
+        self._last_result = result
+        for cb in self._result_listeners:
+            cb(result)
+
+    # ------------------------------------------------------------------ control
+    def control_step(self, now: float, dt: float) -> PcmdCommand | None:
+        """One controller tick (100 Hz): jog, PID towards the setpoint, or hover.
+
+        Sends nothing unless navdata says the drone is flying (take-off, landing and the floor
+        belong to the drone's own controller). Returns the command sent, if any.
+        """
+        nav = self._nav
+        if nav is None or nav.demo is None or self.commander is None:
+            return None
+        if nav.demo.major not in FLYING_STATES:
+            return None
+        with self._lock:
+            mode, sp, jog = self._mode, self._setpoint, self._jog
+            if mode in (VehicleMode.LANDING, VehicleMode.EMERGENCY):
+                return None
+            if mode is VehicleMode.MANUAL and jog is not None:
+                cmd = jog
+            elif mode is VehicleMode.AUTO and sp is not None:
+                cmd = self.pid.step(_Extrapolated(self.ekf.latest, now), sp, max(dt, 0.0))
+            else:
+                cmd = PcmdCommand.hold()
+            if cmd.hover:
+                self.commander.hover()
+            else:
+                self.commander.move(cmd.roll, cmd.pitch, cmd.gaz, cmd.yaw)
+            self._last_cmd = cmd
+        return cmd
+
+    # ------------------------------------------------------------------ output
+    def snapshot(self) -> VehicleSnapshot:
+        now = self.clock.now()
+        est = self.ekf.latest
+        nav = self._nav
+        body = nav.to_body() if nav is not None and nav.demo is not None else None
+        ctrl = body.ctrl_state if body is not None else CtrlState.DEFAULT
+        ctrl_name = ctrl.name if isinstance(ctrl, CtrlState) else str(ctrl)
+        emergency = bool(nav is not None and nav.state & (1 << 31))
+        age = None if self._nav_t is None else max(0.0, now - self._nav_t)
+        link_ok = self._link_ok and age is not None and age < self.link_timeout_s
+        return VehicleSnapshot(
+            name=self.name,
+            t=now,
+            ctrl_state=ctrl_name,
+            flying=bool(body.flying) if body is not None else False,
+            emergency=emergency,
+            battery_pct=body.battery_pct if body is not None else 0.0,
+            altitude_m=body.altitude_m if body is not None else 0.0,
+            x=est.x,
+            y=est.y,
+            z=est.z,
+            yaw_rad=est.yaw_rad,
+            vx=est.vx,
+            vy=est.vy,
+            vz=est.vz,
+            position_sigma_m=est.position_sigma_m,
+            yaw_sigma_rad=est.yaw_sigma_rad,
+            localised=est.localised,
+            markers=self._markers,
+            last_marker_t=self._last_marker_t,
+            link_ok=link_ok,
+            navdata_age_s=age,
+            mode=self._mode.value,
+            setpoint=self._setpoint,
+            controller=self._loop.stats() if self._loop is not None else None,
+            state_bits=int(nav.state) if nav is not None else 0,
+            command=self._last_cmd,
+        )
+
+    def overlay(self, lines: tuple[str, ...] = ()) -> np.ndarray | None:
+        """The latest camera frame with the tracking overlay, or None before the first frame."""
+        frame = self._last_frame
+        if frame is None:
+            return None
+        if self.camera is None:
+            return frame
+        s = self.snapshot()
+        status = (
+            f"{self.name} {s.ctrl_state} bat {s.battery_pct:.0f}%",
+            f"x {s.x:.2f} y {s.y:.2f} z {s.z:.2f} yaw {s.yaw_deg:.0f}",
+        )
+        return draw_overlay(frame, self._last_result, self.camera, (*status, *lines))
+
+    # ------------------------------------------------------------------ real time
+    async def start(
+        self, driver: Any, *, control_period_s: float = 0.01, frame_latency_s: float = 0.05
+    ) -> None:
+        """Fly in real time with the asyncio ``ARDroneDriver`` ``driver`` (already started).
+
+        Chains ``driver.on_event`` to :meth:`on_driver_event`, polls ``driver.latest_frame``
+        (100 Hz) into the perception worker thread, stamped ``frame_latency_s`` before it was
+        seen (H.264 transport and decoding; the EKF fuses it at that time), and starts the
+        100 Hz control thread.
+        """
+        self.commander = driver
+        self._driver = driver
+        previous = getattr(driver, "on_event", None)
+
+        def on_event(event: Any) -> None:
+            self.on_driver_event(event)
+            if previous is not None:
+                previous(event)
+
+        driver.on_event = on_event
+        if self.localiser is not None:
+            self._worker = PerceptionWorker(
+                self.localiser, self._worker_result, self._perception_context
+            )
+            self._worker.start()
+        self._frame_task = asyncio.create_task(
+            self._frame_pump(driver, frame_latency_s), name=f"{self.name}-frames"
+        )
+        self._loop = ControlLoop(
+            self.control_step,
+            period_s=control_period_s,
+            on_stall=self._stalled,
+            name=self.name,
+            clock=self.clock.now,
+        )
+        self._loop.start()
+
+    async def _frame_pump(self, driver: Any, latency_s: float, period_s: float = 0.01) -> None:
+        """Hand each newly decoded frame (``driver.latest_frame``) to perception."""
+        seen = -1
+        while True:
+            n = getattr(driver, "frames_decoded", 0)
+            frame = getattr(driver, "latest_frame", None)
+            if n != seen and frame is not None:
+                seen = n
+                self.on_frame(frame, self.clock.now() - latency_s)
+            await asyncio.sleep(period_s)
+
+    def _worker_result(self, result: FrameResult) -> None:
+        self._on_result(result)
+
+    def _stalled(self) -> None:
+        if self.commander is not None:
+            self.commander.hover()
+
+    async def stop(self, *, land: bool = True) -> None:
+        """Leave the drone safe (land, or hover with ``land=False``) and stop the threads."""
+        if self.commander is not None:
+            if land:
+                self.land()
+            else:
+                self.hover()
+        if self._frame_task is not None:
+            self._frame_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._frame_task
+            self._frame_task = None
+        if self._loop is not None:
+            self._loop.stop()
+            await asyncio.sleep(0.1)  # let the driver put the land/hover on the wire
+        if self._worker is not None:
+            self._worker.stop()
+            self._worker = None
+
+
+@dataclass(frozen=True)
+class _Extrapolated:
+    """The estimate carried forward to ``now`` with its velocity (navdata is 15 Hz, control 100)."""
+
+    est: Estimate
+    now: float
+
+    @property
+    def _dt(self) -> float:
+        return min(max(self.now - self.est.t, 0.0), 0.1)
+
+    @property
+    def x(self) -> float:
+        return self.est.x + self.est.vx * self._dt
+
+    @property
+    def y(self) -> float:
+        return self.est.y + self.est.vy * self._dt
+
+    @property
+    def z(self) -> float:
+        return self.est.z + self.est.vz * self._dt
+
+    @property
+    def yaw_rad(self) -> float:
+        return self.est.yaw_rad
+
+    @property
+    def vx(self) -> float:
+        return self.est.vx
+
+    @property
+    def vy(self) -> float:
+        return self.est.vy
+
+    @property
+    def vz(self) -> float:
+        return self.est.vz

@@ -1,0 +1,422 @@
+"""``TaskManager``: turns DESIGN §4 commands into tasks, runs them one at a time, searches for
+markers when lost, and reports status and events. One per vehicle.
+
+Sans-I/O-ish: nothing here sleeps or opens sockets; time comes in through ``step(now)`` (the
+vehicle node calls it at 20 Hz in real time, ``LockstepRig.add_stepper`` every tick in lockstep).
+
+Public API (used by the dialog manager, the REST API and the fleet manager)::
+
+    tm = TaskManager(vehicle, world, clock, search_after_s=1.5, describe_hook=None)
+    decisions = tm.submit([{"action": "takeoff"}, {"action": "goto", "marker": 3}])
+    #   -> [Decision(command, accepted, reason, task_id)], validated BEFORE anything moves:
+    #      unknown marker ids, targets outside the room, not flying → refused with a reason;
+    #      if one command is refused, none of the sentence runs.
+    tm.cancel()                   # stop the running task and drop the queue; the drone hovers
+    tm.preempt("land")            # land / emergency / return_home / hover: now, bypassing the queue
+    tm.step(now)                  # advance (arrival rules, tag search, timeouts)
+    tm.status                     # TaskStatus(name, state, progress, detail, task_id, queued)
+    tm.on_event(cb)               # cb(TaskNotice(kind, text, task, task_id, t)); kinds: started,
+                                  # done, failed, cancelled, preempted, searching, marker_found,
+                                  # progress (a patrol leg reached)
+
+Queueing: commands of a ``submit`` are appended after the running task (``replace=True``
+cancels it and the queue first). A sentence that *starts* with ``land``, ``emergency`` or
+``return_home`` preempts at once (DESIGN §5: safety bypasses every queue); later in a sentence
+they run in spoken order ("go to marker 3 and land"). ``cancel`` in a sentence cancels;
+``query`` is accepted and left to the dialog (it is answered from ``vehicle.snapshot()``).
+A manual jog (``vehicle.jog``) cancels the running task.
+
+Tag search (issue 4): while a task needs localisation (goto, patrol, return home, indoor
+waypoints) and no marker has been seen for ``search_after_s``, and the estimate is no longer
+confident (planar σ > 0.3 m or yaw σ > 10°) — or at once when the drone has never been
+localised — the task pauses (state SEARCHING,
+event "searching": "I lost sight of the markers, searching"), the drone holds its position and
+height and turns in yaw until a marker fix arrives ("marker_found"), then the task resumes.
+After two full turns without a marker the task fails.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from drone.control.clock import Clock
+from drone.control.pid import Setpoint
+from drone.vehicle import VehicleSnapshot
+from server.tasks.errors import CommandError, IllegalTransition
+from server.tasks.states import TaskEvent, TaskState, transition
+from server.tasks.types import (
+    SEARCH_MAX_TURNS,
+    SEARCH_RATE_RAD_S,
+    ArrivalRule,
+    Context,
+    LegsTask,
+    Outcome,
+    PlanState,
+    Task,
+    build_task,
+)
+
+log = logging.getLogger(__name__)
+
+SAFETY_ACTIONS = ("land", "emergency", "return_home", "hover")
+LOST_SIGMA_M = 0.3
+LOST_SIGMA_YAW_RAD = math.radians(10.0)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The answer to one submitted command."""
+
+    command: dict[str, Any]
+    accepted: bool
+    reason: str  # why refused, or what will happen
+    task_id: int | None = None
+
+
+@dataclass(frozen=True)
+class TaskStatus:
+    """What ``/uav/task`` carries (uav_console/TaskStatus)."""
+
+    name: str  # "" when idle
+    state: str  # a TaskState value, or "idle"
+    progress: float  # 0..1
+    detail: str
+    task_id: int | None = None
+    queued: int = 0
+
+    def as_message(self, drone: str = "") -> dict[str, Any]:
+        return {
+            "drone": drone,
+            "name": self.name,
+            "state": self.state,
+            "progress": self.progress,
+            "detail": self.detail,
+        }
+
+
+@dataclass(frozen=True)
+class TaskNotice:
+    """An event for the dialog and the console."""
+
+    kind: str
+    text: str
+    task: str
+    task_id: int | None
+    t: float
+
+
+class TaskManager(Context):
+    """See the module docstring."""
+
+    def __init__(
+        self,
+        vehicle: Any,
+        world: Any,
+        clock: Clock,
+        *,
+        search_after_s: float = 1.5,
+        arrival: ArrivalRule | None = None,
+        describe_hook: Callable[[VehicleSnapshot], str] | None = None,
+        margin_m: float = 0.35,
+        ceiling_m: float | None = None,
+    ) -> None:
+        self.vehicle = vehicle
+        self.world = world
+        self.clock = clock
+        self.search_after_s = search_after_s
+        self.arrival = arrival or ArrivalRule()
+        self.describe_hook = describe_hook
+        self.margin_m = margin_m
+        b = world.bounds
+        self.ceiling_m = ceiling_m if ceiling_m is not None else (b.z_max - b.z_min) - 0.3
+        self._lock = threading.RLock()
+        self._queue: deque[Task] = deque()
+        self._current: Task | None = None
+        self._listeners: list[Callable[[TaskNotice], None]] = []
+        self._pending: list[TaskNotice] = []
+        self.history: deque[tuple[Task, str]] = deque(maxlen=50)
+        self._search_started: float | None = None
+        self._search_marker_t: float | None = None
+        self._last_now: float | None = None
+        vehicle.add_jog_listener(self._on_jog)
+
+    # ------------------------------------------------------------------ Context
+    def snapshot(self) -> VehicleSnapshot:
+        snap: VehicleSnapshot = self.vehicle.snapshot()
+        return snap
+
+    def emit(self, kind: str, text: str) -> None:
+        cur = self._current
+        self._pending.append(
+            TaskNotice(
+                kind, text, cur.name if cur else "", cur.id if cur else None, self.clock.now()
+            )
+        )
+
+    # ------------------------------------------------------------------ public
+    def on_event(self, cb: Callable[[TaskNotice], None]) -> None:
+        """Call ``cb(notice)`` for every event (from the thread that caused it)."""
+        self._listeners.append(cb)
+
+    @property
+    def current(self) -> Task | None:
+        return self._current
+
+    @property
+    def queued(self) -> tuple[Task, ...]:
+        return tuple(self._queue)
+
+    @property
+    def status(self) -> TaskStatus:
+        cur = self._current
+        if cur is None:
+            return TaskStatus("", "idle", 0.0, "", None, len(self._queue))
+        return TaskStatus(
+            cur.name, cur.state.value, cur.progress, cur.detail, cur.id, len(self._queue)
+        )
+
+    def submit(
+        self, commands: Sequence[Mapping[str, Any]], *, replace: bool = False
+    ) -> list[Decision]:
+        """Validate ``commands`` (a sentence) and queue them; see the module docstring."""
+        with self._lock:
+            out, tasks = self._validate(list(commands))
+            if not all(d.accepted for d in out):
+                first = next(d for d in out if not d.accepted)
+                return [
+                    d if not d.accepted else Decision(d.command, False, f"not run: {first.reason}")
+                    for d in out
+                ]
+            items = list(zip(out, tasks, strict=True))
+            head = items[0][1] if items else None
+            if head is not None and head.name in ("land", "emergency", "return_home"):
+                items = items[1:]
+                self._preempt_with(head)
+            elif replace:
+                self._cancel_all("replaced by a new command", TaskEvent.CANCEL)
+            for d, task in items:
+                if d.command.get("action") == "cancel":
+                    self._cancel_all("cancelled", TaskEvent.CANCEL)
+                elif task is not None:
+                    self._queue.append(task)
+        self._flush()
+        return out
+
+    def _validate(
+        self, commands: list[Mapping[str, Any]]
+    ) -> tuple[list[Decision], list[Task | None]]:
+        s = self.snapshot()
+        flying = s.flying or s.ctrl_state == "TAKEOFF"
+        p = self._predicted(s, flying)
+        decisions: list[Decision] = []
+        tasks: list[Task | None] = []
+        for raw in commands:
+            cmd = dict(raw) if isinstance(raw, Mapping) else {"action": repr(raw)}
+            action = cmd.get("action")
+            if action in ("cancel", "query"):
+                text = "cancelling" if action == "cancel" else "answered from telemetry"
+                decisions.append(Decision(cmd, True, text))
+                tasks.append(None)
+                if action == "cancel":
+                    p = self._predicted(s, flying)
+                continue
+            try:
+                task = build_task(cmd)
+                p = task.plan(p, self)
+            except CommandError as exc:
+                decisions.append(Decision(cmd, False, exc.reason))
+                tasks.append(None)
+                continue
+            decisions.append(Decision(cmd, True, f"queued: {task.describe()}", task.id))
+            tasks.append(task)
+        return decisions, tasks
+
+    def _predicted(self, s: VehicleSnapshot, flying: bool) -> PlanState:
+        """The state the next queued task will start from (after the running and queued ones)."""
+        p = PlanState(flying, s.x, s.y, max(s.z, 0.0), s.yaw_rad)
+        for t in ([self._current] if self._current else []) + list(self._queue):
+            if t.name == "patrol":
+                continue  # loops forever; what follows starts wherever it is cancelled
+            try:
+                p = t.plan(p, self)
+            except CommandError:  # no longer plannable (e.g. landed meanwhile): skip its effect
+                continue
+        return p
+
+    def cancel(self, reason: str = "cancelled", *, hold: bool = True) -> bool:
+        """Cancel the running task and the queue. True if there was any.
+
+        ``hold``: the drone holds its position (a setpoint where it is, or the drone's own
+        hover when not localised); False leaves the vehicle's control as it is (a jog).
+        """
+        with self._lock:
+            had = self._current is not None or bool(self._queue)
+            self._cancel_all(reason, TaskEvent.CANCEL, hold=hold)
+        self._flush()
+        return had
+
+    def preempt(self, action: str) -> Decision:
+        """Run a safety action now: ``land``, ``emergency``, ``return_home`` or ``hover``.
+
+        Everything running or queued is preempted. Refused (with a reason) only when the action
+        is not one of these or cannot be planned (e.g. return home with no station).
+        """
+        cmd = {"action": action}
+        if action not in SAFETY_ACTIONS:
+            return Decision(
+                cmd, False, f"{action!r} is not a safety action ({', '.join(SAFETY_ACTIONS)})"
+            )
+        with self._lock:
+            try:
+                task = build_task(cmd)
+                s = self.snapshot()
+                if action in ("return_home", "hover"):
+                    task.plan(PlanState(s.flying, s.x, s.y, s.z, s.yaw_rad), self)
+            except CommandError as exc:
+                return Decision(cmd, False, exc.reason)
+            self._preempt_with(task)
+        self._flush()
+        return Decision(cmd, True, f"now: {task.describe()}", task.id)
+
+    def _preempt_with(self, task: Task) -> None:
+        self._cancel_all(f"preempted by {task.name}", TaskEvent.PREEMPT)
+        self._queue.appendleft(task)
+        # Land and emergency reach the wire now, not at the next step (DESIGN §5).
+        self._start_next(self.clock.now())
+
+    def step(self, now: float) -> TaskStatus:
+        """Advance the running task; start the next one when it ends. Returns the status."""
+        with self._lock:
+            self._last_now = now
+            if self._current is None and self._queue:
+                self._start_next(now)
+            cur = self._current
+            if cur is not None:
+                self._supervise(cur, now)
+        self._flush()
+        return self.status
+
+    # ------------------------------------------------------------------ internals
+    def _on_jog(self) -> None:
+        if self._current is not None or self._queue:
+            self.cancel("manual control took over", hold=False)
+
+    def _cancel_all(self, reason: str, event: TaskEvent, hold: bool = True) -> None:
+        kind = "cancelled" if event is TaskEvent.CANCEL else "preempted"
+        for t in list(self._queue):
+            t.state = transition(t.state, event)
+            self.history.append((t, reason))
+        self._queue.clear()
+        cur = self._current
+        if cur is not None:
+            cur.state = transition(cur.state, event)
+            cur.result = reason
+            self.emit(kind, f"{cur.describe()}: {reason}")
+            self.history.append((cur, reason))
+            self._current = None
+            self._search_started = None
+            if hold and event is TaskEvent.CANCEL and cur.name not in ("land", "emergency"):
+                s = self.snapshot()
+                if s.flying:
+                    if s.localised:
+                        self.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad))
+                    else:
+                        self.vehicle.hover()
+
+    def _start_next(self, now: float) -> None:
+        while self._current is None and self._queue:
+            task = self._queue.popleft()
+            task.state = transition(task.state, TaskEvent.START)
+            self._current = task
+            self._search_started = None
+            self.emit("started", task.describe())
+            try:
+                out = task.start(self, now)
+            except CommandError as exc:
+                out = Outcome(False, exc.reason)
+            if out is not None:
+                self._finish(task, out)
+
+    def _finish(self, task: Task, out: Outcome) -> None:
+        event = TaskEvent.SUCCEED if out.ok else TaskEvent.FAIL
+        try:
+            task.state = transition(task.state, event)
+        except IllegalTransition:
+            log.exception("task %s", task.name)
+        task.result = out.text
+        self.emit("done" if out.ok else "failed", out.text)
+        self.history.append((task, out.text))
+        if self._current is task:
+            self._current = None
+            self._search_started = None
+        if not out.ok:
+            # a failure leaves the drone holding position; later tasks of that plan are dropped
+            for t in list(self._queue):
+                t.state = transition(t.state, TaskEvent.CANCEL)
+            self._queue.clear()
+
+    def _needs_search(self, task: Task, s: VehicleSnapshot, now: float) -> bool:
+        if not task.needs_localisation or not s.flying:
+            return False
+        if not s.localised:
+            return True  # never seen a marker: do not fly anywhere on a made-up position
+        since = s.last_marker_t
+        stale = since is None or now - since > self.search_after_s
+        unsure = (
+            not s.localised
+            or s.position_sigma_m > LOST_SIGMA_M
+            or s.yaw_sigma_rad > LOST_SIGMA_YAW_RAD
+        )
+        return stale and unsure
+
+    def _supervise(self, task: Task, now: float) -> None:
+        s = self.snapshot()
+        if task.state is TaskState.SEARCHING:
+            assert self._search_started is not None
+            found = s.last_marker_t is not None and s.last_marker_t != self._search_marker_t
+            if found and s.localised:
+                task.state = transition(task.state, TaskEvent.FOUND)
+                ids = ", ".join(str(m.id) for m in s.markers) or "?"
+                self.emit("marker_found", f"Found marker {ids}; carrying on")
+                if isinstance(task, LegsTask):
+                    task.pause(now - self._search_started)
+                if task.target is not None:
+                    self.vehicle.set_setpoint(task.target)
+                task.detail = task.detail.replace(" (searching)", "")
+                self._search_started = None
+                return
+            if now - self._search_started > SEARCH_MAX_TURNS * 2 * math.pi / SEARCH_RATE_RAD_S:
+                self._finish(task, Outcome(False, "I lost the markers and could not find one"))
+            return
+        if self._needs_search(task, s, now):
+            task.state = transition(task.state, TaskEvent.LOST)
+            self._search_started = now
+            self._search_marker_t = s.last_marker_t
+            task.detail += " (searching)"
+            self.emit("searching", "I lost sight of the markers, searching")
+            self.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad, SEARCH_RATE_RAD_S))
+            return
+        try:
+            out = task.step(self, now)
+        except CommandError as exc:
+            out = Outcome(False, exc.reason)
+        if out is not None:
+            self._finish(task, out)
+            if self._queue:
+                self._start_next(now)
+
+    def _flush(self) -> None:
+        with self._lock:
+            pending, self._pending = self._pending, []
+        for n in pending:
+            for cb in list(self._listeners):
+                try:
+                    cb(n)
+                except Exception:
+                    log.exception("task event listener failed")

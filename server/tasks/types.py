@@ -1,0 +1,691 @@
+"""Task types: one class per DESIGN §4 command, each a sequence of setpoints with arrival rules.
+
+A task is planned before the drone moves (``plan``: raises ``RefusedError`` with a reason a
+person can read; returns the predicted state after it, so "take off and go to marker 3" checks
+the second command against a flying drone), then started and stepped by the ``TaskManager``.
+
+Arrival (tum_ardrone's rule, tightened as issue 4 asks): within ``pos_tol_m`` (0.15 m, 3-D) and
+``yaw_tol_deg`` (5°) of the target, then staying inside for ``dwell_s`` (1 s); leaving resets the
+dwell. Each leg has a time limit of ``20 s + 4 s/m``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+from drone.control.pid import Setpoint, wrap_angle
+from drone.vehicle import VehicleSnapshot
+from server.tasks.errors import CommandError, RefusedError
+from server.tasks.states import TaskState
+
+_ids = itertools.count(1)
+
+DIRECTIONS = ("forward", "backward", "left", "right", "up", "down")
+CRUISE_Z_M = 1.0  # height for return home and other legs without a stated height
+MIN_Z_M = 0.3
+DEFAULT_MOVE_M = 1.0
+DEFAULT_TURN_DEG = 90.0
+MAX_MOVE_M = 20.0
+SEARCH_RATE_RAD_S = 0.5  # ~29°/s: a full turn in 12.6 s, slow enough for the detector
+SEARCH_MAX_TURNS = 2.0
+
+
+@dataclass(frozen=True)
+class ArrivalRule:
+    pos_tol_m: float = 0.15
+    yaw_tol_deg: float = 5.0
+    dwell_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class PlanState:
+    """What the drone is predicted to be doing when a queued command starts."""
+
+    flying: bool
+    x: float
+    y: float
+    z: float
+    yaw_rad: float
+
+
+@dataclass(frozen=True)
+class Outcome:
+    ok: bool
+    text: str
+
+
+class Context:
+    """What tasks use from the manager (the manager implements it)."""
+
+    vehicle: Any
+    world: Any
+    arrival: ArrivalRule
+    margin_m: float
+    ceiling_m: float
+    describe_hook: Callable[[VehicleSnapshot], str] | None
+
+    def snapshot(self) -> VehicleSnapshot:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def emit(self, kind: str, text: str) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+def _num(cmd: Mapping[str, Any], key: str, default: float | None = None) -> float:
+    if key not in cmd:
+        if default is None:
+            raise CommandError(f"'{cmd.get('action')}' needs '{key}'")
+        return default
+    v = cmd[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise CommandError(f"'{key}' must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _marker_id(v: Any) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise CommandError(f"a marker id must be an integer, got {v!r}")
+    return v
+
+
+class Task:
+    """Base class: subclasses set ``name`` and override ``plan``/``start``/``step``."""
+
+    name = "task"
+    needs_localisation = False
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        self.id = next(_ids)
+        self.command = dict(command)
+        self.state = TaskState.QUEUED
+        self.progress = 0.0
+        self.detail = ""
+        self.result = ""
+        self.started_at: float | None = None
+        self.target: Setpoint | None = None  # the setpoint to restore after a search
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        """Check the command against the predicted state; return the state after it.
+
+        Raises:
+            RefusedError: it cannot be done (the message says why).
+        """
+        return p
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        self.started_at = now
+        return None
+
+    def step(self, ctx: Context, now: float) -> Outcome | None:
+        return None
+
+    def describe(self) -> str:
+        return self.name
+
+
+def _need_flying(p: PlanState, what: str) -> None:
+    if not p.flying:
+        raise RefusedError(f"I can't {what}: I'm not flying. Say 'take off' first.")
+
+
+def _inside(ctx: Context, x: float, y: float, z: float, what: str) -> None:
+    b = ctx.world.bounds
+    m = ctx.margin_m
+    ok = b.x_min + m <= x <= b.x_max - m and b.y_min + m <= y <= b.y_max - m
+    if not ok:
+        raise RefusedError(
+            f"I can't {what}: ({x:.1f}, {y:.1f}) is outside the room "
+            f"({b.x_max - b.x_min:.0f} × {b.y_max - b.y_min:.0f} m, "
+            f"keeping {m:.1f} m from the walls)."
+        )
+    if not MIN_Z_M <= z <= ctx.ceiling_m:
+        raise RefusedError(
+            f"I can't {what}: a height of {z:.1f} m is outside {MIN_Z_M:.1f}–{ctx.ceiling_m:.1f} m."
+        )
+
+
+class _Leg:
+    """One setpoint with the arrival rule and a time limit."""
+
+    def __init__(self, sp: Setpoint, rule: ArrivalRule, start_pose: VehicleSnapshot, now: float):
+        self.sp = sp
+        self.rule = rule
+        dist = math.dist((start_pose.x, start_pose.y, start_pose.z), (sp.x, sp.y, sp.z))
+        self.deadline = now + 20.0 + 4.0 * dist
+        self.dist0 = max(dist, 1e-6)
+        self.inside_since: float | None = None
+
+    def error(self, s: VehicleSnapshot) -> tuple[float, float]:
+        d = math.dist((s.x, s.y, s.z), (self.sp.x, self.sp.y, self.sp.z))
+        dyaw = abs(math.degrees(wrap_angle(self.sp.yaw_rad - s.yaw_rad)))
+        return d, dyaw
+
+    def arrived(self, s: VehicleSnapshot, now: float) -> bool:
+        d, dyaw = self.error(s)
+        if d <= self.rule.pos_tol_m and dyaw <= self.rule.yaw_tol_deg:
+            if self.inside_since is None:
+                self.inside_since = now
+            return now - self.inside_since >= self.rule.dwell_s
+        self.inside_since = None
+        return False
+
+    def progress(self, s: VehicleSnapshot) -> float:
+        d, _ = self.error(s)
+        return max(0.0, min(1.0, 1.0 - d / self.dist0))
+
+    def pause(self, dt: float) -> None:
+        """Extend the time limit (time spent searching does not count)."""
+        self.deadline += dt
+        self.inside_since = None
+
+
+class LegsTask(Task):
+    """A task made of setpoint legs flown in order (goto, move, turn, patrol, waypoints…)."""
+
+    loop = False
+    arrival: ArrivalRule | None = None  # overrides the manager's rule (e.g. outdoor tolerance)
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        super().__init__(command)
+        self._legs: list[Setpoint] = []
+        self._labels: list[str] = []
+        self._i = 0
+        self._leg: _Leg | None = None
+        self.lap = 0
+
+    def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
+        raise NotImplementedError
+
+    def done_text(self) -> str:
+        return f"{self.describe()}: done"
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        super().start(ctx, now)
+        s = ctx.snapshot()
+        if not s.flying:
+            return Outcome(False, "I'm not flying")
+        self._legs, self._labels = self.legs(ctx, s)
+        self._begin_leg(ctx, s, now)
+        return None
+
+    def _begin_leg(self, ctx: Context, s: VehicleSnapshot, now: float) -> None:
+        sp = self._legs[self._i]
+        self._leg = _Leg(sp, self.arrival or ctx.arrival, s, now)
+        self.target = sp
+        ctx.vehicle.set_setpoint(sp)
+        self.detail = self._labels[self._i]
+
+    def pause(self, dt: float) -> None:
+        if self._leg is not None:
+            self._leg.pause(dt)
+
+    def step(self, ctx: Context, now: float) -> Outcome | None:
+        s = ctx.snapshot()
+        leg = self._leg
+        assert leg is not None
+        if not s.flying:
+            return Outcome(False, "the drone is no longer flying")
+        n = len(self._legs)
+        self.progress = (self._i + leg.progress(s)) / n
+        if now > leg.deadline:
+            d, dyaw = leg.error(s)
+            return Outcome(False, f"timed out {d:.2f} m / {dyaw:.0f}° from {self._labels[self._i]}")
+        if not leg.arrived(s, now):
+            return None
+        self.on_leg_done(ctx, self._i)
+        self._i += 1
+        if self._i >= n:
+            if not self.loop:
+                self.progress = 1.0
+                return Outcome(True, self.done_text())
+            self._i = 0
+            self.lap += 1
+        self._begin_leg(ctx, s, now)
+        return None
+
+    def on_leg_done(self, ctx: Context, i: int) -> None:
+        pass
+
+
+class TakeoffTask(Task):
+    name = "takeoff"
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        return replace(p, flying=True, z=max(p.z, 0.8))
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        super().start(ctx, now)
+        s = ctx.snapshot()
+        if s.flying:
+            return Outcome(True, "Already flying")
+        if s.emergency:
+            return Outcome(False, "the drone is in emergency; reset it first")
+        ctx.vehicle.takeoff()
+        self.detail = "taking off"
+        return None
+
+    def step(self, ctx: Context, now: float) -> Outcome | None:
+        s = ctx.snapshot()
+        assert self.started_at is not None
+        self.progress = min(1.0, s.altitude_m / 0.8)
+        if s.flying and s.ctrl_state in ("HOVERING", "FLYING"):
+            return Outcome(True, "Took off")
+        if now - self.started_at > 10.0:
+            return Outcome(False, f"take-off did not finish within 10 s (state {s.ctrl_state})")
+        return None
+
+
+class LandTask(Task):
+    name = "land"
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        return replace(p, flying=False, z=0.0)
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        super().start(ctx, now)
+        ctx.vehicle.land()
+        self.detail = "landing"
+        return None
+
+    def step(self, ctx: Context, now: float) -> Outcome | None:
+        s = ctx.snapshot()
+        assert self.started_at is not None
+        if not s.flying and s.ctrl_state in ("LANDED", "DEFAULT"):
+            return Outcome(True, "Landed")
+        if now - self.started_at > 15.0:
+            return Outcome(False, f"landing did not finish within 15 s (state {s.ctrl_state})")
+        return None
+
+
+class EmergencyTask(Task):
+    name = "emergency"
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        return replace(p, flying=False, z=0.0)
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        super().start(ctx, now)
+        ctx.vehicle.emergency()
+        return Outcome(True, "Motors cut (emergency)")
+
+
+class HoverTask(Task):
+    name = "hover"
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        _need_flying(p, "hover")
+        return p
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        super().start(ctx, now)
+        s = ctx.snapshot()
+        if s.localised:
+            ctx.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad))
+        else:
+            ctx.vehicle.hover()
+        return Outcome(True, "Hovering")
+
+
+class GotoMarkerTask(LegsTask):
+    name = "goto"
+    needs_localisation = True
+    standoff_m = 1.0
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        super().__init__(command)
+        if "marker" not in command:
+            raise CommandError("'goto' needs 'marker'")
+        self.marker = _marker_id(command["marker"])
+
+    def _standoff(self, ctx: Context) -> Setpoint:
+        try:
+            m = ctx.world.marker(self.marker)
+        except KeyError:
+            known = ", ".join(str(i) for i in ctx.world.marker_ids())
+            raise RefusedError(
+                f"There is no marker {self.marker}. Known markers: {known}."
+            ) from None
+        p = m.standoff(self.standoff_m)
+        return Setpoint(float(p.x), float(p.y), float(p.z), float(p.yaw_rad))
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        sp = self._standoff(ctx)
+        _need_flying(p, f"go to marker {self.marker}")
+        _inside(ctx, sp.x, sp.y, sp.z, f"go to marker {self.marker}")
+        return replace(p, x=sp.x, y=sp.y, z=sp.z, yaw_rad=sp.yaw_rad)
+
+    def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
+        return [self._standoff(ctx)], [f"marker {self.marker}"]
+
+    def describe(self) -> str:
+        return f"go to marker {self.marker}"
+
+    def done_text(self) -> str:
+        return f"Reached marker {self.marker}"
+
+
+class PatrolTask(LegsTask):
+    name = "patrol"
+    needs_localisation = True
+    loop = True
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        super().__init__(command)
+        raw = command.get("markers")
+        if not isinstance(raw, list | tuple) or not raw:
+            raise CommandError("'patrol' needs 'markers', a non-empty list of marker ids")
+        self.markers = [_marker_id(v) for v in raw]
+        self._gotos = [GotoMarkerTask({"action": "goto", "marker": m}) for m in self.markers]
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        for g in self._gotos:
+            p = g.plan(p, ctx)
+        return p
+
+    def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
+        return [g._standoff(ctx) for g in self._gotos], [f"marker {m}" for m in self.markers]
+
+    def on_leg_done(self, ctx: Context, i: int) -> None:
+        ctx.emit("progress", f"Reached marker {self.markers[i]}")
+
+    def describe(self) -> str:
+        return "patrol markers " + ", ".join(str(m) for m in self.markers)
+
+
+def _offset(direction: str, dist: float, yaw: float) -> tuple[float, float, float]:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return {
+        "forward": (c * dist, s * dist, 0.0),
+        "backward": (-c * dist, -s * dist, 0.0),
+        "left": (-s * dist, c * dist, 0.0),
+        "right": (s * dist, -c * dist, 0.0),
+        "up": (0.0, 0.0, dist),
+        "down": (0.0, 0.0, -dist),
+    }[direction]
+
+
+class MoveTask(LegsTask):
+    """Relative move in the drone's frame (forward = where its nose points)."""
+
+    name = "move"
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        super().__init__(command)
+        d = command.get("direction")
+        if d not in DIRECTIONS:
+            raise CommandError(f"'move' needs 'direction' in {', '.join(DIRECTIONS)}; got {d!r}")
+        self.direction = str(d)
+        self.distance = _num(command, "distance", DEFAULT_MOVE_M)
+        if not 0 < self.distance <= MAX_MOVE_M:
+            raise CommandError(
+                f"move distance must be in (0, {MAX_MOVE_M:.0f}] m, got {self.distance}"
+            )
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        what = f"move {self.direction} {self.distance:g} m"
+        _need_flying(p, what)
+        dx, dy, dz = _offset(self.direction, self.distance, p.yaw_rad)
+        x, y, z = p.x + dx, p.y + dy, max(p.z, 0.8) + dz if dz else p.z
+        _inside(ctx, x, y, z if dz else max(z, MIN_Z_M), what)
+        return replace(p, x=x, y=y, z=z)
+
+    def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
+        base = s.setpoint if s.setpoint is not None and s.setpoint.yaw_rate_rad_s is None else None
+        x, y, z, yaw = (
+            (base.x, base.y, base.z, base.yaw_rad) if base else (s.x, s.y, s.z, s.yaw_rad)
+        )
+        dx, dy, dz = _offset(self.direction, self.distance, yaw)
+        return [Setpoint(x + dx, y + dy, z + dz, yaw)], [f"{self.distance:g} m {self.direction}"]
+
+    def describe(self) -> str:
+        return f"move {self.direction} {self.distance:g} m"
+
+    def done_text(self) -> str:
+        return f"Moved {self.direction} {self.distance:g} m"
+
+
+class TurnTask(LegsTask):
+    """Turn in place; left = counter-clockwise. Large turns fly in legs of at most 90°."""
+
+    name = "turn"
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        super().__init__(command)
+        d = command.get("direction")
+        if d not in ("left", "right"):
+            raise CommandError(f"'turn' needs 'direction' left or right; got {d!r}")
+        self.direction = str(d)
+        self.angle = _num(command, "angle", DEFAULT_TURN_DEG)
+        if not 0 < self.angle <= 720:
+            raise CommandError(f"turn angle must be in (0, 720] degrees, got {self.angle}")
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        _need_flying(p, f"turn {self.direction}")
+        sign = 1.0 if self.direction == "left" else -1.0
+        return replace(p, yaw_rad=wrap_angle(p.yaw_rad + sign * math.radians(self.angle)))
+
+    def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
+        base = s.setpoint if s.setpoint is not None and s.setpoint.yaw_rate_rad_s is None else None
+        x, y, z, yaw = (
+            (base.x, base.y, base.z, base.yaw_rad) if base else (s.x, s.y, s.z, s.yaw_rad)
+        )
+        sign = 1.0 if self.direction == "left" else -1.0
+        n = max(1, math.ceil(self.angle / 90.0))
+        step = math.radians(self.angle) / n
+        legs = [Setpoint(x, y, z, wrap_angle(yaw + sign * step * (k + 1))) for k in range(n)]
+        return legs, [f"turning {self.direction} {self.angle:g}°"] * n
+
+    def describe(self) -> str:
+        return f"turn {self.direction} {self.angle:g}°"
+
+    def done_text(self) -> str:
+        return f"Turned {self.direction} {self.angle:g}°"
+
+
+class ReturnHomeTask(LegsTask):
+    """Fly to the home station at cruise height, then land on it."""
+
+    name = "return_home"
+    needs_localisation = True
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        super().__init__(command)
+        self._landing: LandTask | None = None
+
+    def _home(self, ctx: Context, x: float, y: float) -> Any:
+        stations = getattr(ctx.world, "stations", ())
+        if not stations:
+            raise RefusedError("This world has no home station to return to.")
+        return min(stations, key=lambda st: math.hypot(st.position[0] - x, st.position[1] - y))
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        _need_flying(p, "return home")
+        h = self._home(ctx, p.x, p.y)
+        return replace(p, flying=False, x=h.position[0], y=h.position[1], z=0.0)
+
+    def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
+        h = self._home(ctx, s.x, s.y)
+        sp = Setpoint(float(h.position[0]), float(h.position[1]), CRUISE_Z_M, s.yaw_rad)
+        return [sp], [f"home station {h.id}"]
+
+    def step(self, ctx: Context, now: float) -> Outcome | None:
+        if self._landing is not None:
+            out = self._landing.step(ctx, now)
+            if out is not None and out.ok:
+                return Outcome(True, "Back home and landed")
+            return out
+        out = super().step(ctx, now)
+        if out is not None and out.ok:
+            self._landing = LandTask({"action": "land"})
+            self.detail = "landing at home"
+            return self._landing.start(ctx, now)
+        return out
+
+    def describe(self) -> str:
+        return "return home"
+
+
+class WaypointsTask(LegsTask):
+    """Fly map-frame (``x, y, z``) or geodetic (``lat, lon, alt``) waypoints in order.
+
+    Command: ``{"action": "waypoints", "waypoints": [{"x":…, "y":…, "z":…} | {"lat":…, "lon":…,
+    "alt":…}, …], "loop": false, "tolerance_m": 0.15, "yaw_deg": optional heading}``. Geodetic
+    points need the world's ``gps_origin`` (local ENU by pymap3d). Used by the fleet manager.
+    """
+
+    name = "waypoints"
+
+    def __init__(self, command: Mapping[str, Any]) -> None:
+        super().__init__(command)
+        raw = command.get("waypoints")
+        if not isinstance(raw, list | tuple) or not raw:
+            raise CommandError("'waypoints' needs a non-empty list of waypoints")
+        self.raw = list(raw)
+        self.loop = bool(command.get("loop", False))
+        self.tolerance_m = _num(command, "tolerance_m", 0.0) or None
+        self.yaw_deg = _num(command, "yaw_deg", 0.0) if "yaw_deg" in command else None
+        self.points: list[tuple[float, float, float]] | None = None
+
+    def _resolve(self, ctx: Context) -> list[tuple[float, float, float]]:
+        out = []
+        origin = getattr(ctx.world, "gps_origin", None)
+        for i, w in enumerate(self.raw):
+            if not isinstance(w, Mapping):
+                raise CommandError(f"waypoint {i} must be an object, got {w!r}")
+            if "lat" in w:
+                if origin is None:
+                    raise RefusedError("This world has no GPS origin for lat/lon waypoints.")
+                import pymap3d
+
+                e, n, u = pymap3d.geodetic2enu(
+                    _num(w, "lat"),
+                    _num(w, "lon"),
+                    _num(w, "alt", origin.alt_m + CRUISE_Z_M),
+                    origin.lat_deg,
+                    origin.lon_deg,
+                    origin.alt_m,
+                )
+                out.append((float(e), float(n), float(u)))
+            else:
+                out.append((_num(w, "x"), _num(w, "y"), _num(w, "z", CRUISE_Z_M)))
+        return out
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        _need_flying(p, "fly the waypoints")
+        self.points = self._resolve(ctx)
+        for k, (x, y, z) in enumerate(self.points):
+            _inside(ctx, x, y, z, f"fly to waypoint {k + 1}")
+        x, y, z = self.points[-1]
+        self.needs_localisation = bool(getattr(ctx.world, "indoor", False) and ctx.world.markers)
+        return replace(p, x=x, y=y, z=z)
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        if self.tolerance_m:
+            self.arrival = replace(ctx.arrival, pos_tol_m=self.tolerance_m)
+        return super().start(ctx, now)
+
+    def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
+        pts = self.points or self._resolve(ctx)
+        legs = []
+        px, py = s.x, s.y
+        for x, y, z in pts:
+            yaw = (
+                math.radians(self.yaw_deg)
+                if self.yaw_deg is not None
+                else math.atan2(y - py, x - px)
+            )
+            legs.append(Setpoint(x, y, z, yaw))
+            px, py = x, y
+        return legs, [f"waypoint {k + 1}/{len(pts)}" for k in range(len(pts))]
+
+    def describe(self) -> str:
+        return f"fly {len(self.raw)} waypoints"
+
+    def done_text(self) -> str:
+        return f"Reached all {len(self.raw)} waypoints"
+
+
+class SearchTask(Task):
+    """Turn in place (holding height) until a marker is seen (tag search, on request)."""
+
+    name = "search"
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        _need_flying(p, "search for markers")
+        return p
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        super().start(ctx, now)
+        s = ctx.snapshot()
+        self._t0_marker = s.last_marker_t
+        ctx.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad, SEARCH_RATE_RAD_S))
+        self.detail = "turning to find a marker"
+        return None
+
+    def step(self, ctx: Context, now: float) -> Outcome | None:
+        s = ctx.snapshot()
+        assert self.started_at is not None
+        if s.markers and s.last_marker_t is not None and s.last_marker_t != self._t0_marker:
+            ctx.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad))
+            return Outcome(True, f"Found marker {s.markers[0].id}")
+        limit = SEARCH_MAX_TURNS * 2 * math.pi / SEARCH_RATE_RAD_S
+        self.progress = min(1.0, (now - self.started_at) / limit)
+        if now - self.started_at > limit:
+            return Outcome(False, "no marker in sight after turning around twice")
+        return None
+
+
+class DescribeTask(Task):
+    """Hands the current view to the describe hook (the captioner) and reports its sentence."""
+
+    name = "describe"
+
+    def plan(self, p: PlanState, ctx: Context) -> PlanState:
+        if ctx.describe_hook is None:
+            raise RefusedError("I can't describe the view: no captioner is loaded.")
+        return p
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        super().start(ctx, now)
+        assert ctx.describe_hook is not None
+        try:
+            text = ctx.describe_hook(ctx.snapshot())
+        except Exception as exc:  # the captioner failing must not kill the task manager
+            return Outcome(False, f"describing failed: {exc}")
+        return Outcome(True, text)
+
+
+TASK_TYPES: dict[str, type[Task]] = {
+    "takeoff": TakeoffTask,
+    "land": LandTask,
+    "emergency": EmergencyTask,
+    "hover": HoverTask,
+    "move": MoveTask,
+    "turn": TurnTask,
+    "goto": GotoMarkerTask,
+    "patrol": PatrolTask,
+    "return_home": ReturnHomeTask,
+    "search": SearchTask,
+    "waypoints": WaypointsTask,
+    "describe": DescribeTask,
+}
+"""Command ``action`` → task class. ``cancel`` and ``query`` are handled by the manager itself."""
+
+
+def build_task(command: Any) -> Task:
+    """The task for one DESIGN §4 command dict.
+
+    Raises:
+        CommandError: not a dict, no/unknown ``action``, or a malformed slot.
+    """
+    if not isinstance(command, Mapping):
+        raise CommandError(f"a command must be an object, got {type(command).__name__}")
+    action = command.get("action")
+    cls = TASK_TYPES.get(action) if isinstance(action, str) else None
+    if cls is None:
+        raise CommandError(f"unknown action {action!r}")
+    return cls(command)

@@ -1,0 +1,355 @@
+"""``VehicleNode``: one vehicle on the graph (DESIGN §4 "Graph"), ardrone_autonomy-compatible.
+
+Publishes (a fleet prefixes ``/NAME``, e.g. ``/uav2/ardrone/navdata``):
+
+- ``/ardrone/navdata`` (ardrone_autonomy/Navdata) at the navdata rate, converted as
+  ardrone_autonomy does: state = major ctrl_state, rotX = phi/1000, rotY = −theta/1000,
+  rotZ = −psi/1000 (degrees), altd mm, vx, vy = −vy, vz = −vz (mm/s), tm µs;
+- ``/ardrone/image_raw/compressed`` (sensor_msgs/CompressedImage): JPEG of the camera with the
+  tracking overlay, at most ``image_hz`` (15); ``data`` is base64 text (rosbridge's JSON form of
+  ``uint8[]``);
+- ``/uav/pose`` (geometry_msgs/PoseStamped, frame ``map``): the EKF estimate, per navdata;
+- ``/uav/markers`` (uav_console/MarkerArray): per processed frame, each detected marker's map
+  pose and its distance from the drone;
+- ``/uav/task`` (uav_console/TaskStatus, latched): whenever the status changes.
+
+Subscribes: ``/cmd_vel`` (Twist fractions → ``vehicle.jog``, which cancels the running task);
+``/ardrone/takeoff``, ``/ardrone/land``, ``/ardrone/reset`` (std_msgs/Empty). ``reset`` only
+leaves the emergency state (unlike ardrone_autonomy it never cuts flying motors).
+
+Operator watchdog (DESIGN §5): while jogging, if neither ``/cmd_vel`` nor
+``operator_heartbeat()`` is heard for ``heartbeat_timeout_s`` (1 s), the drone hovers.
+
+Driving: real time ``await node.start()`` runs ``step`` at 20 Hz (task manager, watchdog,
+status) and the JPEG stream in an asyncio task (encoding in a worker thread); lockstep calls
+``node.step(now)`` (e.g. ``rig.add_stepper(lambda now, dt: node.step(now))``), which also
+encodes the image when one is due.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import cv2
+
+from drone.ardrone.navdata import Navdata
+from drone.perception.markers import FrameResult
+from server.graph import Graph
+from server.msgs import header
+
+log = logging.getLogger(__name__)
+
+NAVDATA = "ardrone_autonomy/Navdata"
+IMAGE = "sensor_msgs/CompressedImage"
+POSE = "geometry_msgs/PoseStamped"
+MARKERS = "uav_console/MarkerArray"
+TASK = "uav_console/TaskStatus"
+TWIST = "geometry_msgs/Twist"
+EMPTY = "std_msgs/Empty"
+
+
+def navdata_message(nav: Navdata, stamp_s: float, t_s: float) -> dict[str, Any]:
+    """ardrone_autonomy/Navdata from a decoded packet (conversions in the module docstring)."""
+    d = nav.demo
+    msg: dict[str, Any] = {
+        "header": header("ardrone_base_link", stamp_s),
+        "batteryPercent": float(d.battery_pct) if d else 0.0,
+        "state": int(d.ctrl_state >> 16) if d else 0,
+        "magX": 0,
+        "magY": 0,
+        "magZ": 0,
+        "pressure": 0,
+        "temp": 0,
+        "wind_speed": 0.0,
+        "wind_angle": 0.0,
+        "wind_comp_angle": 0.0,
+        "rotX": d.phi_mdeg / 1000.0 if d else 0.0,
+        "rotY": -d.theta_mdeg / 1000.0 if d else 0.0,
+        "rotZ": -d.psi_mdeg / 1000.0 if d else 0.0,
+        "altd": int(d.altitude_mm) if d else 0,
+        "vx": d.vx_mm_s if d else 0.0,
+        "vy": -d.vy_mm_s if d else 0.0,
+        "vz": -d.vz_mm_s if d else 0.0,
+        "ax": 0.0,
+        "ay": 0.0,
+        "az": 0.0,
+        "motor1": 0,
+        "motor2": 0,
+        "motor3": 0,
+        "motor4": 0,
+        "tags_count": 0,
+        "tags_type": [],
+        "tags_xc": [],
+        "tags_yc": [],
+        "tags_width": [],
+        "tags_height": [],
+        "tags_orientation": [],
+        "tags_distance": [],
+        "tm": float(t_s * 1e6),
+    }
+    return msg
+
+
+def _quat_yaw(yaw: float) -> dict[str, float]:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
+
+
+class VehicleNode:
+    """See the module docstring.
+
+    Args:
+        graph: the process graph.
+        vehicle: a ``drone.vehicle.Vehicle``.
+        task_manager: its ``server.tasks.TaskManager``.
+        name: the drone's name (``uav1``), carried in ``/uav/task``.
+        prefix: ``""`` for a single drone, ``"/uav2"`` in a fleet.
+        clock: monotonic time for the watchdog and rates (the vehicle's clock by default).
+        stamp: wall-clock seconds for message headers (``time.time``; lockstep may pass the
+            virtual clock).
+    """
+
+    def __init__(
+        self,
+        graph: Graph,
+        vehicle: Any,
+        task_manager: Any,
+        name: str,
+        prefix: str = "",
+        *,
+        clock: Callable[[], float] | None = None,
+        stamp: Callable[[], float] = time.time,
+        heartbeat_timeout_s: float = 1.0,
+        image_hz: float = 15.0,
+        jpeg_quality: int = 80,
+    ) -> None:
+        self.graph = graph
+        self.vehicle = vehicle
+        self.tasks = task_manager
+        self.name = name
+        self.prefix = prefix.rstrip("/")
+        self.clock = clock or vehicle.clock.now
+        self.stamp = stamp
+        self.heartbeat_timeout_s = heartbeat_timeout_s
+        self.image_period_s = 1.0 / image_hz
+        self.jpeg_quality = jpeg_quality
+        self.owner = f"vehicle:{name}"
+        self.topic = {
+            k: self._name(v)
+            for k, v in {
+                "navdata": "/ardrone/navdata",
+                "image": "/ardrone/image_raw/compressed",
+                "pose": "/uav/pose",
+                "markers": "/uav/markers",
+                "task": "/uav/task",
+                "cmd_vel": "/cmd_vel",
+                "takeoff": "/ardrone/takeoff",
+                "land": "/ardrone/land",
+                "reset": "/ardrone/reset",
+            }.items()
+        }
+        self._jogging = False
+        self._last_operator: float | None = None
+        self._last_task: tuple[Any, ...] | None = None
+        self._last_image_t = -math.inf
+        self._last_image_frame = -1
+        self.images_published = 0
+        self.watchdog_hovers = 0
+        self._subs: list[Any] = []
+        self._closed = False
+        self._tasks: list[asyncio.Task[None]] = []
+        self._advertise()
+
+    def _name(self, topic: str) -> str:
+        return f"{self.prefix}{topic}"
+
+    # ------------------------------------------------------------------ wiring
+    def _advertise(self) -> None:
+        g, o, t = self.graph, self.owner, self.topic
+        g.advertise(t["navdata"], NAVDATA, owner=o)
+        g.advertise(t["image"], IMAGE, owner=o)
+        g.advertise(t["pose"], POSE, owner=o)
+        g.advertise(t["markers"], MARKERS, owner=o)
+        g.advertise(t["task"], TASK, latch=True, owner=o)
+        self._subs = [
+            g.subscribe(t["cmd_vel"], self._on_cmd_vel, type=TWIST, owner=o),
+            g.subscribe(t["takeoff"], self._on_takeoff, type=EMPTY, owner=o),
+            g.subscribe(t["land"], self._on_land, type=EMPTY, owner=o),
+            g.subscribe(t["reset"], self._on_reset, type=EMPTY, owner=o),
+        ]
+        self.vehicle.add_navdata_listener(self._on_navdata)
+        self.vehicle.add_result_listener(self._on_result)
+        self.tasks.on_event(lambda _n: self._publish_task(force=True))
+        self._publish_task(force=True)
+
+    def close(self) -> None:
+        """Unsubscribe and unadvertise (the vehicle keeps flying; stop it separately)."""
+        self._closed = True
+        for s in self._subs:
+            s.close()
+        self._subs = []
+        for topic in ("navdata", "image", "pose", "markers", "task"):
+            self.graph.unadvertise(self.topic[topic], self.owner)
+
+    # ------------------------------------------------------------------ inputs
+    def operator_heartbeat(self) -> None:
+        """The jogging operator is still there (the console pings while a key is held)."""
+        self._last_operator = self.clock()
+
+    def _on_cmd_vel(self, msg: dict[str, Any]) -> None:
+        try:
+            lin, ang = msg.get("linear") or {}, msg.get("angular") or {}
+            vals = [float(lin.get("x", 0.0)), float(lin.get("y", 0.0)), float(lin.get("z", 0.0))]
+            vals.append(float(ang.get("z", 0.0)))
+            self.vehicle.jog(*vals)
+        except (TypeError, ValueError, AttributeError) as exc:
+            log.warning("%s: bad /cmd_vel %r: %s", self.name, msg, exc)
+            return
+        self._jogging = any(v != 0.0 for v in vals)
+        self._last_operator = self.clock()
+
+    def _on_takeoff(self, _msg: dict[str, Any]) -> None:
+        self.tasks.cancel("take-off requested")
+        self.vehicle.takeoff()
+
+    def _on_land(self, _msg: dict[str, Any]) -> None:
+        self.tasks.preempt("land")
+
+    def _on_reset(self, _msg: dict[str, Any]) -> None:
+        self.tasks.cancel("reset requested")
+        self.vehicle.reset()
+
+    # ------------------------------------------------------------------ outputs
+    def _on_navdata(self, nav: Navdata, now: float) -> None:
+        if self._closed:
+            return
+        stamp = self.stamp()
+        self.graph.publish(self.topic["navdata"], navdata_message(nav, stamp, now))
+        est = self.vehicle.estimate
+        self.graph.publish(
+            self.topic["pose"],
+            {
+                "header": header("map", stamp),
+                "pose": {
+                    "position": {"x": est.x, "y": est.y, "z": est.z},
+                    "orientation": _quat_yaw(est.yaw_rad),
+                },
+            },
+        )
+
+    def _on_result(self, result: FrameResult) -> None:
+        if self._closed:
+            return
+        markers = []
+        loc = self.vehicle.localiser
+        for det in result.detections:
+            m = loc.markers.get(det.marker_id) if loc is not None else None
+            if m is None:
+                continue
+            markers.append(
+                {
+                    "id": det.marker_id,
+                    "pose": {
+                        "position": {"x": m.position[0], "y": m.position[1], "z": m.position[2]},
+                        "orientation": _quat_yaw(m.yaw_rad),
+                    },
+                    "distance": det.distance_m,
+                }
+            )
+        self.graph.publish(
+            self.topic["markers"], {"header": header("map", self.stamp()), "markers": markers}
+        )
+
+    def _publish_task(self, force: bool = False) -> None:
+        if self._closed:
+            return
+        st = self.tasks.status
+        key = (st.name, st.state, round(st.progress, 2), st.detail)
+        if not force and key == self._last_task:
+            return
+        self._last_task = key
+        msg = {"header": header("map", self.stamp()), **st.as_message(self.name)}
+        self.graph.publish(self.topic["task"], msg)
+
+    def encode_image(self) -> dict[str, Any] | None:
+        """The latest frame with the overlay as a CompressedImage message (None: no new frame)."""
+        count = self.vehicle.frames_seen
+        if count == self._last_image_frame:
+            return None
+        status = self.tasks.status
+        line = f"task: {status.name} {status.state} {status.detail}" if status.name else "idle"
+        frame = self.vehicle.overlay((line,))
+        if frame is None:
+            return None
+        ok, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
+        if not ok:
+            return None
+        self._last_image_frame = count
+        return {
+            "header": header("ardrone_base_frontcam", self.stamp()),
+            "format": "jpeg",
+            "data": base64.b64encode(buf.tobytes()).decode("ascii"),
+        }
+
+    def _publish_image(self, msg: dict[str, Any] | None) -> None:
+        if msg is not None:
+            self.graph.publish(self.topic["image"], msg)
+            self.images_published += 1
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, now: float, *, images: bool = True) -> None:
+        """Task manager, operator watchdog and task status; the image too when due."""
+        self.tasks.step(now)
+        if (
+            self._jogging
+            and self._last_operator is not None
+            and now - self._last_operator > self.heartbeat_timeout_s
+        ):
+            log.warning(
+                "%s: operator silent for %.1f s while jogging: hover",
+                self.name,
+                now - self._last_operator,
+            )
+            self._jogging = False
+            self.watchdog_hovers += 1
+            self.vehicle.hover()
+        self._publish_task()
+        if images and now - self._last_image_t >= self.image_period_s:
+            self._last_image_t = now
+            self._publish_image(self.encode_image())
+
+    async def start(self, rate_hz: float = 20.0) -> None:
+        """Real time: step at ``rate_hz`` and stream images, until :meth:`stop`."""
+        self._tasks.append(asyncio.create_task(self._run(1.0 / rate_hz), name=f"{self.name}-node"))
+        self._tasks.append(asyncio.create_task(self._images(), name=f"{self.name}-images"))
+
+    async def stop(self) -> None:
+        for t in self._tasks:
+            t.cancel()
+        for t in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        self._tasks = []
+        self.close()
+
+    async def _run(self, period: float) -> None:
+        while True:
+            try:
+                self.step(self.clock(), images=False)
+            except Exception:
+                log.exception("%s: node step failed", self.name)
+            await asyncio.sleep(period)
+
+    async def _images(self) -> None:
+        while True:
+            try:
+                self._publish_image(await asyncio.to_thread(self.encode_image))
+            except Exception:
+                log.exception("%s: image encoding failed", self.name)
+            await asyncio.sleep(self.image_period_s)

@@ -1,0 +1,122 @@
+"""Clocks, timing statistics, and the 100 Hz thread with its stall watchdog.
+
+The thread tests run in real time (that is what they test) but never sleep: they wait on events
+the loop sets, with generous timeouts.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from drone.control.clock import MonotonicClock, VirtualClock
+from drone.control.errors import GainError, LoopStateError
+from drone.control.loop import ControlLoop, TimingRecorder
+
+
+def test_virtual_clock_only_moves_forward() -> None:
+    c = VirtualClock(5.0)
+    assert c.now() == 5.0
+    assert c.advance(0.25) == 5.25
+    c.set(6.0)
+    assert c.now() == 6.0
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError):
+            c.advance(bad)
+    with pytest.raises(ValueError):
+        c.set(1.0)
+    a = MonotonicClock().now()
+    assert MonotonicClock().now() >= a
+
+
+def test_timing_recorder_statistics_from_known_ticks() -> None:
+    rec = TimingRecorder(0.01, window=100)
+    t = 0.0
+    for k in range(100):
+        late = 0.002 if k == 50 else 0.0001
+        rec.record(t + late, t, 0.0005)
+        t += 0.01
+    s = rec.stats()
+    assert s.ticks == 100
+    assert s.period_p50_s == pytest.approx(0.01, abs=1e-9)
+    assert s.rate_hz == pytest.approx(100.0)
+    assert s.period_error_max_s == pytest.approx(0.0019, abs=1e-9)  # 1.9 ms early/late pair
+    assert s.period_error_p50_s == pytest.approx(0.0, abs=1e-9)
+    assert s.step_p50_s == pytest.approx(0.0005)
+
+
+def test_bad_loop_parameters() -> None:
+    with pytest.raises(GainError):
+        ControlLoop(lambda now, dt: None, period_s=0.0)
+    with pytest.raises(GainError):
+        ControlLoop(lambda now, dt: None, period_s=0.01, spin_s=0.02)
+    with pytest.raises(GainError):
+        ControlLoop(lambda now, dt: None, period_s=0.01, stall_s=0.005)
+
+
+def test_the_thread_runs_at_100_hz_with_absolute_deadlines() -> None:
+    done = threading.Event()
+    stamps: list[float] = []
+
+    def step(now: float, dt: float) -> None:
+        stamps.append(now)
+        if len(stamps) == 50:
+            done.set()
+
+    loop = ControlLoop(step, period_s=0.01)
+    loop.start()
+    try:
+        assert done.wait(5.0)
+    finally:
+        loop.stop()
+    s = loop.stats()
+    assert s.ticks >= 50
+    # 49 periods after the first tick: absolute deadlines do not drift even on a busy machine
+    span = stamps[49] - stamps[0]
+    assert span == pytest.approx(0.49, abs=0.05 + 0.01 * s.overruns)
+    assert 80.0 < s.rate_hz < 120.0
+    with pytest.raises(LoopStateError):
+        loop.start()
+
+
+def test_watchdog_hovers_when_the_step_stalls() -> None:
+    release, stalled, entered = threading.Event(), threading.Event(), threading.Event()
+    calls = {"n": 0}
+
+    def step(now: float, dt: float) -> None:
+        calls["n"] += 1
+        if calls["n"] == 5:
+            entered.set()
+            release.wait(5.0)  # the step hangs (e.g. a blocked driver call)
+
+    loop = ControlLoop(step, period_s=0.01, on_stall=stalled.set, stall_s=0.2)
+    loop.start()
+    try:
+        assert entered.wait(5.0)
+        assert stalled.wait(5.0)  # told to hover while the step is still stuck
+        assert loop.stats().stalls == 1
+    finally:
+        release.set()
+        loop.stop()
+    assert loop.stats().overruns >= 15  # the ~0.2 s hang skipped ticks instead of bunching them
+
+
+def test_a_failing_step_is_counted_and_the_loop_keeps_running() -> None:
+    ok = threading.Event()
+    calls = {"n": 0}
+
+    def step(now: float, dt: float) -> None:
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise RuntimeError("boom")
+        if calls["n"] == 6:
+            ok.set()
+
+    loop = ControlLoop(step)
+    loop.start()
+    try:
+        assert ok.wait(5.0)
+    finally:
+        loop.stop()
+    assert loop.errors == 1 and "boom" in (loop.last_error or "")

@@ -1,0 +1,257 @@
+"""Browser tests: the real server on the simulator, driven by Debian's headless Chromium.
+
+The server runs as ``python -m server serve`` in a subprocess (exactly what an operator starts),
+with its simulated drone on a loopback address of its own so it never clashes with other tests.
+Chromium is launched with flags that keep it off the network; set ``UAVC_SKIP_BROWSER=1`` to
+skip these tests on a machine without ``/usr/bin/chromium``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM = Path(os.environ.get("UAVC_CHROMIUM", "/usr/bin/chromium"))
+# Flags that keep a headless Chromium off the network and quiet (no updates, sync, QUIC, GPU).
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+PILOT = "pilot-token-for-browser-tests"
+OBSERVER = "observer-token-for-browser-tests"
+START_TIMEOUT_S = 60.0
+SCREENSHOTS = ROOT / "docs" / "screenshots"
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    skip = os.environ.get("UAVC_SKIP_BROWSER") == "1"
+    for item in items:
+        if "tests/browser/" not in str(item.fspath).replace(os.sep, "/"):
+            continue
+        item.add_marker(pytest.mark.browser)
+        if skip:
+            item.add_marker(pytest.mark.skip(reason="UAVC_SKIP_BROWSER=1"))
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class ServerProcess:
+    """``uav-console serve`` on the simulator in a subprocess; restartable on the same port."""
+
+    data_dir: Path
+    sim_addr: str
+    extra_args: tuple[str, ...] = ()
+    port: int = field(default_factory=free_port)
+    proc: subprocess.Popen[bytes] | None = None
+    log_path: Path | None = None
+
+    @property
+    def base(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def url(self, token: str = PILOT) -> str:
+        return f"{self.base}/?token={token}"
+
+    def start(self) -> None:
+        env = dict(os.environ)
+        env.update(
+            UAVC_SIM_BASE_ADDR=self.sim_addr,
+            UAVC_DATA_DIR=str(self.data_dir),
+            PYTHONUNBUFFERED="1",
+        )
+        self.log_path = self.data_dir / f"server-{self.port}.log"
+        log = self.log_path.open("ab")
+        cmd = [
+            sys.executable,
+            "-m",
+            "server",
+            "serve",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(self.port),
+            "--token",
+            PILOT,
+            "--observer-token",
+            OBSERVER,
+            "--data-dir",
+            str(self.data_dir),
+            "--seed",
+            "1",
+            *self.extra_args,
+        ]
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+        log.close()
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"server exited with {self.proc.returncode}:\n{self.log_tail()}")
+            with contextlib.suppress(httpx.HTTPError):
+                r = httpx.get(f"{self.base}/api/v1/health", timeout=1.0)
+                if r.status_code == 200:
+                    return
+            time.sleep(0.2)
+        self.stop()
+        raise RuntimeError(
+            f"server did not become healthy in {START_TIMEOUT_S} s:\n{self.log_tail()}"
+        )
+
+    def stop(self) -> None:
+        if self.proc is None:
+            return
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=5)
+        self.proc = None
+
+    def restart(self) -> None:
+        self.stop()
+        self.start()
+
+    def log_tail(self, n: int = 4000) -> str:
+        if self.log_path is None or not self.log_path.exists():
+            return ""
+        return self.log_path.read_text(errors="replace")[-n:]
+
+    # -- REST helpers for ground truth and set-up --------------------------------------------
+    def api(self, method: str, path: str, token: str = PILOT, **kw: Any) -> httpx.Response:
+        return httpx.request(
+            method,
+            f"{self.base}/api/v1{path}",
+            headers={"Authorization": f"Bearer {token}"},
+            timeout=10.0,
+            **kw,
+        )
+
+    def truth(self, drone: str = "uav1") -> dict[str, Any]:
+        r = self.api("GET", f"/sim/{drone}/truth")
+        r.raise_for_status()
+        return dict(r.json())
+
+
+def _server(
+    tmp_path_factory: pytest.TempPathFactory, name: str, addr: str, *extra: str
+) -> Iterator[ServerProcess]:
+    if os.environ.get("UAVC_SKIP_BROWSER") == "1":
+        pytest.skip("UAVC_SKIP_BROWSER=1")
+    server = ServerProcess(tmp_path_factory.mktemp(name), addr, tuple(extra))
+    server.start()
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+@pytest.fixture(scope="session")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """The shared server (its drone starts landed; flying tests run in file order)."""
+    yield from _server(tmp_path_factory, "uavc-browser", "127.0.0.93")
+
+
+@pytest.fixture
+def own_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """A server of the test's own (for restarts)."""
+    yield from _server(tmp_path_factory, "uavc-browser-own", "127.0.0.94")
+
+
+@pytest.fixture
+def fleet_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """Two simulated drones (127.0.0.96 and .97): topics prefixed /uav1, /uav2."""
+    yield from _server(tmp_path_factory, "uavc-browser-fleet", "127.0.0.96", "--fleet", "2")
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Any]:
+    if not CHROMIUM.exists():
+        pytest.fail(f"{CHROMIUM} is missing: apt-get install -y chromium (or UAVC_SKIP_BROWSER=1)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        # launch() gives every browser a fresh temporary user-data-dir of its own.
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+@dataclass
+class ConsolePage:
+    """A console page with everything it logged collected for assertions."""
+
+    page: Any
+    errors: list[str] = field(default_factory=list)
+    messages: list[str] = field(default_factory=list)
+    failed_requests: list[str] = field(default_factory=list)
+
+    def console_errors(self) -> list[str]:
+        return list(self.errors)
+
+
+def open_console(
+    browser: Any,
+    url: str,
+    *,
+    viewport: dict[str, int] | None = None,
+    color_scheme: str = "light",
+    init_script: str | None = None,
+) -> tuple[Any, ConsolePage]:
+    """A fresh context (own storage) with the console loaded and connected."""
+    ctx = browser.new_context(
+        viewport=viewport or {"width": 1440, "height": 900},
+        color_scheme=color_scheme,
+        device_scale_factor=1,
+        service_workers="block",
+    )
+    if init_script:
+        ctx.add_init_script(init_script)
+    page = ctx.new_page()
+    cp = ConsolePage(page)
+
+    def on_console(m: Any) -> None:
+        cp.messages.append(f"{m.type}: {m.text}")
+        if m.type == "error":
+            cp.errors.append(m.text)
+
+    page.on("console", on_console)
+    page.on("pageerror", lambda e: cp.errors.append(f"pageerror: {e}"))
+    page.on("requestfailed", lambda r: cp.failed_requests.append(f"{r.url} {r.failure}"))
+    page.goto(url)
+    page.wait_for_selector("#conn[data-state='open']", timeout=20_000)
+    return ctx, cp
+
+
+@pytest.fixture
+def console(browser: Any, server: ServerProcess) -> Iterator[ConsolePage]:
+    ctx, cp = open_console(browser, server.url())
+    try:
+        yield cp
+    finally:
+        ctx.close()

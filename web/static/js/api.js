@@ -1,0 +1,87 @@
+// REST client for /api/v1 (DESIGN §4) with the page's bearer token.
+
+/** An HTTP error from the API; ``status`` is the HTTP status (0 when the server is unreachable). */
+export class ApiError extends Error {
+  constructor(status, message) {
+    super(message);
+    this.name = "ApiError";
+    this.status = status;
+  }
+}
+
+export class Api {
+  /** @param {string} base e.g. "/api/v1"; @param {string|null} token bearer token */
+  constructor(base, token) {
+    this.base = base;
+    this.token = token;
+  }
+
+  async request(method, path, body, { timeoutMs = 8000 } = {}) {
+    const headers = { Accept: "application/json" };
+    if (this.token) headers.Authorization = `Bearer ${this.token}`;
+    if (body !== undefined) headers["Content-Type"] = "application/json";
+    const ctrl = new AbortController();
+    const timer = setTimeout(() => ctrl.abort(), timeoutMs);
+    let resp;
+    try {
+      resp = await fetch(this.base + path, {
+        method,
+        headers,
+        body: body === undefined ? undefined : JSON.stringify(body),
+        signal: ctrl.signal,
+        cache: "no-store",
+      });
+    } catch (err) {
+      throw new ApiError(0, ctrl.signal.aborted ? "request timed out" : "server unreachable");
+    } finally {
+      clearTimeout(timer);
+    }
+    const text = await resp.text();
+    let data = null;
+    if (text) {
+      try {
+        data = JSON.parse(text);
+      } catch {
+        data = { detail: text };
+      }
+    }
+    if (!resp.ok) {
+      const detail = data && (data.detail ?? data.message ?? data.error);
+      const msg = typeof detail === "string" ? detail : JSON.stringify(detail ?? resp.statusText);
+      throw new ApiError(resp.status, msg);
+    }
+    return data;
+  }
+
+  get(path, opts) {
+    return this.request("GET", path, undefined, opts);
+  }
+
+  post(path, body = {}, opts) {
+    return this.request("POST", path, body, opts);
+  }
+
+  world() {
+    return this.get("/world");
+  }
+
+  drones() {
+    return this.get("/drones");
+  }
+
+  drone(id) {
+    return this.get(`/drones/${encodeURIComponent(id)}`);
+  }
+
+  /** POST /drones/{id}/{takeoff|land|hover|emergency|reset} */
+  action(id, action) {
+    return this.post(`/drones/${encodeURIComponent(id)}/${action}`, {}, { timeoutMs: 4000 });
+  }
+
+  command(text, { confidence, drone } = {}) {
+    const body = { text };
+    if (confidence !== undefined) body.confidence = confidence;
+    if (drone) body.drone = drone;
+    return this.post("/command", body);
+  }
+}

@@ -1,0 +1,479 @@
+// The operator console: wires the rosbridge client and the REST API to the panels.
+//
+// Talks to the backend only through /rosbridge (rosbridge v2 JSON) and /api/v1 (bearer token),
+// DESIGN §4. Direct control never waits for the dialog.
+
+import { Api, ApiError } from "./api.js";
+import { CameraPanel } from "./camera.js";
+import { Controls } from "./controls.js";
+import { DialogPanel } from "./dialog.js";
+import { MapPanel } from "./map.js";
+import { RosbridgeClient, STATES, rosbridgeUrl } from "./rosbridge.js";
+import {
+  LEASE_SERVICE,
+  TOPIC_TYPES,
+  droneNames,
+  leaseNews,
+  pageToken,
+  refusedRole,
+  roleFromStatus,
+} from "./session.js";
+import { SpeechInput } from "./speech.js";
+import { TelemetryPanel } from "./telemetry.js";
+import { droneTopic, stampSeconds } from "./util.js";
+
+const $ = (id) => document.getElementById(id);
+const STATUS_POLL_MS = 1000;
+
+class Console {
+  constructor() {
+    this.token = pageToken();
+    this.api = new Api("/api/v1", this.token);
+    this.ros = new RosbridgeClient(rosbridgeUrl(window.location, this.token));
+    this.clockOffset = 0; // server time - local time, seconds
+    this.drones = [];
+    this.fleet = false;
+    this.drone = null;
+    this.role = null;
+    this.haveLease = null;
+    this.droneSubs = [];
+    this.everOpened = false;
+
+    this.camera = new CameraPanel(
+      { img: $("camera"), empty: $("camera-empty"), fps: $("cam-fps"), latency: $("cam-latency") },
+      () => Date.now() / 1000 + this.clockOffset,
+    );
+    this.telemetry = new TelemetryPanel(document);
+    this.map = new MapPanel(
+      $("map"),
+      {
+        popover: $("map-popover"),
+        text: $("map-popover-text"),
+        go: $("map-go"),
+        cancel: $("map-cancel"),
+        caption: $("map-caption"),
+      },
+      (id) => this.goToMarker(id),
+    );
+    this.dialog = new DialogPanel({
+      log: $("dialog"),
+      alerts: $("alerts"),
+      mute: $("mute"),
+      state: $("dialog-state"),
+    });
+    this.speech = new SpeechInput(
+      { button: $("mic"), interim: $("interim") },
+      (text, confidence) => this.sendUtterance(text, "speech", confidence),
+      (notice) => this.notice(notice),
+    );
+    this.controls = new Controls(document.body, {
+      action: (name) => this.act(name),
+      twist: (t) => this.publishTwist(t),
+      focusInput: () => $("text-input").focus(),
+      mic: () => this.speech.toggle(),
+      describe: () => this.describe(),
+    });
+    $("describe").addEventListener("click", () => this.describe());
+
+    $("input-form").addEventListener("submit", (ev) => {
+      ev.preventDefault();
+      const input = $("text-input");
+      const text = input.value.trim();
+      if (!text) return;
+      if (this.sendUtterance(text, "text", 1.0)) input.value = "";
+    });
+    $("drone-select").addEventListener("change", (ev) => this.selectDrone(ev.target.value));
+    $("takeover").addEventListener("click", () => this.takeOver());
+
+    this.ros.addEventListener("state", (ev) => this.onConnState(ev.detail.state));
+    this.ros.addEventListener("open", () => this.onOpen());
+    this.ros.addEventListener("status", (ev) => this.onStatus(ev.detail));
+    this.ros.addEventListener("callback-error", (ev) => console.warn("panel error", ev.detail));
+
+    this.subscribeGlobal();
+    this.layoutDock();
+    window.addEventListener("resize", () => this.layoutDock());
+  }
+
+  async start() {
+    if (!this.token) {
+      // Nothing works without one (REST says 401, rosbridge closes): say so and stop here.
+      this.banner(
+        "No token in the address. Open the link printed by `uav-console serve` (…/?token=…).",
+        "alert",
+        "rest",
+      );
+      this.onConnState(STATES.CLOSED);
+      return;
+    }
+    await this.loadServerInfo();
+    this.ros.connect();
+    setInterval(() => this.pollDrone(), STATUS_POLL_MS);
+  }
+
+  /** World and drones: fetched at start and again after every reconnection. */
+  async loadServerInfo() {
+    try {
+      const [world, drones] = await Promise.all([this.api.world(), this.api.drones()]);
+      this.map.setWorld(world);
+      this.setDrones(droneNames(drones));
+      if ($("banner").dataset.source === "rest") this.banner(null);
+      this.pollDrone();
+    } catch (err) {
+      if (err instanceof ApiError && err.status === 401) {
+        const why = this.token
+          ? "The server refused this page's token."
+          : "No token in the address.";
+        this.banner(`${why} Open the link printed by \`uav-console serve\` (…/?token=…).`, "alert", "rest");
+      } else if (err instanceof ApiError && err.status === 0) {
+        // Server down: the rosbridge reconnect loop will bring us back.
+      } else {
+        this.banner(`Could not load the server's state: ${err.message}`, "warn", "rest");
+      }
+    }
+  }
+
+  // ---- session ---------------------------------------------------------------------------
+  onConnState(state) {
+    const el = $("conn");
+    el.dataset.state = state;
+    if (state === STATES.OPEN) {
+      el.textContent = "Connected";
+      el.className = "pill pill-ok";
+    } else if (state === STATES.CONNECTING) {
+      el.textContent = this.everOpened ? "Reconnecting…" : "Connecting…";
+      el.className = "pill pill-warn";
+    } else {
+      el.textContent = this.everOpened ? "Connection lost — retrying" : "Not connected";
+      el.className = "pill pill-alert";
+      this.controls.releaseAll(false);
+    }
+    this.renderEnabled();
+  }
+
+  async onOpen() {
+    const again = this.everOpened;
+    this.everOpened = true;
+    // The connection is already authenticated by ?token=; the auth op makes the server say as
+    // whom ("authenticated as pilot"), which is how the page learns its role.
+    // Status messages default to errors only (ROSBRIDGE_PROTOCOL.md §3.2); lease warnings and the
+    // auth answer are "warning" and "info".
+    this.ros.send({ op: "set_level", id: "level:info", level: "info" });
+    this.ros.send({ op: "auth", id: "auth:role", token: this.token || "" });
+    this.syncClock();
+    if (again) {
+      this.dialog.addSystem("Reconnected.");
+      this.camera.reset();
+    }
+    // After a restart the world or the fleet may differ; at first load the REST calls may have
+    // raced a server that was still starting.
+    if (again || !this.drone || !this.map.world) await this.loadServerInfo();
+    this.pollDrone();
+  }
+
+  /** Estimate server clock offset with rosapi get_time (half the round trip, NTP-style). */
+  async syncClock() {
+    // On this very machine both sides read one clock: an estimate could only add error.
+    const host = window.location.hostname;
+    if (/^127\./.test(host) || host === "localhost" || host === "[::1]") {
+      this.clockOffset = 0;
+      return;
+    }
+    try {
+      const t0 = Date.now() / 1000;
+      const values = await this.ros.callService("/rosapi/get_time", {}, { timeoutMs: 2000 });
+      const t1 = Date.now() / 1000;
+      const server = stampSeconds(values.time);
+      if (server !== null) this.clockOffset = server - (t0 + t1) / 2;
+    } catch {
+      this.clockOffset = 0; // same machine is the common case; latency stays meaningful
+    }
+  }
+
+  setRole(role) {
+    this.role = role;
+    const el = $("role");
+    el.textContent = role === "pilot" ? "pilot" : role === "observer" ? "observer (watch only)" : `role: ${role}`;
+    el.className = `pill ${role === "observer" ? "pill-warn" : "pill-ok"}`;
+    el.dataset.role = role;
+    this.renderEnabled();
+  }
+
+  setLease(mine) {
+    this.haveLease = mine;
+    this.renderEnabled();
+  }
+
+  /** Observer, or a pilot without the lease, or no connection: controls off (emergency stays). */
+  renderEnabled() {
+    const connected = this.ros.state === STATES.OPEN;
+    const observer = this.role === "observer";
+    const lostLease = this.role === "pilot" && this.haveLease === false;
+    const can = !observer && !lostLease;
+    for (const el of document.querySelectorAll("[data-control], #text-input, #mic")) {
+      el.disabled = !can;
+    }
+    // The emergency stop is never disabled for a pilot: even without the lease a pilot may stop
+    // the drone (the server decides); observers cannot command at all.
+    $("btn-emergency").disabled = observer;
+    this.controls.setEnabled(can);
+    $("takeover").hidden = !lostLease;
+    document.body.dataset.role = this.role || "";
+    document.body.dataset.connected = String(connected);
+    if (observer) $("text-input").placeholder = "Observers can watch but not command";
+  }
+
+  /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over. */
+  async claimLease() {
+    try {
+      let lease = await this.ros.callService(LEASE_SERVICE, { action: "status" });
+      if (!lease.held_by_me && !lease.holder) {
+        lease = await this.ros.callService(LEASE_SERVICE, { action: "acquire" });
+      }
+      this.setLease(!!lease.held_by_me);
+      if (!lease.held_by_me) {
+        this.banner(
+          "Another pilot holds the controls. Press “Take over as pilot” to command.",
+          "warn",
+          "lease",
+        );
+      } else if ($("banner").dataset.source === "lease") {
+        this.banner(null);
+      }
+    } catch (err) {
+      // No lease service (an older server): commands go through and the server decides.
+      this.setLease(null);
+    }
+  }
+
+  async takeOver() {
+    try {
+      const lease = await this.ros.callService(LEASE_SERVICE, { action: "acquire", take_over: true });
+      this.setLease(!!lease.held_by_me);
+      if (lease.held_by_me) {
+        this.dialog.addSystem("You took over as pilot; the other pilot was told.");
+        if ($("banner").dataset.source === "lease") this.banner(null);
+      }
+    } catch (err) {
+      this.flash(`Could not take over: ${err.message}`, "alert");
+    }
+  }
+
+  onStatus(st) {
+    const msg = st.msg || "";
+    const role = roleFromStatus(msg);
+    if (role) {
+      this.setRole(role);
+      if (role === "pilot") this.claimLease();
+      return;
+    }
+    const refused = refusedRole(msg);
+    if (refused === "observer" && this.role !== "observer") this.setRole("observer");
+    const lease = leaseNews(msg);
+    if (lease === "lost") {
+      // The server says it twice (a warning naming the new holder, then an error): tell once.
+      if (this.haveLease !== false) {
+        this.dialog.addSystem(msg);
+        this.banner("Another pilot took over the controls. Press “Take over as pilot” to command again.", "warn", "lease");
+      }
+      this.setLease(false);
+      return;
+    }
+    if (lease === "mine") {
+      this.setLease(true);
+      if ($("banner").dataset.source === "lease") this.banner(null);
+      return;
+    }
+    if (st.level === "error" || st.level === "warning" || st.level === "warn") {
+      this.dialog.addSystem(`Server: ${msg}`);
+      this.flash(`Server refused: ${msg}`, "warn");
+    }
+  }
+
+  setDrones(names) {
+    const list = names.length ? names : ["uav1"];
+    this.drones = list;
+    this.fleet = list.length > 1;
+    const sel = $("drone-select");
+    sel.replaceChildren(...list.map((n) => new Option(n, n)));
+    $("drone-select-wrap").hidden = !this.fleet;
+    $("fleet-list").hidden = !this.fleet;
+    const stored = window.localStorage.getItem("uavc.drone");
+    const want = list.includes(this.drone) ? this.drone : list.includes(stored) ? stored : list[0];
+    sel.value = want;
+    if (want !== this.drone) this.selectDrone(want);
+  }
+
+  selectDrone(name) {
+    this.drone = name;
+    try {
+      window.localStorage.setItem("uavc.drone", name);
+    } catch {
+      /* private mode */
+    }
+    this.controls.releaseAll(true);
+    for (const s of this.droneSubs) s.unsubscribe();
+    this.camera.reset();
+    this.map.setSelected(name);
+    const t = (n) => droneTopic(n, name, this.fleet);
+    const sub = (topic, cb, opts) => this.ros.subscribe(t(topic), TOPIC_TYPES[topic], cb, opts);
+    this.droneSubs = [
+      sub("/ardrone/navdata", (m) => this.telemetry.onNavdata(m), { throttle_rate: 50, queue_length: 1 }),
+      sub("/ardrone/image_raw/compressed", (m) => this.camera.onImage(m), { queue_length: 1 }),
+      sub("/uav/pose", (m) => this.map.onPose(name, m), { throttle_rate: 50, queue_length: 1 }),
+      sub("/uav/markers", (m) => this.map.onMarkers(m), { throttle_rate: 200, queue_length: 1 }),
+      sub("/uav/task", (m) => {
+        this.telemetry.onTask(m);
+        this.map.onTask(m);
+      }),
+    ];
+    document.body.dataset.drone = name;
+  }
+
+  subscribeGlobal() {
+    this.ros.subscribe("/console/reply", TOPIC_TYPES["/console/reply"], (m) => this.dialog.onReply(m));
+    this.ros.subscribe("/console/state", TOPIC_TYPES["/console/state"], (m) => {
+      if (!m.drone || !this.fleet || m.drone === this.drone) this.dialog.onState(m);
+    });
+    this.ros.subscribe("/fleet/status", TOPIC_TYPES["/fleet/status"], (m) => this.onFleet(m), {
+      throttle_rate: 200,
+    });
+  }
+
+  onFleet(msg) {
+    this.map.onFleet(msg);
+    const ul = $("fleet-list");
+    const items = (msg.drones || []).map((d) => {
+      const li = document.createElement("li");
+      const bat = Number.isFinite(d.battery) ? `${Math.round(d.battery)} %` : "–";
+      li.textContent = `${d.name} · ${d.role || d.state || "?"} · ${bat}${d.link === false ? " · link lost" : ""}`;
+      return li;
+    });
+    ul.replaceChildren(...items);
+  }
+
+  async pollDrone() {
+    // While the socket is down the server is too: no REST polling (and no console noise).
+    if (!this.drone || document.hidden || this.ros.state !== STATES.OPEN) return;
+    try {
+      const status = await this.api.drone(this.drone);
+      this.telemetry.onDroneStatus(status);
+      this.map.onSnapshot(this.drone, status);
+      this.map.setLocalised(this.drone, status.localised);
+    } catch {
+      /* the connection pill already tells the operator */
+    }
+  }
+
+  // ---- commands ----------------------------------------------------------------------------
+  /** Publish what the operator said/typed to /console/utterance; false if it could not be sent. */
+  sendUtterance(text, source, confidence) {
+    const msg = { text, confidence, source, drone: this.drone || "" };
+    const id = this.ros.publish("/console/utterance", TOPIC_TYPES["/console/utterance"], msg);
+    if (!id) {
+      this.flash("Not connected: the command was not sent.", "alert");
+      return false;
+    }
+    this.dialog.addUtterance(text, { source, confidence });
+    return true;
+  }
+
+  publishTwist(twist) {
+    if (!this.drone) return;
+    const topic = droneTopic("/cmd_vel", this.drone, this.fleet);
+    if (!this.ros.publish(topic, TOPIC_TYPES["/cmd_vel"], twist)) {
+      this.flash("Not connected: jog not sent.", "alert");
+    }
+  }
+
+  /** Direct actions through REST (land/emergency jump every queue on the server, DESIGN §5). */
+  async act(action) {
+    if (!this.drone) return;
+    if (action === "emergency") {
+      this.dialog.addSystem("EMERGENCY STOP");
+      document.body.dataset.emergency = String(Date.now());
+    }
+    try {
+      const res = await this.api.action(this.drone, action);
+      if (res && res.accepted === false) this.flash(`${action}: ${res.detail || "refused"}`, "warn");
+    } catch (err) {
+      // REST unreachable or failing: land still has a second road, ardrone_autonomy's topic.
+      // (There is no topic for emergency: /ardrone/reset only leaves the emergency state here.)
+      if (action === "land" && (err.status === 0 || err.status >= 500)) {
+        this.ros.publish(droneTopic("/ardrone/land", this.drone, this.fleet), "std_msgs/Empty", {});
+      }
+      this.flash(`${action} failed: ${err.message}`, "alert");
+      if (err.status === 403) this.onStatus({ level: "error", msg: err.message });
+    }
+  }
+
+  /** Scene description (the server's captioner), shown and spoken like a reply. */
+  async describe() {
+    if (!this.drone) return;
+    const btn = $("describe");
+    btn.disabled = true;
+    try {
+      const res = await this.api.post(`/drones/${encodeURIComponent(this.drone)}/describe`, {});
+      this.dialog.onReply({ text: res.text, level: "info", speak: true });
+    } catch (err) {
+      this.dialog.onReply({ text: `I cannot describe the scene: ${err.message}`, level: "warn", speak: true });
+    } finally {
+      btn.disabled = false;
+    }
+  }
+
+  async goToMarker(id) {
+    const text = `go to marker ${id}`;
+    this.dialog.addUtterance(text, { source: "map" });
+    try {
+      const res = await this.api.command(text, { drone: this.drone || undefined });
+      // The reply also arrives on /console/reply; show REST-only refusals here.
+      if (res && res.accepted === false && res.reply) this.flash(res.reply, "warn");
+    } catch (err) {
+      this.flash(`Could not send “${text}”: ${err.message}`, "alert");
+    }
+  }
+
+  // ---- feedback ------------------------------------------------------------------------------
+  notice(text) {
+    this.dialog.addSystem(text);
+    $("interim").textContent = text;
+  }
+
+  banner(text, level = "alert", source = "") {
+    const b = $("banner");
+    if (!text) {
+      b.hidden = true;
+      b.textContent = "";
+      b.dataset.source = "";
+      return;
+    }
+    b.textContent = text;
+    b.dataset.level = level;
+    b.dataset.source = source;
+    b.hidden = false;
+  }
+
+  flash(text, level) {
+    // A standing alert about the token outranks passing messages.
+    if ($("banner").dataset.source === "rest" && !$("banner").hidden) {
+      this.dialog.addSystem(text);
+      return;
+    }
+    this.banner(text, level, "flash");
+    clearTimeout(this.flashTimer);
+    this.flashTimer = setTimeout(() => {
+      if ($("banner").dataset.source === "flash") this.banner(null);
+    }, 5000);
+  }
+
+  /** Phones: keep the fixed dock's height in --dock-h so the last panel is not hidden under it. */
+  layoutDock() {
+    const h = $("dock").getBoundingClientRect().height;
+    document.documentElement.style.setProperty("--dock-h", `${Math.ceil(h)}px`);
+  }
+}
+
+const app = new Console();
+window.uavConsole = app; // for debugging from the browser's console and for the browser tests
+app.start();

@@ -1,0 +1,244 @@
+// Direct control and emergency override: take off, land, hover, reset, EMERGENCY STOP, a jog pad
+// publishing geometry_msgs/Twist on /cmd_vel at ~10 Hz while held (a zero Twist on release),
+// and keyboard shortcuts. Independent of the dialog: these never wait for it.
+//
+// /cmd_vel semantics as ardrone_autonomy: components are fractions in [-1, 1]; linear.x forward,
+// linear.y left, linear.z up, angular.z counter-clockwise (docs/CONVENTIONS.md, protocols.md).
+
+export const JOG_PERIOD_MS = 100; // ~10 Hz, well inside the drone's 2 s command watchdog
+
+export const JOG_AXES = Object.freeze({
+  forward: ["linear", "x", 1],
+  backward: ["linear", "x", -1],
+  left: ["linear", "y", 1],
+  right: ["linear", "y", -1],
+  up: ["linear", "z", 1],
+  down: ["linear", "z", -1],
+  yaw_left: ["angular", "z", 1],
+  yaw_right: ["angular", "z", -1],
+});
+
+export const KEYMAP = Object.freeze({
+  w: "forward",
+  arrowup: "forward",
+  s: "backward",
+  arrowdown: "backward",
+  a: "left",
+  arrowleft: "left",
+  d: "right",
+  arrowright: "right",
+  r: "up",
+  pageup: "up",
+  f: "down",
+  pagedown: "down",
+  q: "yaw_left",
+  e: "yaw_right",
+});
+
+export function zeroTwist() {
+  return { linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } };
+}
+
+/** The Twist for a set of held directions at strength ``s`` (opposites cancel). */
+export function twistFor(held, s) {
+  const t = zeroTwist();
+  for (const dir of held) {
+    const axis = JOG_AXES[dir];
+    if (!axis) continue;
+    const [part, comp, sign] = axis;
+    t[part][comp] = Math.max(-1, Math.min(1, t[part][comp] + sign * s));
+  }
+  return t;
+}
+
+export class Controls {
+  /**
+   * @param {HTMLElement} root
+   * @param {{action: (name: string) => void, twist: (t: object) => void, focusInput: () => void,
+   *          mic: () => void, describe?: () => void}} hooks
+   */
+  constructor(root, hooks) {
+    this.root = root;
+    this.hooks = hooks;
+    this.held = new Set();
+    this.pointerHeld = new Map(); // pointerId -> direction
+    this.keyHeld = new Map(); // key -> direction
+    this.timer = null;
+    this.enabled = true;
+    this.speedInput = root.querySelector("#jog-speed");
+    this.speedOut = root.querySelector("#jog-speed-out");
+    this.speedInput.addEventListener("input", () => this.renderSpeed());
+    this.renderSpeed();
+
+    const bind = (id, action) =>
+      root.querySelector(id).addEventListener("click", () => this.enabled && hooks.action(action));
+    bind("#btn-takeoff", "takeoff");
+    bind("#btn-land", "land");
+    bind("#btn-hover", "hover");
+    bind("#btn-reset", "reset");
+    // Emergency on pointerdown as well as click: it must not wait for the finger to lift.
+    const em = root.querySelector("#btn-emergency");
+    let emAt = 0;
+    const fire = () => {
+      const now = performance.now();
+      if (now - emAt < 300) return; // pointerdown + click of one press
+      emAt = now;
+      this.releaseAll(false);
+      hooks.action("emergency");
+    };
+    em.addEventListener("pointerdown", (ev) => {
+      if (ev.button === 0) fire();
+    });
+    em.addEventListener("click", fire);
+
+    for (const btn of root.querySelectorAll("[data-jog]")) {
+      const dir = btn.dataset.jog;
+      btn.addEventListener("pointerdown", (ev) => {
+        if (!this.enabled || btn.disabled) return;
+        ev.preventDefault();
+        btn.setPointerCapture?.(ev.pointerId);
+        this.pointerHeld.set(ev.pointerId, dir);
+        btn.classList.add("active");
+        this.update();
+      });
+      const up = (ev) => {
+        if (!this.pointerHeld.has(ev.pointerId)) return;
+        this.pointerHeld.delete(ev.pointerId);
+        btn.classList.remove("active");
+        this.update();
+      };
+      btn.addEventListener("pointerup", up);
+      btn.addEventListener("pointercancel", up);
+      btn.addEventListener("lostpointercapture", up);
+      // Keyboard users: Enter/Space on a focused jog button jogs while the key is down.
+      btn.addEventListener("keydown", (ev) => {
+        if ((ev.key === "Enter" || ev.key === " ") && !ev.repeat && this.enabled) {
+          ev.preventDefault();
+          ev.stopPropagation();
+          this.keyHeld.set(`btn:${ev.key}`, dir);
+          btn.classList.add("active");
+          this.update();
+        }
+      });
+      btn.addEventListener("keyup", (ev) => {
+        if (this.keyHeld.delete(`btn:${ev.key}`)) {
+          ev.stopPropagation();
+          btn.classList.remove("active");
+          this.update();
+        }
+      });
+      btn.addEventListener("contextmenu", (ev) => ev.preventDefault());
+    }
+
+    document.addEventListener("keydown", (ev) => this.onKeyDown(ev));
+    document.addEventListener("keyup", (ev) => this.onKeyUp(ev));
+    // Losing the page while jogging must stop the drone (DESIGN §5, operator gone -> hover).
+    window.addEventListener("blur", () => this.releaseAll(true));
+    document.addEventListener("visibilitychange", () => {
+      if (document.hidden) this.releaseAll(true);
+    });
+  }
+
+  strength() {
+    return Number(this.speedInput.value) || 0.3;
+  }
+
+  renderSpeed() {
+    this.speedOut.textContent = `${Math.round(this.strength() * 100)} %`;
+  }
+
+  setEnabled(on) {
+    this.enabled = on;
+    if (!on) this.releaseAll(false);
+  }
+
+  onKeyDown(ev) {
+    if (ev.ctrlKey || ev.metaKey || ev.altKey) return;
+    const key = ev.key.toLowerCase();
+    if (key === "escape") {
+      ev.preventDefault();
+      this.releaseAll(false);
+      this.hooks.action("emergency");
+      return;
+    }
+    const t = ev.target;
+    const typing =
+      t instanceof HTMLInputElement && t.type !== "range"
+        ? true
+        : t instanceof HTMLTextAreaElement || t instanceof HTMLSelectElement || t?.isContentEditable;
+    if (typing || !this.enabled) return;
+    if (key === " " || key === "spacebar") {
+      if (t instanceof HTMLButtonElement || t instanceof HTMLElement && t.tagName === "SUMMARY") return;
+      ev.preventDefault();
+      if (!ev.repeat) this.hooks.action("hover");
+      return;
+    }
+    if (key === "/") {
+      ev.preventDefault();
+      this.hooks.focusInput();
+      return;
+    }
+    if (key === "m" && !ev.repeat) {
+      this.hooks.mic();
+      return;
+    }
+    if (key === "v" && !ev.repeat) {
+      this.hooks.describe?.();
+      return;
+    }
+    if (key === "t" && !ev.repeat) {
+      this.hooks.action("takeoff");
+      return;
+    }
+    if (key === "l" && !ev.repeat) {
+      this.hooks.action("land");
+      return;
+    }
+    const dir = KEYMAP[key];
+    if (dir) {
+      ev.preventDefault();
+      if (!this.keyHeld.has(key)) {
+        this.keyHeld.set(key, dir);
+        this.update();
+      }
+    }
+  }
+
+  onKeyUp(ev) {
+    const key = ev.key.toLowerCase();
+    if (this.keyHeld.delete(key)) this.update();
+  }
+
+  /** Recompute the held set; start/stop the 10 Hz stream; a zero Twist on release. */
+  update() {
+    const next = new Set([...this.pointerHeld.values(), ...this.keyHeld.values()]);
+    const was = this.held.size > 0;
+    this.held = next;
+    this.root.dataset.jogging = next.size ? [...next].join(" ") : "";
+    if (next.size) {
+      this.send();
+      if (!this.timer) this.timer = setInterval(() => this.send(), JOG_PERIOD_MS);
+    } else {
+      clearInterval(this.timer);
+      this.timer = null;
+      if (was) this.hooks.twist(zeroTwist());
+    }
+  }
+
+  send() {
+    if (this.held.size) this.hooks.twist(twistFor(this.held, this.strength()));
+  }
+
+  /** Forget every held direction; ``sendZero`` publishes the stopping Twist. */
+  releaseAll(sendZero) {
+    const was = this.held.size > 0;
+    this.pointerHeld.clear();
+    this.keyHeld.clear();
+    for (const b of this.root.querySelectorAll("[data-jog].active")) b.classList.remove("active");
+    this.held = new Set();
+    this.root.dataset.jogging = "";
+    clearInterval(this.timer);
+    this.timer = null;
+    if (was && sendZero) this.hooks.twist(zeroTwist());
+  }
+}

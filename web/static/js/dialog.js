@@ -1,0 +1,149 @@
+// Dialog panel: the conversation (newest at the bottom), each utterance annotated with how the
+// server understood it; replies spoken with speechSynthesis unless muted, alerts also announced
+// assertively for screen readers.
+
+const MAX_ENTRIES = 200;
+
+/** A short human reading of a command list (DESIGN §4 commands). */
+export function describeCommands(commands) {
+  if (!Array.isArray(commands) || commands.length === 0) return "nothing";
+  return commands
+    .map((c) => {
+      const slots = Object.entries(c)
+        .filter(([k]) => k !== "action")
+        .map(([k, v]) => `${k}=${Array.isArray(v) ? v.join(",") : v}`);
+      return slots.length ? `${c.action}(${slots.join(", ")})` : c.action;
+    })
+    .join(" → ");
+}
+
+function parseCommands(raw) {
+  if (Array.isArray(raw)) return raw;
+  if (typeof raw !== "string" || raw === "") return null;
+  try {
+    const v = JSON.parse(raw);
+    return Array.isArray(v) ? v : null;
+  } catch {
+    return null;
+  }
+}
+
+export class DialogPanel {
+  /**
+   * @param {{log: HTMLOListElement, alerts: HTMLElement, mute: HTMLButtonElement, state: HTMLElement}} els
+   * @param {{speechSynthesis?: SpeechSynthesis, storage?: Storage}} env
+   */
+  constructor(els, env = {}) {
+    this.els = els;
+    this.synth = env.speechSynthesis ?? window.speechSynthesis ?? null;
+    this.storage = env.storage ?? window.localStorage;
+    this.muted = this.storage?.getItem("uavc.muted") === "1";
+    els.mute.addEventListener("click", () => this.setMuted(!this.muted));
+    this.renderMute();
+  }
+
+  setMuted(muted) {
+    this.muted = muted;
+    try {
+      this.storage?.setItem("uavc.muted", muted ? "1" : "0");
+    } catch {
+      /* private mode: the toggle still works for this page */
+    }
+    if (muted && this.synth) this.synth.cancel();
+    this.renderMute();
+  }
+
+  renderMute() {
+    const b = this.els.mute;
+    b.setAttribute("aria-pressed", String(this.muted));
+    b.querySelector(".label").textContent = this.muted ? "Muted" : "Voice on";
+    b.title = this.muted ? "Spoken replies are muted" : "Mute spoken replies";
+  }
+
+  add(kind, text, extra = {}) {
+    const li = document.createElement("li");
+    li.className = `msg msg-${kind}`;
+    const body = document.createElement("span");
+    body.className = "text";
+    body.textContent = text;
+    li.append(body);
+    if (extra.level) li.dataset.level = extra.level;
+    if (extra.meta) {
+      const meta = document.createElement("span");
+      meta.className = "meta";
+      meta.textContent = extra.meta;
+      li.append(meta);
+    }
+    const log = this.els.log;
+    const stick = log.scrollHeight - log.scrollTop - log.clientHeight < 40;
+    log.append(li);
+    while (log.children.length > MAX_ENTRIES) log.firstElementChild.remove();
+    if (stick || kind === "user") li.scrollIntoView({ block: "end" });
+    return li;
+  }
+
+  /** The operator said or typed something (shown at once, annotated when the reply comes). */
+  addUtterance(text, { source = "text", confidence = 1 } = {}) {
+    const meta =
+      source === "speech"
+        ? `spoken · confidence ${Math.round(confidence * 100)} %`
+        : source === "map"
+          ? "from the map"
+          : "typed";
+    const li = this.add("user", text, { meta });
+    li.dataset.utterance = text;
+    li.dataset.pending = "1";
+    return li;
+  }
+
+  addSystem(text) {
+    return this.add("system", text);
+  }
+
+  /** uav_console/Reply: text, level, speak, utterance, commands (JSON string). */
+  onReply(msg) {
+    const level = msg.level || "info";
+    const commands = parseCommands(msg.commands);
+    if (msg.utterance) this.annotate(msg.utterance, commands);
+    const li = this.add("bot", msg.text || "", { level });
+    li.dataset.level = level;
+    if (level === "alert" || level === "warn") {
+      this.els.alerts.textContent = "";
+      // A fresh text node makes screen readers announce repeated alerts too.
+      this.els.alerts.append(document.createTextNode(msg.text || ""));
+    }
+    if (msg.speak !== false && msg.text) this.speak(msg.text, level);
+    return li;
+  }
+
+  /** Attach "understood as …" to the newest pending entry with this text (or add one). */
+  annotate(utterance, commands) {
+    const pending = [...this.els.log.querySelectorAll("li.msg-user[data-pending='1']")];
+    let li = pending.reverse().find((el) => el.dataset.utterance === utterance);
+    if (!li) {
+      li = this.add("user", utterance, { meta: "from another console" });
+    }
+    li.dataset.pending = "0";
+    const u = document.createElement("span");
+    u.className = "understood";
+    u.textContent = commands ? `understood: ${describeCommands(commands)}` : "understood: —";
+    li.append(u);
+  }
+
+  speak(text, level) {
+    if (this.muted || !this.synth || typeof SpeechSynthesisUtterance === "undefined") return;
+    const u = new SpeechSynthesisUtterance(text);
+    u.lang = "en-US";
+    if (level === "alert") {
+      this.synth.cancel(); // an alert goes first
+      u.rate = 1.1;
+    }
+    this.synth.speak(u);
+  }
+
+  onState(msg) {
+    const grammars = Array.isArray(msg.grammars) ? msg.grammars.join(", ") : "";
+    this.els.state.textContent = msg.state ? `· ${msg.state.toLowerCase().replace(/_/g, " ")}` : "";
+    this.els.state.title = grammars ? `active grammars: ${grammars}` : "";
+  }
+}
