@@ -303,7 +303,12 @@ def draw_overlay(
             )
     for k, text in enumerate(lines):
         org = (8, 18 + 16 * k)
-        cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 3, cv2.LINE_AA)
+        # A dark box rather than a thick outline: OpenCV spaces glyphs by thickness, so a
+        # thick outline under thin text does not line up.
+        (w, h), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)
+        top_left = (org[0] - 3, org[1] - h - 3)
+        bottom_right = (org[0] + w + 3, org[1] + base)
+        cv2.rectangle(img, top_left, bottom_right, (0, 0, 0), -1)
         cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
     return img
 

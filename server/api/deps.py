@@ -46,8 +46,9 @@ SAFETY_ACTIONS = frozenset({"land", "emergency", "hover"})
 def check_lease(request: Request, runtime: Runtime, actions: set[str]) -> None:
     """A pilot on REST commands only while no other pilot holds the lease (DESIGN §5).
 
-    Safety actions (land, emergency, hover) always get through. ``?take_over=true`` takes the
-    lease from its holder, who is told, and leaves it free.
+    Safety actions (land, emergency, hover) always get through. The holder itself (the console
+    page, whose rosbridge session holds the lease) names it in ``X-Pilot-Lease``.
+    ``?take_over=true`` takes the lease from its holder, who is told, and leaves it free.
 
     Raises:
         HTTPException: 409 naming the holder and how to take over.
@@ -56,7 +57,7 @@ def check_lease(request: Request, runtime: Runtime, actions: set[str]) -> None:
         return
     lease = runtime.security.lease
     holder = lease.state.holder
-    if holder is None:
+    if holder is None or request.headers.get("x-pilot-lease") == holder:
         return
     if request.query_params.get("take_over", "").lower() in ("1", "true", "yes"):
         taker = f"rest:{request.client.host if request.client else 'unknown'}"

@@ -198,6 +198,8 @@ async def test_rest_respects_the_pilot_lease_but_never_blocks_safety(
     held = await api.post("/api/v1/drones/uav1/takeoff")
     assert held.status_code == 409 and "take_over" in held.json()["detail"]
     assert (await api.post("/api/v1/command", json={"text": "take off"})).status_code == 409
+    as_holder = {"X-Pilot-Lease": "browser-pilot"}
+    assert (await api.post("/api/v1/drones/uav1/reset", headers=as_holder)).status_code == 200
     for safety in ("land", "emergency", "hover"):
         assert (await api.post(f"/api/v1/drones/uav1/{safety}")).status_code == 200
     assert (await api.post("/api/v1/command", json={"text": "land now"})).status_code == 200

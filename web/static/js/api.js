@@ -14,11 +14,15 @@ export class Api {
   constructor(base, token) {
     this.base = base;
     this.token = token;
+    /** @type {string|null} the lease holder id of this page's rosbridge session, if it holds it */
+    this.leaseHolder = null;
   }
 
   async request(method, path, body, { timeoutMs = 8000 } = {}) {
     const headers = { Accept: "application/json" };
     if (this.token) headers.Authorization = `Bearer ${this.token}`;
+    // The pilot lease this page holds on its rosbridge session: REST commands speak for it.
+    if (this.leaseHolder) headers["X-Pilot-Lease"] = this.leaseHolder;
     if (body !== undefined) headers["Content-Type"] = "application/json";
     const ctrl = new AbortController();
     const timer = setTimeout(() => ctrl.abort(), timeoutMs);

@@ -231,6 +231,7 @@ class Console {
         lease = await this.ros.callService(LEASE_SERVICE, { action: "acquire" });
       }
       this.setLease(!!lease.held_by_me);
+      this.api.leaseHolder = lease.held_by_me ? lease.holder : null;
       if (!lease.held_by_me) {
         this.banner(
           "Another pilot holds the controls. Press “Take over as pilot” to command.",
@@ -250,6 +251,7 @@ class Console {
     try {
       const lease = await this.ros.callService(LEASE_SERVICE, { action: "acquire", take_over: true });
       this.setLease(!!lease.held_by_me);
+      this.api.leaseHolder = lease.held_by_me ? lease.holder : null;
       if (lease.held_by_me) {
         this.dialog.addSystem("You took over as pilot; the other pilot was told.");
         if ($("banner").dataset.source === "lease") this.banner(null);
