@@ -118,7 +118,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per run")
+    ap.add_argument("--quick", action="store_true", help="3 runs of 15 simulated seconds")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.repeats, args.seconds = min(args.repeats, 3), min(args.seconds, 15.0)
     r = args.repeats
     world = _world()
     rows: list[tuple[str, float, str, str, float | None, str]] = []

@@ -111,7 +111,12 @@ def _serve(args: argparse.Namespace) -> int:
     )
     app = create_app(settings, announce=True)
     config = uvicorn.Config(
-        app, host=settings.host, port=settings.port, log_level="warning", ws_max_size=None
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level="warning",
+        # uvicorn cuts off absurd frames; below this the endpoint answers with a status error.
+        ws_max_size=4 * settings.max_frame_bytes,
     )
     # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
     with contextlib.suppress(KeyboardInterrupt):

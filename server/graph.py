@@ -145,6 +145,11 @@ class Graph:
         self._loop = loop
         self._loop_thread = threading.get_ident()
 
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop | None:
+        """The loop messages are delivered on (None until :meth:`bind_loop`)."""
+        return self._loop
+
     def _on_loop_thread(self) -> bool:
         return self._loop is None or threading.get_ident() == self._loop_thread
 

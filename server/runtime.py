@@ -247,6 +247,8 @@ class Runtime:
             if stack.sim is not None:
                 await stack.sim.stop()
         self.audit.close()
+        if isinstance(self._captioner, Captioner):
+            self._captioner.close()
 
     # ------------------------------------------------------------------ queries
     @property

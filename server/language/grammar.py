@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import threading
+import warnings
 import xml.parsers.expat
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
@@ -203,6 +204,20 @@ class Grammar:
 
     def word_set(self, name: str) -> WordSet:
         return self.sets[name]
+
+
+def compile_strict(pattern: str) -> re.Pattern[str]:
+    """``re.compile``, but syntax Python warns will change meaning (``[[``) is an error too.
+
+    Raises:
+        re.error: invalid, or ambiguous (the FutureWarning's text as the message).
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FutureWarning)
+        try:
+            return re.compile(pattern)
+        except FutureWarning as warning:
+            raise re.error(f"ambiguous syntax: {warning}") from None
 
 
 def _compile_matcher(rules: list[Rule]) -> Matcher:
@@ -470,7 +485,7 @@ def _load_sets(path: Path) -> dict[str, WordSet]:
     for name, (_alts, labels, values, line) in raw.items():
         regex = expand(name, (name,))
         try:
-            re.compile(regex)
+            compile_strict(regex)
         except re.error as exc:
             raise InvalidRegexError(f"set {name}: {exc}", file=file, line=line) from exc
         sets[name] = WordSet(name, regex, labels, values, line)
@@ -560,7 +575,7 @@ def _load_rule(
 
     pattern = _SET_REF.sub(sub, source)
     try:
-        compiled = re.compile(pattern)
+        compiled = compile_strict(pattern)
     except re.error as exc:
         raise InvalidRegexError(
             f"invalid regex: {exc}", file=file, line=pat_line, rule=rid

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -253,3 +254,12 @@ def test_arbitrary_patterns_load_or_raise_grammar_error(tmp_path: Path, pattern:
         NLU(tmp_path).interpret("a b")
     except GrammarError as exc:
         assert exc.file == "rules.xml"
+
+
+def test_ambiguous_regex_syntax_is_a_load_error() -> None:
+    """``[[`` compiles in Python today but is warned to change meaning: refused at load."""
+    from server.language.grammar import compile_strict
+
+    with pytest.raises(re.error, match="ambiguous"):
+        compile_strict("[[a]")
+    assert compile_strict("[a]").fullmatch("a")

@@ -1,0 +1,81 @@
+"""What every rosbridge connection of one server shares: graph, security, settings, caches."""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import itertools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from server.graph import Graph
+from server.rosbridge.values import to_json_text
+from server.security import Security
+from server.settings import Settings
+
+
+class JsonCache:
+    """JSON text of messages being delivered right now, keyed by identity.
+
+    The graph hands the same dict to every subscriber in one synchronous pass, so N clients
+    cost one ``json.dumps``. The cache is emptied on the next loop iteration, so a publisher
+    that reuses and mutates one dict is never served stale text; each entry keeps its message
+    alive, so an ``id`` cannot be reused while cached.
+    """
+
+    def __init__(self, size: int = 256) -> None:
+        self._size = size
+        self._entries: collections.OrderedDict[int, tuple[Any, str]] = collections.OrderedDict()
+
+    def text(self, msg: Any) -> str:
+        key = id(msg)
+        hit = self._entries.get(key)
+        if hit is not None and hit[0] is msg:
+            return hit[1]
+        text = to_json_text(msg)
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # no loop, so no "delivery pass" to scope the cache to
+            return text
+        if not self._entries:
+            loop.call_soon(self._entries.clear)
+        self._entries[key] = (msg, text)
+        if len(self._entries) > self._size:
+            self._entries.popitem(last=False)
+        return text
+
+
+@dataclass
+class BridgeContext:
+    """Shared by the connections of one server; build one per app (see ``make_router``).
+
+    Attributes:
+        service_timeout_s: default timeout of a ``call_service`` that names none (a client that
+            provides a service and never answers must not hold the caller forever).
+        out_queue_frames / out_queue_bytes: bound of a connection's outgoing queue; beyond it
+            the oldest frames are dropped.
+        stall_close_s: a client that has not read for this long while frames wait is closed
+            with code 1008.
+        auth_timeout_s: a connection without a token must send ``auth`` within this time.
+    """
+
+    graph: Graph
+    security: Security
+    settings: Settings
+    service_timeout_s: float = 10.0
+    out_queue_frames: int = 1000
+    out_queue_bytes: int = 64 * 1024 * 1024
+    stall_close_s: float = 10.0
+    auth_timeout_s: float = 5.0
+    clock: Callable[[], float] = time.monotonic
+    wall_clock: Callable[[], float] = time.time
+    json_cache: JsonCache = field(default_factory=JsonCache)
+    # service type -> request field names in order, to map list ``args`` (rosapi fills this)
+    request_fields: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    _conn_ids: itertools.count[int] = field(default_factory=lambda: itertools.count(1))
+
+    def new_owner(self, peer: str) -> str:
+        """A graph owner name for a new connection (shown by rosapi/nodes)."""
+        return f"/rosbridge/client_{next(self._conn_ids)}@{peer}"

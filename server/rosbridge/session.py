@@ -1,0 +1,436 @@
+"""One rosbridge connection's state on the graph: its subscriptions, advertisements, services.
+
+:class:`BridgeSession` applies decoded ops (``server.rosbridge.ops``) to the graph after the
+security checks, turns graph messages into frames through its :class:`BridgeProtocol`, and calls
+``notify()`` whenever frames are ready. It does no socket I/O: the endpoint drains
+``protocol.frames_to_send()`` and owns the socket. Service calls run as tasks on the loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import json
+from collections.abc import Callable, Coroutine
+from typing import Any
+
+from server import graph as g
+from server.rosbridge import ops
+from server.rosbridge.context import BridgeContext
+from server.rosbridge.errors import (
+    BridgeError,
+    MessageError,
+    NotAuthenticated,
+    NotFoundError,
+    OpError,
+    RefusedError,
+)
+from server.rosbridge.protocol import BridgeProtocol
+from server.rosbridge.streams import SubParams, TopicStream
+from server.rosbridge.values import check_message, is_known_type, to_json_text
+from server.security import LEASE_SERVICE, LeaseHeld, Role
+
+Schedule = Callable[[float, Callable[[], None]], object]
+Spawn = Callable[[Coroutine[Any, Any, None]], object]
+
+
+class BridgeSession:
+    """Applies one connection's ops to the graph and feeds graph events back as frames."""
+
+    def __init__(
+        self,
+        ctx: BridgeContext,
+        protocol: BridgeProtocol,
+        *,
+        owner: str,
+        role: Role | None,
+        notify: Callable[[], None],
+        schedule: Schedule,
+        spawn: Spawn,
+    ) -> None:
+        self.ctx = ctx
+        self.graph = ctx.graph
+        self.security = ctx.security
+        self.protocol = protocol
+        self.owner = owner
+        self.role = role
+        self._notify = notify
+        self._schedule = schedule
+        self._spawn = spawn
+        self.streams: dict[str, TopicStream] = {}  # by topic as the client spelled it
+        self._graph_subs: dict[str, g.Subscription] = {}
+        self.advertised: dict[str, str] = {}  # canonical topic -> type
+        self.provided: dict[str, str] = {}  # canonical service -> name as spelled
+        self._pending: dict[str, asyncio.Future[Any]] = {}  # service_request id -> future
+        self._request_ids = itertools.count(1)
+        self._poll_scheduled: set[str] = set()
+        self.close_request: tuple[int, str] | None = None
+        self.closed = False
+
+    # -- dispatch -------------------------------------------------------------------------
+    def handle(self, op: ops.Op, now: float) -> None:
+        """Apply one op; a refusal or failure becomes a status error with the op's id."""
+        try:
+            if self.role is None and not isinstance(op, ops.Auth | ops.StatusIn | ops.SetLevel):
+                self.close_request = (1008, "not authenticated")
+                raise NotAuthenticated(
+                    "not authenticated: connect with ?token=… or an Authorization bearer header, "
+                    'or send {"op": "auth", "token": …} first',
+                    id=op.id,
+                )
+            handler = _HANDLERS[type(op)]
+            handler(self, op, now)
+        except BridgeError as err:
+            if err.id is None:
+                err.id = op.id
+            self.protocol.reject(err)
+        self._notify()
+
+    # -- auth / level ---------------------------------------------------------------------
+    def _auth(self, op: ops.Auth, now: float) -> None:
+        role = self.security.role_for(op.token)
+        if role is None:
+            self.close_request = (1008, "invalid token")
+            raise RefusedError("auth: invalid token", id=op.id)
+        self.role = role
+        self.protocol.send_status("info", f"authenticated as {role.value}", id=op.id)
+
+    def _set_level(self, op: ops.SetLevel, now: float) -> None:
+        self.protocol.set_level(op.level)
+
+    def _status_in(self, op: ops.StatusIn, now: float) -> None:
+        return None  # clients may send status; nothing to do
+
+    # -- topics ---------------------------------------------------------------------------
+    def _check_type(self, type_name: str, what: str, id: str | None) -> None:
+        if not is_known_type(type_name):
+            raise NotFoundError(f"{what}: unknown message type {type_name}", id=id)
+
+    def _advertise(self, op: ops.Advertise, now: float) -> None:
+        if not self.security.can_publish(self.role, op.topic):
+            raise RefusedError(self.security.refusal(self.role, "advertise", op.topic))
+        self._check_type(op.type, f"advertise {op.topic}", op.id)
+        try:
+            key = self.graph.advertise(op.topic, op.type, latch=op.latch, owner=self.owner)
+        except g.GraphError as exc:
+            raise OpError(f"advertise {op.topic}: {exc}") from exc
+        self.advertised[key] = op.type
+
+    def _unadvertise(self, op: ops.Unadvertise, now: float) -> None:
+        key = g.canonical(op.topic)
+        if key not in self.advertised:
+            raise OpError(f"unadvertise: this connection has not advertised {op.topic}")
+        del self.advertised[key]
+        self.graph.unadvertise(key, owner=self.owner)
+
+    def _publish(self, op: ops.Publish, now: float) -> None:
+        topic = op.topic
+        if not self.security.can_publish(self.role, topic):
+            raise RefusedError(self.security.refusal(self.role, "publish to", topic))
+        key = g.canonical(topic)
+        type_name = self.advertised.get(key) or self.graph.topic_type(key)
+        if type_name is None:
+            raise NotFoundError(
+                f"publish to {topic}: unknown topic; advertise it first with its type"
+            )
+        if self.security.needs_lease(key, service=False):
+            self._ensure_lease(now, f"publish to {topic}")
+        msg = check_message(type_name, op.msg, self.ctx.wall_clock())
+        try:
+            if key not in self.advertised or op.latch:
+                self.graph.advertise(key, type_name, latch=op.latch, owner=self.owner)
+                self.advertised[key] = type_name
+            self.graph.publish(key, msg)
+        except g.GraphError as exc:
+            raise OpError(f"publish to {topic}: {exc}") from exc
+
+    def _subscribe(self, op: ops.Subscribe, now: float) -> None:
+        if op.compression == "cbor-raw":
+            raise OpError(
+                "subscribe: compression cbor-raw (ROS-serialized bytes) is not supported "
+                "by this server; use cbor"
+            )
+        key = g.canonical(op.topic)
+        existing = self.graph.topic_type(key)
+        type_name = op.type or existing
+        if type_name is None:
+            raise NotFoundError(
+                f"subscribe to {op.topic}: unknown topic and no type given to create it"
+            )
+        if existing is not None and op.type is not None and existing != op.type:
+            raise OpError(f"subscribe to {op.topic}: topic has type {existing}, not {op.type}")
+        self._check_type(type_name, f"subscribe to {op.topic}", op.id)
+        params = SubParams(op.throttle_rate_ms, op.queue_length, op.fragment_size, op.compression)
+        stream = self.streams.get(op.topic)
+        if stream is not None:
+            stream.add(op.id, params)
+            return
+        stream = self.streams[op.topic] = TopicStream(op.topic, type_name)
+        stream.add(op.id, params)
+
+        def deliver(msg: dict[str, Any]) -> None:
+            self._on_message(stream, msg)
+
+        try:
+            self._graph_subs[op.topic] = self.graph.subscribe(
+                key, deliver, type=type_name, owner=self.owner
+            )
+        except g.GraphError as exc:
+            del self.streams[op.topic]
+            raise OpError(f"subscribe to {op.topic}: {exc}") from exc
+
+    def _unsubscribe(self, op: ops.Unsubscribe, now: float) -> None:
+        stream = self.streams.get(op.topic)
+        if stream is None or not stream.remove(op.id):
+            which = f" with id {op.id}" if op.id is not None else ""
+            raise OpError(f"unsubscribe: not subscribed to {op.topic}{which}")
+        if stream.empty:
+            del self.streams[op.topic]
+            sub = self._graph_subs.pop(op.topic, None)
+            if sub is not None:
+                sub.close()
+
+    def _on_message(self, stream: TopicStream, msg: dict[str, Any]) -> None:
+        if self.closed or self.streams.get(stream.topic) is not stream:
+            return
+        self._send(stream, stream.offer(msg, self.ctx.clock()))
+        self._arm_poll(stream)
+
+    def _send(self, stream: TopicStream, msgs: list[Any]) -> None:
+        if not msgs:
+            return
+        p = stream.params
+        for msg in msgs:
+            text = "" if p.compression == "cbor" else self.ctx.json_cache.text(msg)
+            self.protocol.send_publish(
+                stream.topic,
+                text,
+                compression=p.compression,
+                fragment_size=p.fragment_size,
+                msg=msg,
+                type_name=stream.type_name,
+            )
+        self._notify()
+
+    def _arm_poll(self, stream: TopicStream) -> None:
+        due = stream.next_due()
+        if due is None or stream.topic in self._poll_scheduled:
+            return
+        self._poll_scheduled.add(stream.topic)
+        delay = max(0.0, due - self.ctx.clock())
+
+        def fire() -> None:
+            self._poll_scheduled.discard(stream.topic)
+            if self.closed or self.streams.get(stream.topic) is not stream:
+                return
+            self._send(stream, stream.poll(self.ctx.clock()))
+            self._arm_poll(stream)
+
+        self._schedule(delay, fire)
+
+    # -- services -------------------------------------------------------------------------
+    def _call_service(self, op: ops.CallService, now: float) -> None:
+        key = g.canonical(op.service)
+        if not self.security.can_call(self.role, key):
+            msg = self.security.refusal(self.role, "call", op.service)
+            self._service_failed(op, msg)
+            raise RefusedError(msg)
+        if key == LEASE_SERVICE:
+            self._lease_call(op, now)
+            return
+        if self.security.needs_lease(key, service=True):
+            try:
+                self._ensure_lease(now, f"call {op.service}")
+            except RefusedError as err:
+                self._service_failed(op, err.msg)
+                raise
+        try:
+            args = self._args(op, key)
+        except BridgeError as err:
+            self._service_failed(op, err.msg)
+            raise
+        self._spawn(self._run_call(op, key, args))
+
+    def _args(self, op: ops.CallService, key: str) -> dict[str, Any]:
+        if isinstance(op.args, dict):
+            return op.args
+        if not op.args:
+            return {}
+        stype = self.graph.service_type(key) or ""
+        names = self.ctx.request_fields.get(stype)
+        if names is None:
+            raise OpError(
+                f"call {op.service}: positional args need a known request type ({stype or '?'}); "
+                "send args as an object"
+            )
+        if len(op.args) > len(names):
+            raise OpError(f"call {op.service}: {len(op.args)} args for {len(names)} fields")
+        return dict(zip(names, op.args, strict=False))
+
+    async def _run_call(self, op: ops.CallService, key: str, args: dict[str, Any]) -> None:
+        timeout = op.timeout_s if op.timeout_s is not None else self.ctx.service_timeout_s
+        try:
+            values = await self.graph.call_service(key, args, timeout=timeout)
+            values_json = to_json_text(values)
+        except g.GraphError as exc:
+            self._service_failed(op, str(exc))
+            self._notify()
+            return
+        except (TypeError, ValueError) as exc:
+            self._service_failed(op, f"service {key} returned values that are not JSON: {exc}")
+            self._notify()
+            return
+        if self.closed:
+            return
+        self.protocol.send_service_response(
+            op.service,
+            op.id,
+            None,
+            True,
+            values_json=values_json,
+            compression="png" if op.compression == "png" else "none",
+            fragment_size=op.fragment_size,
+        )
+        self._notify()
+
+    def _service_failed(self, op: ops.CallService, message: str) -> None:
+        if not self.closed:
+            self.protocol.send_service_response(op.service, op.id, message, False)
+
+    def _advertise_service(self, op: ops.AdvertiseService, now: float) -> None:
+        if self.role is not Role.PILOT:
+            raise RefusedError(self.security.refusal(self.role, "provide the service", op.service))
+        key = g.canonical(op.service)
+        owner = self.graph.service_owner(key)
+        if (
+            key.startswith("/rosapi/")
+            or key == LEASE_SERVICE
+            or (owner is not None and owner == g.INTERNAL)
+        ):
+            raise RefusedError(f"{op.service} is provided by the server and cannot be replaced")
+        self.provided[key] = op.service
+        spelled = op.service
+
+        async def handler(args: dict[str, Any]) -> dict[str, Any]:
+            return await self._forward_call(key, spelled, args)
+
+        self.graph.advertise_service(key, op.type, handler, owner=self.owner)
+
+    async def _forward_call(self, key: str, spelled: str, args: dict[str, Any]) -> Any:
+        if self.closed:
+            raise g.ServiceError(f"the provider of {key} disconnected")
+        req_id = f"service_request:{spelled}:{next(self._request_ids)}"
+        fut: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
+        self._pending[req_id] = fut
+        self.protocol.send_call_service(spelled, req_id, to_json_text(args))
+        self._notify()
+        try:
+            return await fut
+        finally:
+            self._pending.pop(req_id, None)
+
+    def _service_response(self, op: ops.ServiceResponse, now: float) -> None:
+        fut = self._pending.get(op.id or "")
+        if fut is None:
+            raise OpError(f"service_response: no call {op.id!r} is waiting for an answer")
+        if fut.done():
+            return
+        if op.result:
+            values = op.values if op.values is not None else {}
+            if not isinstance(values, dict):
+                fut.set_exception(g.ServiceError(f"provider answered non-object values {values!r}"))
+                return
+            fut.set_result(values)
+        else:
+            detail = op.values if isinstance(op.values, str) else json.dumps(op.values)
+            fut.set_exception(g.ServiceError(f"the provider reported failure: {detail}"))
+
+    def _unadvertise_service(self, op: ops.UnadvertiseService, now: float) -> None:
+        key = g.canonical(op.service)
+        if key not in self.provided:
+            raise OpError(f"unadvertise_service: this connection does not provide {op.service}")
+        del self.provided[key]
+        self.graph.unadvertise_service(key, owner=self.owner)
+
+    # -- the pilot lease ------------------------------------------------------------------
+    def _ensure_lease(self, now: float, what: str) -> None:
+        try:
+            self.security.lease.acquire(self.owner, now, on_revoke=self._lease_revoked)
+        except LeaseHeld as exc:
+            raise RefusedError(f"{what} refused: {exc}") from exc
+
+    def _lease_revoked(self, new_holder: str) -> None:
+        self.protocol.send_status(
+            "warning",
+            f"pilot lease taken over by {new_holder}; this connection may no longer command",
+        )
+        self.protocol.send_status(
+            "error", "pilot lease lost: another pilot took over", id="lease:revoked"
+        )
+        self._notify()
+
+    def _lease_call(self, op: ops.CallService, now: float) -> None:
+        """``/console/lease {action: status|acquire|release, take_over}`` for this connection."""
+        args = op.args if isinstance(op.args, dict) else {}
+        action = args.get("action", "acquire")
+        lease = self.security.lease
+        try:
+            if action not in ("status", "acquire", "release"):
+                raise OpError(f"{LEASE_SERVICE}: action must be status, acquire or release")
+            if action != "status" and self.role is not Role.PILOT:
+                raise RefusedError(self.security.refusal(self.role, "take", "the pilot lease"))
+            if action == "acquire":
+                take_over = bool(args.get("take_over", False))
+                try:
+                    lease.acquire(
+                        self.owner, now, take_over=take_over, on_revoke=self._lease_revoked
+                    )
+                except LeaseHeld as exc:
+                    raise RefusedError(str(exc)) from exc
+            elif action == "release":
+                lease.release(self.owner)
+        except BridgeError as err:
+            self._service_failed(op, err.msg)
+            raise
+        state = lease.state
+        values = {
+            "holder": state.holder or "",
+            "held_by_me": state.holder == self.owner,
+            "since": state.since or 0.0,
+        }
+        self.protocol.send_service_response(op.service, op.id, values, True)
+
+    # -- teardown -------------------------------------------------------------------------
+    def close(self) -> None:
+        """Remove everything this connection put on the graph; fail calls waiting on it."""
+        if self.closed:
+            return
+        self.closed = True
+        for sub in self._graph_subs.values():
+            sub.close()
+        self._graph_subs.clear()
+        self.streams.clear()
+        for fut in self._pending.values():
+            if not fut.done():
+                fut.set_exception(g.ServiceError(f"the provider {self.owner} disconnected"))
+        self._pending.clear()
+        self.graph.drop_owner(self.owner)
+        self.security.lease.release(self.owner)
+
+
+_HANDLERS: dict[type, Callable[[BridgeSession, Any, float], None]] = {
+    ops.Auth: BridgeSession._auth,
+    ops.SetLevel: BridgeSession._set_level,
+    ops.StatusIn: BridgeSession._status_in,
+    ops.Advertise: BridgeSession._advertise,
+    ops.Unadvertise: BridgeSession._unadvertise,
+    ops.Publish: BridgeSession._publish,
+    ops.Subscribe: BridgeSession._subscribe,
+    ops.Unsubscribe: BridgeSession._unsubscribe,
+    ops.CallService: BridgeSession._call_service,
+    ops.ServiceResponse: BridgeSession._service_response,
+    ops.AdvertiseService: BridgeSession._advertise_service,
+    ops.UnadvertiseService: BridgeSession._unadvertise_service,
+}
+
+__all__ = ["BridgeSession", "MessageError"]

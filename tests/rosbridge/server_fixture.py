@@ -1,0 +1,106 @@
+"""A real uvicorn server with the rosbridge router on a free loopback port, in a thread."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import threading
+import time
+from collections.abc import AsyncIterator, Coroutine, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import uvicorn
+from fastapi import FastAPI
+
+from server.graph import Graph
+from server.rosbridge.context import BridgeContext
+from server.rosbridge.endpoint import make_router
+from server.security import Security, TokenStore
+from server.settings import Settings
+
+T = TypeVar("T")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class RunningServer:
+    port: int
+    graph: Graph
+    ctx: BridgeContext
+    pilot: str
+    observer: str
+    loop: asyncio.AbstractEventLoop
+
+    def url(self, token: str | None = "pilot", path: str = "/rosbridge") -> str:
+        tok = {"pilot": self.pilot, "observer": self.observer}.get(token or "", token)
+        query = f"?token={tok}" if tok else ""
+        return f"ws://127.0.0.1:{self.port}{path}{query}"
+
+    def run(self, coro: Coroutine[Any, Any, T], timeout: float = 10.0) -> T:
+        """Run ``coro`` on the server's loop (graph calls) and wait for its result."""
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    def call(self, fn: Any, *args: Any) -> Any:
+        """Run a plain function on the server's loop thread and return its result."""
+
+        async def wrapper() -> Any:
+            return fn(*args)
+
+        return self.run(wrapper())
+
+
+@contextlib.contextmanager
+def running_server(tmp: Path, **ctx_overrides: Any) -> Iterator[RunningServer]:
+    settings_overrides = {
+        k: ctx_overrides.pop(k) for k in list(ctx_overrides) if hasattr(Settings, k)
+    }
+    port = free_port()
+    settings = Settings(port=port, data_dir=tmp, **settings_overrides)
+    graph = Graph()
+    tokens = TokenStore(tmp)
+    ctx = BridgeContext(graph=graph, security=Security(settings, tokens), settings=settings)
+    for k, v in ctx_overrides.items():
+        setattr(ctx, k, v)
+    loop_box: list[asyncio.AbstractEventLoop] = []
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        loop = asyncio.get_running_loop()
+        graph.bind_loop(loop)
+        loop_box.append(loop)
+        yield
+
+    app = FastAPI(lifespan=lifespan)
+    app.include_router(make_router(ctx))
+    config = uvicorn.Config(
+        app,
+        host="127.0.0.1",
+        port=port,
+        log_level="error",
+        ws_max_size=4 * settings.max_frame_bytes,
+        ws_ping_interval=None,
+        timeout_graceful_shutdown=1,
+    )
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 20
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            raise RuntimeError("test server did not start")
+        time.sleep(0.01)
+    try:
+        yield RunningServer(
+            port, graph, ctx, tokens.pilot_token, tokens.observer_token, loop_box[0]
+        )
+    finally:
+        server.should_exit = True
+        thread.join(10)
