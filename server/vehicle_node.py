@@ -39,7 +39,7 @@ from typing import Any
 
 import cv2
 
-from drone.ardrone.navdata import Navdata
+from drone.ardrone.navdata import Navdata, ros_navdata_fields
 from drone.perception.markers import FrameResult
 from server.graph import Graph
 from server.msgs import header
@@ -57,44 +57,7 @@ EMPTY = "std_msgs/Empty"
 
 def navdata_message(nav: Navdata, stamp_s: float, t_s: float) -> dict[str, Any]:
     """ardrone_autonomy/Navdata from a decoded packet (conversions in the module docstring)."""
-    d = nav.demo
-    msg: dict[str, Any] = {
-        "header": header("ardrone_base_link", stamp_s),
-        "batteryPercent": float(d.battery_pct) if d else 0.0,
-        "state": int(d.ctrl_state >> 16) if d else 0,
-        "magX": 0,
-        "magY": 0,
-        "magZ": 0,
-        "pressure": 0,
-        "temp": 0,
-        "wind_speed": 0.0,
-        "wind_angle": 0.0,
-        "wind_comp_angle": 0.0,
-        "rotX": d.phi_mdeg / 1000.0 if d else 0.0,
-        "rotY": -d.theta_mdeg / 1000.0 if d else 0.0,
-        "rotZ": -d.psi_mdeg / 1000.0 if d else 0.0,
-        "altd": int(d.altitude_mm) if d else 0,
-        "vx": d.vx_mm_s if d else 0.0,
-        "vy": -d.vy_mm_s if d else 0.0,
-        "vz": -d.vz_mm_s if d else 0.0,
-        "ax": 0.0,
-        "ay": 0.0,
-        "az": 0.0,
-        "motor1": 0,
-        "motor2": 0,
-        "motor3": 0,
-        "motor4": 0,
-        "tags_count": 0,
-        "tags_type": [],
-        "tags_xc": [],
-        "tags_yc": [],
-        "tags_width": [],
-        "tags_height": [],
-        "tags_orientation": [],
-        "tags_distance": [],
-        "tm": float(t_s * 1e6),
-    }
-    return msg
+    return {"header": header("ardrone_base_link", stamp_s), **ros_navdata_fields(nav, t_s * 1e6)}
 
 
 def _quat_yaw(yaw: float) -> dict[str, float]:

@@ -43,6 +43,7 @@ import numpy as np
 
 from drone.perception.ekf import MarkerFix, wrap
 from drone.perception.errors import CameraModelError, FrameError
+from drone.sim.camera import body_rotation
 
 log = logging.getLogger(__name__)
 
@@ -185,7 +186,7 @@ class MarkerLocaliser:
             yaw = math.atan2(R_mb[1, 0], R_mb[0, 0])
             # The lever arm from the marker to the camera uses the navdata roll/pitch (good to
             # ~0.1°) rather than PnP's (degrees off on a small marker): c = m − R·Bᵀ·t.
-            R_att = _rotation(attitude[0], attitude[1], yaw) @ self.B.T
+            R_att = body_rotation(attitude[0], attitude[1], yaw) @ self.B.T
             c = m - R_att @ tv.ravel()
             # ∂c/∂yaw: a yaw error swings the position around the marker (lever arm d)
             lever = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) @ (c - m)
@@ -227,20 +228,6 @@ class MarkerLocaliser:
         )
         view = math.acos(max(-1.0, min(1.0, cos_view)))
         return Detection(int(marker.id), img_pts, rvec, tvec, d, view, fix)
-
-
-def _rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """map←body, Rz(yaw)·Ry(pitch)·Rx(roll) (REP 103, as drone.sim.camera.body_rotation)."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
 
 
 def fix_covariance(
