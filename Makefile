@@ -39,6 +39,7 @@ bench: $(VENV)/.installed-test
 lint: $(VENV)/.installed-test
 	$(VENV)/bin/ruff check server drone tests bench tools
 	$(VENV)/bin/ruff format --check server drone tests bench tools
+	$(VENV)/bin/mypy
 
 clean:
 	rm -rf $(VENV) tests/node/node_modules .pytest_cache .ruff_cache .mypy_cache

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import enum
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
 import cv2
@@ -62,8 +63,7 @@ class DroneStack:
 
     def telemetry(self) -> dict[str, Any]:
         """JSON-ready telemetry of ``GET /api/v1/drones/{id}``."""
-        snap = self.vehicle.snapshot()
-        out = snapshot_to_dict(snap)
+        out: dict[str, Any] = to_json_ready(self.vehicle.snapshot())
         out["name"] = self.name
         out["simulated"] = self.sim is not None
         if self.tasks is not None:
@@ -100,12 +100,7 @@ class DroneStack:
 
     def truth(self) -> dict[str, Any]:
         assert self.sim is not None
-        t = self.sim.truth
-        out = {k: _jsonable(v) for k, v in vars(t).items()} if hasattr(t, "__dict__") else {}
-        if not out:
-            from dataclasses import asdict
-
-            out = {k: _jsonable(v) for k, v in asdict(t).items()}
+        out: dict[str, Any] = to_json_ready(self.sim.truth)
         out["name"] = self.name
         return out
 
@@ -121,28 +116,19 @@ class DroneStack:
         self.sim.inject_fault(body.kind, **params)
 
 
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if hasattr(v, "value") and hasattr(v, "name"):
-        return v.name
-    if isinstance(v, tuple | list):
-        return [_jsonable(x) for x in v]
-    return v
-
-
-def snapshot_to_dict(snap: Any) -> dict[str, Any]:
-    """A ``VehicleSnapshot`` as JSON-ready values (enums by name, NaN as null)."""
-    from dataclasses import asdict, is_dataclass
-
-    raw = asdict(snap) if is_dataclass(snap) else dict(vars(snap))
-    return _clean(raw)
-
-
-def _clean(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _clean(x) for k, x in v.items()}
-    return _jsonable(v) if not isinstance(v, list | tuple) else [_clean(x) for x in v]
+def to_json_ready(value: Any) -> Any:
+    """Dataclasses, enums, tuples and floats as JSON values (enums by name, NaN/inf as null)."""
+    if is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_json_ready(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, dict):
+        return {str(k): to_json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [to_json_ready(v) for v in value]
+    if isinstance(value, enum.Enum):
+        return value.name
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    return value
 
 
 @dataclass

@@ -48,7 +48,22 @@ class GraphLike(Protocol):
 
 
 class StoreLike(Protocol):
-    def append(self, **kwargs: Any) -> int: ...
+    """What the dialog needs of the audit log (``server.store.AuditLog``)."""
+
+    def append(
+        self,
+        *,
+        utterance: str,
+        commands: list[dict[str, Any]],
+        action: str,
+        outcome: str,
+        role: str = ...,
+        source: str = ...,
+        drone: str = ...,
+        confidence: float | None = ...,
+        state: str = ...,
+        now: float | None = ...,
+    ) -> int: ...
 
 
 @dataclass(frozen=True)

@@ -312,7 +312,8 @@ class BridgeSession:
         spelled = op.service
 
         async def handler(args: dict[str, Any]) -> dict[str, Any]:
-            return await self._forward_call(key, spelled, args)
+            values: dict[str, Any] = await self._forward_call(key, spelled, args)
+            return values
 
         self.graph.advertise_service(key, op.type, handler, owner=self.owner)
 
