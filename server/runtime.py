@@ -53,8 +53,8 @@ class DroneStack:
     vehicle: Vehicle
     driver: ARDroneDriver
     sim: SimServer | None = None
-    tasks: Any | None = None
-    node: Any | None = None
+    tasks: TaskManager | None = None
+    node: VehicleNode | None = None
     _jpeg: tuple[int, bytes | None] = (0, None)
     _jpeg_frame_count: int = -1
 
@@ -67,13 +67,7 @@ class DroneStack:
         out["name"] = self.name
         out["simulated"] = self.sim is not None
         if self.tasks is not None:
-            status = self.tasks.status
-            out["task"] = {
-                "name": status.name,
-                "state": str(getattr(status.state, "value", status.state)),
-                "progress": status.progress,
-                "detail": status.detail,
-            }
+            out["task"] = to_json_ready(self.tasks.status)
         return out
 
     def direct(self, action: str) -> str:
