@@ -49,6 +49,17 @@ def _canonical(name: str) -> str:
     return "/" + name.strip().lstrip("/")
 
 
+def new_token() -> str:
+    """A random URL-safe token (192 bits) that does not start with "-".
+
+    A leading dash would make ``--token <token>`` look like an option to a command line.
+    """
+    while True:
+        token = secrets.token_urlsafe(24)
+        if not token.startswith("-"):
+            return token
+
+
 class TokenStore:
     """The pilot and observer tokens, created on first start and stored 0600 in ``data_dir``."""
 
@@ -73,7 +84,7 @@ class TokenStore:
                 return {"pilot": data["pilot"], "observer": data["observer"]}
         except (OSError, ValueError):
             pass  # missing or unreadable: make new tokens below
-        data = {"pilot": secrets.token_urlsafe(24), "observer": secrets.token_urlsafe(24)}
+        data = {"pilot": new_token(), "observer": new_token()}
         self.path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(fd, "w") as fh:

@@ -202,8 +202,7 @@ async def test_vehicle_process_joins(tmp_path: Path) -> None:
             "sim",
             "--world",
             "outdoor",
-            "--token",
-            c.token,
+            f"--token={c.token}",
         ]
         proc = subprocess.Popen(
             cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT

@@ -142,3 +142,11 @@ async def test_serve_rosbridge_port(tmp_path: Path) -> None:
         task.cancel()
         with pytest.raises(asyncio.CancelledError):
             await task
+
+
+def test_generated_tokens_never_look_like_a_command_line_option() -> None:
+    from server.security import new_token
+
+    tokens = {new_token() for _ in range(2000)}
+    assert len(tokens) == 2000
+    assert not any(t.startswith("-") for t in tokens)
