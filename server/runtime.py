@@ -16,7 +16,6 @@ import time
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
-import cv2
 from fastapi import APIRouter
 
 from drone.ardrone.driver import ARDroneDriver, DriverConfig
@@ -41,8 +40,6 @@ from server.vehicle_node import VehicleNode
 
 log = logging.getLogger("uav_console")
 
-JPEG_QUALITY = 80
-
 
 @dataclass
 class DroneStack:
@@ -55,8 +52,6 @@ class DroneStack:
     sim: SimServer | None = None
     tasks: TaskManager | None = None
     node: VehicleNode | None = None
-    _jpeg: tuple[int, bytes | None] = (0, None)
-    _jpeg_frame_count: int = -1
 
     def link_ok(self) -> bool:
         return bool(self.vehicle.snapshot().link_ok)
@@ -81,16 +76,9 @@ class DroneStack:
         return f"{action} sent"
 
     def latest_jpeg(self) -> tuple[int, bytes | None]:
-        """(frame counter, JPEG of the latest camera frame with the tracking overlay)."""
-        count = self.vehicle.frames_seen
-        if count != self._jpeg_frame_count:
-            frame = self.vehicle.overlay()
-            if frame is not None:
-                ok, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-                if ok:
-                    self._jpeg = (count, buf.tobytes())
-            self._jpeg_frame_count = count
-        return self._jpeg
+        """(frame counter, JPEG with the tracking overlay): the one the vehicle node encodes
+        for ``/ardrone/image_raw/compressed``, so MJPEG viewers cost no second encode."""
+        return self.node.latest_jpeg if self.node is not None else (-1, None)
 
     def truth(self) -> dict[str, Any]:
         assert self.sim is not None

@@ -122,6 +122,8 @@ class VehicleNode:
         self._last_task: tuple[Any, ...] | None = None
         self._last_image_t = -math.inf
         self._last_image_frame = -1
+        # (frame count, JPEG) of the last image published; the MJPEG route serves it too
+        self.latest_jpeg: tuple[int, bytes | None] = (-1, None)
         self.images_published = 0
         self.watchdog_hovers = 0
         self._subs: list[Any] = []
@@ -254,10 +256,12 @@ class VehicleNode:
         if not ok:
             return None
         self._last_image_frame = count
+        jpeg = buf.tobytes()
+        self.latest_jpeg = (count, jpeg)
         return {
             "header": header("ardrone_base_frontcam", self.stamp()),
             "format": "jpeg",
-            "data": base64.b64encode(buf.tobytes()).decode("ascii"),
+            "data": base64.b64encode(jpeg).decode("ascii"),
         }
 
     def _publish_image(self, msg: dict[str, Any] | None) -> None:

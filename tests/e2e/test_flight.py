@@ -16,7 +16,9 @@ from typing import Any
 import numpy as np
 import roslibpy
 
-from .conftest import TIMEOUT, Inbox, Server, wait_for
+from tests.inbox import Inbox
+
+from .conftest import TIMEOUT, Server, wait_for
 
 LANDED, FLYING, HOVERING, TAKEOFF, LANDING = 2, 3, 4, 6, 8
 

@@ -12,7 +12,9 @@ import cv2
 import numpy as np
 import roslibpy
 
-from .conftest import TIMEOUT, Inbox, Server
+from tests.inbox import Inbox
+
+from .conftest import TIMEOUT, Server
 
 NAVDATA_FIELDS = {
     "header",

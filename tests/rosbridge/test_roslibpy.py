@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
 import roslibpy
+
+from tests.inbox import Inbox
 
 from .server_fixture import RunningServer
 
@@ -20,25 +21,6 @@ def ros(srv: RunningServer) -> Iterator[roslibpy.Ros]:
     client.run(timeout=TIMEOUT)
     yield client
     client.close()
-
-
-class Inbox:
-    """Collects callback values; ``wait(n)`` blocks until n arrived (or fails the test)."""
-
-    def __init__(self) -> None:
-        self.items: list[Any] = []
-        self._cv = threading.Condition()
-
-    def __call__(self, item: Any) -> None:
-        with self._cv:
-            self.items.append(item)
-            self._cv.notify_all()
-
-    def wait(self, n: int = 1, timeout: float = TIMEOUT) -> list[Any]:
-        with self._cv:
-            ok = self._cv.wait_for(lambda: len(self.items) >= n, timeout)
-        assert ok, f"expected {n} items, got {len(self.items)}: {self.items!r}"
-        return self.items
 
 
 def test_publish_from_graph_reaches_roslibpy(srv: RunningServer, ros: roslibpy.Ros) -> None:
