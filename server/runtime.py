@@ -144,6 +144,14 @@ class Runtime:
         )
         if isinstance(self._captioner, CaptionerUnavailable):
             log.warning(self.captioner_status())
+        if self.settings.drone == "sim" and self.settings.sim_speed != 1.0:
+            log.warning(
+                "simulator at %.1f× real time: the EKF and the 100 Hz PID run on the wall clock, "
+                "so the simulated drone reacts %.1f× faster than they expect; autonomous flight "
+                "is only faithful at speed 1",
+                self.settings.sim_speed,
+                self.settings.sim_speed,
+            )
         count = 0 if self.settings.drone == "none" else max(1, self.settings.fleet)
         for index in range(count):
             name = f"uav{index + 1}"

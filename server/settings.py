@@ -42,7 +42,9 @@ class Settings:
     ans_period_s: float = 0.5
     search_after_s: float = 1.5
     seed: int = 1
-    sim_speed: float = 1.0  # real-time factor of a socket-served simulator
+    # Real-time factor of a socket-served simulator; autonomy is tuned for 1 (tests that only
+    # talk to the drone use more).
+    sim_speed: float = 1.0
     open_browser: bool = False
 
     def with_(self, **changes: Any) -> Settings:

@@ -46,7 +46,9 @@ STD = (0.229, 0.224, 0.225)
 class Encoder(nn.Module):
     """Image [N, 3, 96, 160] in [0, 1] -> decoder state [N, 2H + C] = (h0, c0, context)."""
 
-    def __init__(self, hidden: int, context: int, grid: tuple[int, int] = (6, 10)) -> None:
+    def __init__(
+        self, hidden: int, context: int, concepts: int = 0, grid: tuple[int, int] = (6, 10)
+    ) -> None:
         super().__init__()
 
         def block(cin: int, cout: int, stride: int) -> list[nn.Module]:
@@ -71,18 +73,28 @@ class Encoder(nn.Module):
         self.pool = nn.AdaptiveAvgPool2d(grid)
         flat = 64 * grid[0] * grid[1]
         self.project = nn.Sequential(nn.Dropout(0.2), nn.Linear(flat, context), nn.ReLU())
-        self.init_h = nn.Linear(context, hidden)
-        self.init_c = nn.Linear(context, hidden)
+        # LSTM-A (Yao et al. 2017): the concept head's probabilities join the image context
+        # the decoder reads at every step; 0 keeps the plain NIC context.
+        self.concepts = nn.Linear(context, concepts) if concepts else None
+        width = context + concepts
+        self.init_h = nn.Linear(width, hidden)
+        self.init_c = nn.Linear(width, hidden)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         return self.encode(image)[0]
 
-    def encode(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(decoder state, 12×20 feature map); the map feeds the training-only cell head."""
+    def encode(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(decoder state, 12×20 feature map, image context); the map feeds the training-only
+        cell head, the context the concept head (or, with LSTM-A, its logits)."""
         fmap = self.trunk((image - self.mean) / self.std)
         ctx = self.project(self.pool(self.last(fmap)).flatten(1))
+        if self.concepts is not None:
+            logits = self.concepts(ctx)
+            ctx, head_in = torch.cat([ctx, torch.sigmoid(logits)], dim=1), logits
+        else:
+            head_in = ctx
         state = torch.cat([torch.tanh(self.init_h(ctx)), self.init_c(ctx), ctx], dim=1)
-        return state, fmap
+        return state, fmap, head_in
 
 
 class Decoder(nn.Module):
@@ -284,6 +296,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--context", type=int, default=160)
     ap.add_argument("--aux-weight", type=float, default=1.0)
     ap.add_argument(
+        "--attr-input",
+        action="store_true",
+        help="LSTM-A: feed the concept probabilities to the decoder with the image context",
+    )
+    ap.add_argument(
         "--colour-head", action="store_true", help="also supervise each cell's colour (try)"
     )
     ap.add_argument("--no-jitter", action="store_true", help="no brightness/contrast jitter")
@@ -334,9 +351,13 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
 
-    enc = Encoder(args.hidden, args.context)
-    dec = Decoder(len(vocab), args.hidden, args.context)
-    aux = nn.Linear(args.context, concepts.shape[1])  # training only: not exported
+    n_concepts = concepts.shape[1] if args.attr_input else 0
+    enc = Encoder(args.hidden, args.context, n_concepts)
+    dec = Decoder(len(vocab), args.hidden, args.context + n_concepts)
+    # Training only, not exported; with LSTM-A the encoder's own concept layer is the head.
+    aux: nn.Module = (
+        nn.Identity() if args.attr_input else nn.Linear(args.context, concepts.shape[1])
+    )
     # Dense supervision (training only): which kind covers each cell of the 12×20 feature map,
     # from the renderer's id buffer; teaches shapes far faster than a few caption words.
     cell_head = nn.Conv2d(64, len(CELL_KINDS) + 1, 1)
@@ -363,7 +384,6 @@ def main(argv: list[str] | None = None) -> int:
     out_of_time = False
     best_score = -1.0
     best_state: dict[str, Any] | None = None
-    ctx_slice = slice(2 * args.hidden, None)
     for epoch in range(args.epochs):
         enc.train()
         dec.train()
@@ -405,10 +425,10 @@ def main(argv: list[str] | None = None) -> int:
                     for s, f in zip(seqs, flip.tolist(), strict=True)
                 ]
             tok = batch_tokens(seqs, vocab.pad)
-            state, fmap = enc.encode(x)
+            state, fmap, head_in = enc.encode(x)
             logits = dec(tok[:, :-1], state)
             loss = loss_fn(logits.reshape(-1, logits.shape[-1]), tok[:, 1:].reshape(-1))
-            loss = loss + args.aux_weight * bce(aux(state[:, ctx_slice]), target)
+            loss = loss + args.aux_weight * bce(aux(head_in), target)
             loss = loss + args.aux_weight * cell_ce(cell_head(fmap), cell_target[:, 0])
             if args.colour_head:
                 loss = loss + args.aux_weight * colour_ce(colour_head(fmap), cell_target[:, 1])

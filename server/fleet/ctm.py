@@ -66,6 +66,7 @@ class DroneRecord:
     plan: FlightPlan | None = None
     plan_sent_t: float = -math.inf
     lost_reason: str = ""
+    lost_from: Role = Role.IDLE  # the role it had when it was lost
     samples: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=400))
 
     def drain_pct_s(self, default: float) -> float:
@@ -303,7 +304,7 @@ class CentralTaskManager:
         if why:
             if rec.role is not Role.LOST:
                 self.event(now, f"{rec.name} lost ({why})")
-                rec.role, rec.lost_reason = Role.LOST, why
+                rec.lost_from, rec.role, rec.lost_reason = rec.role, Role.LOST, why
             return
         st = rec.status
         assert st is not None
@@ -311,10 +312,12 @@ class CentralTaskManager:
             self.event(now, f"{rec.name} back ({rec.lost_reason} over)")
             rec.lost_reason = ""
             rec.mission = ""
-            if st.flying:
-                self._send_home(rec, now, None, out)
+            on_duty = rec.lost_from in (Role.PATROLLING, Role.RELIEVING, Role.RETURNING)
+            if st.flying and on_duty:
+                self._send_home(rec, now, None, out)  # its post has been given to another
             else:
-                rec.role = Role.CHARGING
+                # Landed, or someone's manual flight (never the CTM's to end): not taken over.
+                rec.role = Role.IDLE if st.flying else Role.CHARGING
             return
         if rec.role is Role.RETURNING and not st.flying and st.state in ("LANDED", "DEFAULT"):
             rec.role = Role.CHARGING

@@ -102,7 +102,7 @@ def _wait_subscribed(ros: roslibpy.Ros, topic: str) -> None:
 
 
 def test_goto_marker_through_rest_command(landed: Server) -> None:
-    """ "take off and go to marker N" via POST /api/v1/command, flown in (2x) real time."""
+    """ "take off and go to marker N" via POST /api/v1/command, flown in real time."""
     srv = landed
     world = srv.http.get("/api/v1/world").json()
     start = srv.truth()

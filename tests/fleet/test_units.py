@@ -251,6 +251,12 @@ def test_ctm_replaces_failed_drone(failure: dict[str, Any] | None, reason: str) 
     assert ctm.drones[a].role is Role.LOST and ctm.drones[a].lost_reason == reason
     assert len(out) == 1 and out[0].drone != a and out[0].plan.kind is PlanKind.PATROL
     assert ctm.missions["m1"].replacements == 1
+    # back and still flying: its post went to another, so it is sent home
+    healthy = {"emergency": False, "link_ok": True}
+    fly(ctm, a, t + 1, x=-15, y=-15, z=5, flying=True, state="FLYING", **healthy)
+    back = ctm.step(t + 1)
+    assert [(d.drone, d.plan.kind) for d in back if d.drone == a] == [(a, PlanKind.RETURN)]
+    assert ctm.drones[a].role is Role.RETURNING
 
 
 def test_ctm_more_drones_than_routes_and_two_missions() -> None:
@@ -290,3 +296,12 @@ def test_ctm_leaves_a_manually_flown_drone_alone() -> None:
     for t in range(0, 30):
         fly(ctm, "uav1", float(t), flying=True, z=1.2)
         assert ctm.step(float(t)) == []
+    # nor after a link blip or a silence while it flies (the drone was never the CTM's)
+    fly(ctm, "uav1", 30.0, flying=True, z=1.2, link_ok=False)
+    assert ctm.step(30.0) == [] and ctm.drones["uav1"].role is Role.LOST
+    fly(ctm, "uav1", 31.0, flying=True, z=1.2, link_ok=True)
+    assert ctm.step(40.0) == [] and ctm.drones["uav1"].role is Role.LOST  # silent
+    for t in range(41, 50):
+        fly(ctm, "uav1", float(t), flying=True, z=1.2)
+        assert ctm.step(float(t)) == []
+    assert ctm.drones["uav1"].role is Role.IDLE and ctm.drones["uav1"].plan is None
