@@ -42,8 +42,14 @@ MARKER_MIN_AREA = 0.005
 """Objects covering less of the image than this (markers: ``MARKER_MIN_AREA``) are left out of
 the references: a person names what is prominent, and at the model's 96×160 input a smaller
 object is a few pixels wide. They still count as really visible when scoring precision."""
-SEED_BASE = {"train": 0, "train2": 500_000, "val": 1_000_000, "test": 2_000_000}
-"""First seed of each split; ``train2`` is optional extra training data."""
+SEED_BASE = {
+    "train": 0,
+    "train2": 500_000,
+    "train3": 700_000,
+    "val": 1_000_000,
+    "test": 2_000_000,
+}
+"""First seed of each split; ``train2`` and ``train3`` are optional extra training data."""
 
 # Typical (width, depth, height) in metres; scaled by 0.8–1.25 per sample.
 SIZES: dict[str, tuple[float, float, float]] = {
@@ -305,15 +311,21 @@ def items_of(record: dict[str, Any], key: str = "items") -> list[SceneItem]:
 
 
 def write_split(out: Path, split: str, n: int, worlds: dict[str, World]) -> None:
+    """``{split}.npz``, ``{split}.jsonl`` and the dense labels ``{split}_cells.npy``."""
     images = np.zeros((n, *INPUT_HW, 3), np.uint8)
     lines = []
+    cells = []
     t0 = time.perf_counter()
     for i in range(n):
-        _, small, rec = make_sample(SEED_BASE[split] + i, worlds)
+        seed = SEED_BASE[split] + i
+        _, small, rec = make_sample(seed, worlds)
         images[i] = small
         lines.append(json.dumps(rec, separators=(",", ":")))
+        _, world, pose, _ = scene(seed, worlds)
+        cells.append(cell_labels(world, pose))
     np.savez_compressed(out / f"{split}.npz", images=images)
     (out / f"{split}.jsonl").write_text("\n".join(lines) + "\n")
+    np.save(out / f"{split}_cells.npy", np.stack(cells))
     print(f"{split}: {n} images in {time.perf_counter() - t0:.1f} s", flush=True)
 
 
@@ -324,11 +336,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--val", type=int, default=300)
     ap.add_argument("--test", type=int, default=500)
     ap.add_argument("--train2", type=int, default=0, help="extra training images (own seeds)")
+    ap.add_argument("--train3", type=int, default=0, help="more extra training images")
     ap.add_argument("--only", choices=sorted(SEED_BASE), help="write just this split")
     ap.add_argument(
         "--relabel", action="store_true", help="only rewrite the captions of stored splits"
     )
-    ap.add_argument("--cells", action="store_true", help="only write dense kind labels")
+    ap.add_argument(
+        "--cells", action="store_true", help="only (re)write the dense kind labels of every split"
+    )
     args = ap.parse_args(argv)
     if args.relabel:
         relabel(args.out)
@@ -338,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
     worlds = {"indoor": load_world("indoor"), "outdoor": load_world("outdoor")}
-    for split in ("train", "train2", "val", "test"):
+    for split in ("train", "train2", "train3", "val", "test"):
         if (args.only is None or args.only == split) and getattr(args, split) > 0:
             write_split(args.out, split, getattr(args, split), worlds)
     return 0

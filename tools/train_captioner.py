@@ -3,8 +3,8 @@
 Show and Tell (Vinyals et al., CVPR 2015): a CNN encodes the image; its embedding starts an LSTM
 that is trained with teacher forcing to maximise log p(caption | image). Here the embedding both
 initialises the LSTM state and is fed with every word (as in m-RNN, Mao et al. 2015), which keeps
-the image in view for the whole sentence at almost no cost. Small on purpose: a few thousand
-96×160 images, one CPU thread, a wall-time budget.
+the image in view for the whole sentence at almost no cost. Small on purpose: 19 000 96×160
+images, one CPU thread, 24 epochs in about 55 minutes; the defaults reproduce the shipped model.
 
     .venv/bin/python tools/train_captioner.py --data data/captions --out models/captioner
 
@@ -280,13 +280,13 @@ def validate(
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--data", type=Path, default=Path("data/captions"))
-    ap.add_argument("--train-splits", default="train,train2", help="those present are used")
+    ap.add_argument("--train-splits", default="train,train2,train3", help="those present are used")
     ap.add_argument("--out", type=Path, default=Path("models/captioner"))
-    ap.add_argument("--epochs", type=int, default=30, help="upper bound")
+    ap.add_argument("--epochs", type=int, default=24)
     ap.add_argument(
         "--budget-min",
         type=float,
-        default=13.5,
+        default=0.0,
         help="wall-time budget: the learning rate follows a cosine over it and training stops at "
         "its end (0: no budget, the cosine runs over --epochs; exactly reproducible)",
     )
@@ -294,7 +294,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lr", type=float, default=3e-3)
     ap.add_argument("--hidden", type=int, default=256)
     ap.add_argument("--context", type=int, default=160)
-    ap.add_argument("--aux-weight", type=float, default=1.0)
+    ap.add_argument(
+        "--aux-weight", type=float, default=2.0, help="weight of the concept and cell losses"
+    )
     ap.add_argument(
         "--attr-input",
         action="store_true",
