@@ -12,13 +12,14 @@ from fastapi.responses import HTMLResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 
+from drone.share import share_dir
 from server import __version__
 from server.api import drones, language, sim, system
 from server.api.deps import role_by_method
 from server.runtime import Runtime
-from server.settings import ROOT, Settings
+from server.settings import Settings
 
-WEB = ROOT / "web"
+WEB = share_dir("web")
 
 
 def create_app(settings: Settings | None = None, *, announce: bool = False) -> FastAPI:

@@ -126,6 +126,12 @@ def _serve(args: argparse.Namespace) -> int:
 
 def _bench(names: list[str], quick: bool) -> int:
     bench_dir = ROOT / "bench"
+    if not bench_dir.is_dir():
+        print(
+            f"uav-console bench: no benchmarks at {bench_dir}; they run from a source checkout",
+            file=sys.stderr,
+        )
+        return 2
     scripts = sorted(p for p in bench_dir.glob("*.py") if not p.name.startswith("_"))
     if names:
         scripts = [p for p in scripts if p.stem in names]

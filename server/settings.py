@@ -8,7 +8,9 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parent.parent
+from drone.share import SOURCE_ROOT, share_dir
+
+ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
 
 
 class SettingsError(ValueError):
@@ -28,8 +30,8 @@ class Settings:
     observer_token: str | None = None
     allow_origins: tuple[str, ...] = ()
     data_dir: Path = field(default_factory=lambda: Path.home() / ".local/share/uav-console")
-    grammar_dir: Path = ROOT / "grammars"
-    model_dir: Path = ROOT / "models" / "captioner"
+    grammar_dir: Path = field(default_factory=lambda: share_dir("grammars"))
+    model_dir: Path = field(default_factory=lambda: share_dir("models/captioner"))
     max_frame_bytes: int = 16 * 1024 * 1024
     rate_limit_per_s: float = 2000.0  # frames per second per connection (token bucket)
     rate_burst: int = 4000

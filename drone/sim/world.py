@@ -26,7 +26,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-WORLDS_DIR = Path(__file__).resolve().parents[2] / "worlds"
+from drone.share import share_dir
+
+WORLDS_DIR = share_dir("worlds")
 """Directory holding the named worlds (``indoor``, ``outdoor``)."""
 
 ARUCO_DICTIONARY = "DICT_4X4_50"

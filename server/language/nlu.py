@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drone.share import share_dir
 from server.language.errors import GrammarError
 from server.language.grammar import Grammar, Matcher, Slot, load_grammar, trie_regex
 from server.language.numbers import words_to_numbers
@@ -30,7 +31,7 @@ Command = dict[str, Any]
 MAX_UTTERANCE_CHARS = 1000  # longer text is not speech; interpret() answers [] (documented)
 MAX_PIECES = 32
 MAX_WINDOW = 4  # a command spans at most this many split pieces
-DEFAULT_GRAMMAR_DIR = Path(__file__).resolve().parent.parent.parent / "grammars"
+DEFAULT_GRAMMAR_DIR = share_dir("grammars")
 
 _APOSTROPHES = str.maketrans({"\u2019": "'", "\u2018": "'", "`": "'", "\u00b4": "'"})
 _DIGIT_COMMA = re.compile(r"(?<=\d),(?=\d{3}\b)")  # 1,000 -> 1000
