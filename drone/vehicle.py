@@ -34,6 +34,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from drone.ardrone.frame_clock import FrameClock
 from drone.ardrone.navdata import CtrlState, Navdata
 from drone.control.clock import Clock, MonotonicClock
 from drone.control.loop import ControlLoop, LoopStats
@@ -155,6 +156,7 @@ class Vehicle:
         self.clock: Clock = clock or MonotonicClock()
         self.pid = PaperPID(gains, limits)
         self.ekf = ExtendedKalmanFilter(ekf_config, t0=self.clock.now())
+        self.frame_clock = FrameClock()  # PaVE timestamps -> capture times (real time only)
         self.localiser = MarkerLocaliser(world, camera) if camera is not None else None
         self.link_timeout_s = link_timeout_s
         self._lock = threading.RLock()  # commands vs. the control thread
@@ -462,14 +464,21 @@ class Vehicle:
 
     # ------------------------------------------------------------------ real time
     async def start(
-        self, driver: Any, *, control_period_s: float = 0.01, frame_latency_s: float = 0.05
+        self,
+        driver: Any,
+        *,
+        control_period_s: float = 0.01,
+        least_frame_delay_s: float = 0.0,
+        frame_latency_s: float = 0.05,
     ) -> None:
         """Fly in real time with the asyncio ``ARDroneDriver`` ``driver`` (already started).
 
         Chains ``driver.on_event`` to :meth:`on_driver_event`, polls ``driver.latest_frame``
-        (100 Hz) into the perception worker thread, stamped ``frame_latency_s`` before it was
-        seen (H.264 transport and decoding; the EKF fuses it at that time), and starts the
-        100 Hz control thread.
+        (100 Hz) into the perception worker thread and starts the 100 Hz control thread. Each
+        frame is stamped with its capture time (the EKF fuses it then): its PaVE timestamp
+        mapped to this clock by :class:`FrameClock`, less ``least_frame_delay_s`` (the least
+        capture-to-decode delay, which the mapping cannot see: about 6 ms on the simulator,
+        ``bench/frame_stamps.py``); a driver without timestamps gets "seen − ``frame_latency_s``".
         """
         self.commander = driver
         self._driver = driver
@@ -487,7 +496,8 @@ class Vehicle:
             )
             self._worker.start()
         self._frame_task = asyncio.create_task(
-            self._frame_pump(driver, frame_latency_s), name=f"{self.name}-frames"
+            self._frame_pump(driver, least_frame_delay_s, frame_latency_s),
+            name=f"{self.name}-frames",
         )
         self._loop = ControlLoop(
             self.control_step,
@@ -498,7 +508,9 @@ class Vehicle:
         )
         self._loop.start()
 
-    async def _frame_pump(self, driver: Any, latency_s: float, period_s: float = 0.01) -> None:
+    async def _frame_pump(
+        self, driver: Any, least_delay_s: float, latency_s: float, period_s: float = 0.01
+    ) -> None:
         """Hand each newly decoded frame (``driver.latest_frame``) to perception."""
         seen = -1
         while True:
@@ -506,7 +518,13 @@ class Vehicle:
             frame = getattr(driver, "latest_frame", None)
             if n != seen and frame is not None:
                 seen = n
-                self.on_frame(frame, self.clock.now() - latency_s)
+                now = self.clock.now()
+                ms = getattr(driver, "latest_frame_ms", None)
+                if isinstance(ms, int):
+                    stamp = self.frame_clock.stamp(ms, now) - least_delay_s
+                else:
+                    stamp = now - latency_s
+                self.on_frame(frame, stamp)
             await asyncio.sleep(period_s)
 
     def _worker_result(self, result: FrameResult) -> None:

@@ -484,6 +484,7 @@ class ARDroneDriver:
         self.on_event = on_event
         self.events: asyncio.Queue[DriverEvent] = asyncio.Queue(maxsize=events_maxsize)
         self.latest_frame: Any | None = None  # numpy (H, W, 3) uint8 BGR
+        self.latest_frame_ms = 0  # its PaVE timestamp: capture time on the drone's clock, ms
         self.frames_decoded = 0
         self.video_errors = 0
         self._lock = threading.Lock()
@@ -699,6 +700,7 @@ class ARDroneDriver:
                         images = await asyncio.to_thread(decoder.decode_packet, frame)
                         for image in images:
                             self.latest_frame = image
+                            self.latest_frame_ms = frame.timestamp_ms
                             self.frames_decoded += 1
             except (OSError, VideoError) as exc:
                 self.video_errors += 1

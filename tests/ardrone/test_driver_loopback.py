@@ -174,6 +174,8 @@ async def test_video_frames_decoded_from_tcp_5555() -> None:
         diff = abs(frame.astype(int) - reference.astype(int)).mean()
         assert diff < 12.0, diff  # H.264 at crf 23 plus per-frame sensor noise
         assert frame.std() > 10.0
+        # Its PaVE timestamp is the simulator's clock when it was rendered, in ms.
+        assert 0 < drv.latest_frame_ms <= srv.sim.time * 1000 + 1
         await drv.wait_for(lambda d: major(d) is not None, WAIT)
         await drv.wait_for(lambda d: d.latest_navdata.demo.num_frames >= 5, WAIT)  # type: ignore[union-attr]
         assert drv.video_errors == 0

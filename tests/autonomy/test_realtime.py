@@ -60,6 +60,9 @@ async def test_real_time_flight_to_a_marker_with_the_100_hz_control_thread() -> 
         assert 95.0 < stats.rate_hz < 105.0
         assert stats.stalls == 0
         assert vehicle.ekf.stats.fixes_accepted > 20
+        # Frames were stamped from their PaVE timestamps, on one drone clock.
+        assert vehicle.frame_clock.frames == vehicle.frames_seen > 20
+        assert vehicle.frame_clock.resets == 0
     finally:
         stepper.cancel()
         with contextlib.suppress(asyncio.CancelledError):
