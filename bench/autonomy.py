@@ -32,11 +32,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from drone.camera import CameraModel  # noqa: E402
 from drone.control.loop import ControlLoop, LoopStats  # noqa: E402
 from drone.control.pid import PaperPID, Setpoint  # noqa: E402
 from drone.perception.ekf import ExtendedKalmanFilter, NavdataInput  # noqa: E402
 from drone.perception.markers import MarkerLocaliser  # noqa: E402
-from drone.sim.camera import CameraModel, Renderer  # noqa: E402
+from drone.sim.camera import Renderer  # noqa: E402
 from drone.sim.world import load_world  # noqa: E402
 
 

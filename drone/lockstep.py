@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 
 from drone.ardrone.driver import DriverProtocol
+from drone.camera import CameraModel
 from drone.control.clock import VirtualClock
-from drone.sim.camera import CameraModel
 from drone.sim.drone import SimConfig, SimDrone
 from drone.sim.link import InMemoryLink
 from drone.vehicle import Vehicle

@@ -132,7 +132,7 @@ class Vehicle:
         name: ``uav1``…
         world: the map (``drone.sim.world.World``): marker poses for localisation.
         commander: the driver to command (``DriverProtocol`` in lockstep, ``ARDroneDriver`` live).
-        camera: front camera model (``drone.sim.camera.CameraModel``); None disables perception.
+        camera: front camera model (``drone.camera.CameraModel``); None disables perception.
         clock: time source for ``snapshot``/ages (virtual in lockstep).
     """
 

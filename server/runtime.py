@@ -19,7 +19,7 @@ from typing import Any
 from fastapi import APIRouter
 
 from drone.ardrone.driver import ARDroneDriver, DriverConfig
-from drone.sim.camera import CameraModel
+from drone.camera import CameraModel
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World, load_world
 from drone.vehicle import Vehicle

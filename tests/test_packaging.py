@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -24,6 +25,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ("grammars", "worlds", "web", "models/captioner")
+DOCKER_CONTEXT = ("pyproject.toml", "README.md", "server", "drone", *SHIPPED[:3], "models")
 SIM_ADDR = "127.0.0.140"
 TOKEN = "packaging-test-token"
 PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
@@ -40,9 +42,16 @@ def shipped_files() -> list[str]:
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Built from what docker/Dockerfile copies, in a scratch copy (no build/ in the checkout)."""
+    src = tmp_path_factory.mktemp("src")
+    for name in DOCKER_CONTEXT:
+        if (ROOT / name).is_dir():
+            shutil.copytree(ROOT / name, src / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(ROOT / name, src / name)
     out = tmp_path_factory.mktemp("wheel")
     subprocess.run(
-        [*PIP, "wheel", "--no-deps", "--no-build-isolation", "-w", str(out), str(ROOT)],
+        [*PIP, "wheel", "--no-deps", "--no-build-isolation", "-w", str(out), str(src)],
         check=True,
         capture_output=True,
         timeout=300,

@@ -2,7 +2,7 @@
 
 Pipeline per frame (issue 4 "Perception"): ``cv2.aruco.ArucoDetector`` → for each known marker
 ``cv2.solvePnP(..., SOLVEPNP_IPPE_SQUARE)`` with the front camera's intrinsics
-(``drone.sim.camera.CameraModel``: 640×360, 92° diagonal, no distortion) → the drone's map-frame
+(``drone.camera.CameraModel``: 640×360, 92° diagonal, no distortion) → the drone's map-frame
 pose from the marker's known pose (``drone.sim.world.Marker``: centre, outward-normal yaw, side)
 → a :class:`~drone.perception.ekf.MarkerFix` with a covariance that grows with distance and
 viewing angle.
@@ -41,9 +41,9 @@ from typing import Any
 import cv2
 import numpy as np
 
+from drone.camera import body_rotation
 from drone.perception.ekf import MarkerFix, wrap
 from drone.perception.errors import CameraModelError, FrameError
-from drone.sim.camera import body_rotation
 
 log = logging.getLogger(__name__)
 
@@ -89,7 +89,7 @@ class MarkerLocaliser:
     def __init__(self, world: Any, camera: Any) -> None:
         """Args:
         world: a ``drone.sim.world.World`` (or anything with ``markers``).
-        camera: a ``drone.sim.camera.CameraModel`` (``matrix``, ``dist_coeffs``,
+        camera: a ``drone.camera.CameraModel`` (``matrix``, ``dist_coeffs``,
             ``body_to_camera``).
 
         Raises:

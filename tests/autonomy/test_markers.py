@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from drone.camera import CameraModel
 from drone.perception.ekf import wrap
 from drone.perception.errors import CameraModelError, FrameError
 from drone.perception.markers import MarkerLocaliser, draw_overlay
-from drone.sim.camera import CameraModel, Renderer
+from drone.sim.camera import Renderer
 from drone.sim.world import load_world, parse_world
 
 

@@ -10,7 +10,7 @@ import math
 
 from drone.ardrone.driver import ARDroneDriver
 from drone.ardrone.navdata import CtrlState
-from drone.sim.camera import CameraModel
+from drone.camera import CameraModel
 from drone.sim.server import SimServer
 from drone.sim.world import load_world
 from drone.vehicle import Vehicle

@@ -12,14 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drone.sim.camera import (
-    BODY_TO_CAMERA,
-    CameraModel,
-    Renderer,
-    body_rotation,
-    pose_tuple,
-    visible_objects,
-)
+from drone.camera import BODY_TO_CAMERA, CameraModel, body_rotation, pose_tuple
+from drone.sim.camera import Renderer, visible_objects
 from drone.sim.world import Marker, World, load_world
 
 
