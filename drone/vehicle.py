@@ -14,6 +14,9 @@ The same object flies in real time and in lockstep (DESIGN §3):
 Jog follows ardrone_autonomy's ``/cmd_vel``: fractions in [−1, 1], PCMD roll = −linear.y,
 pitch = −linear.x, gaz = linear.z, yaw = −angular.z; all zero → hover. A jog replaces the
 setpoint, and ``add_jog_listener`` callbacks learn of it (the task manager cancels its task).
+Near the world's walls, floor and ceiling (``drone.limits``) each controller tick slows the
+jog towards them, then stops and brakes it; ``snapshot().jog_limit`` says why (the ANS tells
+the operator).
 
 Real time: ``await vehicle.start(driver)`` with the asyncio ``ARDroneDriver`` (already
 started) hooks its ``on_event`` (chaining any existing callback), feeds ``driver.latest_frame``
@@ -35,16 +38,27 @@ from typing import Any, Protocol
 import numpy as np
 
 from drone.ardrone.frame_clock import FrameClock
-from drone.ardrone.navdata import CtrlState, Navdata
+from drone.ardrone.navdata import TAG_DEMO, TAG_GPS, TAG_PRESSURE_RAW, CtrlState, Navdata
 from drone.control.clock import Clock, MonotonicClock
 from drone.control.loop import ControlLoop, LoopStats
 from drone.control.pid import DroneLimits, PaperGains, PaperPID, PcmdCommand, Setpoint, wrap_angle
+from drone.limits import FlightLimits, limits_of
 from drone.perception.ekf import EkfConfig, Estimate, ExtendedKalmanFilter, NavdataInput
 from drone.perception.markers import FrameResult, MarkerLocaliser, PerceptionWorker, draw_overlay
 
 __all__ = ["Commander", "MarkerSeen", "Setpoint", "Vehicle", "VehicleMode", "VehicleSnapshot"]
 
 FLYING_STATES = (CtrlState.FLYING, CtrlState.HOVERING, CtrlState.GOTOFIX)
+ALTITUDE_MAX_DEFAULT_MM = 3000  # control:altitude_max firmware default (ARDroneLib config_keys.h)
+
+
+def navdata_options(world: Any) -> int:
+    """``general:navdata_options`` bit mask (one bit per option tag, navdata_keys.h): demo and
+    raw pressure always, GPS where the world has a GPS origin."""
+    mask = (1 << TAG_DEMO) | (1 << TAG_PRESSURE_RAW)
+    if getattr(world, "gps_origin", None) is not None:
+        mask |= 1 << TAG_GPS
+    return mask
 
 
 class Commander(Protocol):
@@ -115,6 +129,10 @@ class VehicleSnapshot:
     state_bits: int = 0
     command: PcmdCommand | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    battery_known: bool = False  # navdata has carried a battery reading (demo option)
+    estimator_disagreement: tuple[str, ...] = ()  # Estimate.disagreement
+    estimator_reinits: int = 0  # EkfStats.navdata_reinits
+    jog_limit: str = ""  # why the jog is being slowed/stopped near a limit ("" when it is not)
 
     @property
     def yaw_deg(self) -> float:
@@ -159,6 +177,10 @@ class Vehicle:
         self.frame_clock = FrameClock()  # PaVE timestamps -> capture times (real time only)
         self.localiser = MarkerLocaliser(world, camera) if camera is not None else None
         self.link_timeout_s = link_timeout_s
+        self.limits: FlightLimits | None = (
+            limits_of(world) if world is not None and hasattr(world, "bounds") else None
+        )
+        self._jog_limit = ""
         self._lock = threading.RLock()  # commands vs. the control thread
         self._mode = VehicleMode.IDLE
         self._setpoint: Setpoint | None = None
@@ -293,6 +315,26 @@ class Vehicle:
             self._link_ok = False
         elif kind in ("LinkRestored", "HandshakeDone"):
             self._link_ok = True
+            if kind == "HandshakeDone":
+                self.configure_drone()
+
+    def configure_drone(self) -> None:
+        """Configure the drone for this world once the link is up:
+
+        * ``general:navdata_options``: demo, the barometer (tag 21: pressure and temperature,
+          shown in the console) and, where the world has a GPS origin, GPS (tag 27);
+        * ``control:altitude_max`` raised to the world's ceiling when it allows more than the
+          firmware's 3000 mm default (outdoor fields), so the drone can fly what is accepted.
+        """
+        config = getattr(self.commander, "config", None)
+        if config is None:
+            return
+        with contextlib.suppress(Exception):  # not connected yet: HandshakeDone calls again
+            config("general:navdata_options", str(navdata_options(self.world)))
+            if self.limits is not None:
+                mm = round(self.limits.ceiling_m * 1000.0)
+                if mm > ALTITUDE_MAX_DEFAULT_MM:
+                    config("control:altitude_max", str(mm))
 
     def on_navdata(self, nav: Navdata, now: float) -> None:
         """One navdata packet at ``now``: body state → EKF predict + update."""
@@ -314,8 +356,9 @@ class Vehicle:
         self._prev_psi = (now, body.yaw_rad)
         if not body.flying:
             rate = 0.0
+        landed = not body.flying and body.ctrl_state == CtrlState.LANDED
         self.ekf.update_navdata(
-            NavdataInput(now, body.vx_m_s, body.vy_m_s, body.vz_m_s, body.altitude_m, rate)
+            NavdataInput(now, body.vx_m_s, body.vy_m_s, body.vz_m_s, body.altitude_m, rate, landed)
         )
         for cb in self._nav_listeners:
             cb(nav, now)
@@ -396,17 +439,45 @@ class Vehicle:
             if mode in (VehicleMode.LANDING, VehicleMode.EMERGENCY):
                 return None
             if mode is VehicleMode.MANUAL and jog is not None:
-                cmd = jog
+                cmd = self._clamped(jog, nav)
             elif mode is VehicleMode.AUTO and sp is not None:
                 cmd = self.pid.step(_Extrapolated(self.ekf.latest, now), sp, max(dt, 0.0))
             else:
                 cmd = PcmdCommand.hold()
+            if mode is not VehicleMode.MANUAL:
+                self._jog_limit = ""
             if cmd.hover:
                 self.commander.hover()
             else:
                 self.commander.move(cmd.roll, cmd.pitch, cmd.gaz, cmd.yaw)
             self._last_cmd = cmd
         return cmd
+
+    def _clamped(self, jog: PcmdCommand, nav: Navdata) -> PcmdCommand:
+        """The jog limited near the world's walls, floor and ceiling (``drone.limits``).
+
+        Height comes from the ultrasound (navdata), the planar position and velocities from the
+        estimate; before the first marker fix only the height is limited (no position known).
+        """
+        lim = self.limits
+        if lim is None:
+            return jog
+        est = self.ekf.latest
+        c, s = math.cos(est.yaw_rad), math.sin(est.yaw_rad)
+        fwd, left = -jog.pitch, -jog.roll
+        east, north = c * fwd - s * left, s * fwd + c * left
+        alt = nav.to_body().altitude_m
+        if est.localised:
+            out = lim.clamp_jog(est.x, est.y, alt, est.vx, est.vy, est.vz, east, north, jog.gaz)
+        else:
+            far = (lim.x_min + lim.x_max) / 2, (lim.y_min + lim.y_max) / 2
+            out = lim.clamp_jog(*far, alt, 0.0, 0.0, est.vz, 0.0, 0.0, jog.gaz)
+            out = type(out)(east, north, out.up, out.reasons)
+        self._jog_limit = "; ".join(out.reasons)
+        if not out.reasons:
+            return jog
+        fwd, left = c * out.east + s * out.north, -s * out.east + c * out.north
+        return PcmdCommand(roll=-left, pitch=-fwd, gaz=out.up, yaw=jog.yaw)
 
     # ------------------------------------------------------------------ output
     def snapshot(self) -> VehicleSnapshot:
@@ -446,6 +517,10 @@ class Vehicle:
             controller=self._loop.stats() if self._loop is not None else None,
             state_bits=int(nav.state) if nav is not None else 0,
             command=self._last_cmd,
+            battery_known=body is not None,
+            estimator_disagreement=est.disagreement,
+            estimator_reinits=self.ekf.stats.navdata_reinits,
+            jog_limit=self._jog_limit if self._mode is VehicleMode.MANUAL else "",
         )
 
     def overlay(self, lines: tuple[str, ...] = ()) -> np.ndarray | None:
@@ -490,6 +565,9 @@ class Vehicle:
                 previous(event)
 
         driver.on_event = on_event
+        proto = getattr(driver, "protocol", None)
+        if proto is not None and getattr(proto, "handshake_done", False):
+            self.configure_drone()  # the handshake finished before this hook was in place
         if self.localiser is not None:
             self._worker = PerceptionWorker(
                 self.localiser, self._worker_result, self._perception_context

@@ -14,8 +14,10 @@ from fastapi.templating import Jinja2Templates
 
 from drone.share import share_dir
 from server import __version__
-from server.api import drones, language, sim, system
-from server.api.deps import role_by_method
+from server.api import drones, flights, language, sim, speech, strict, system, tls, tts
+from server.api.deps import fleet_access
+from server.audit_trail import RestAuditMiddleware
+from server.http_guard import HttpGuard
 from server.runtime import Runtime
 from server.settings import Settings
 
@@ -51,11 +53,23 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         lifespan=lifespan,
     )
     app.state.runtime = runtime
-    for router in (system.router, language.router, drones.router, sim.router):
+    # Intent/outcome audit rows of REST actions, inside the guard (issue 14).
+    app.add_middleware(RestAuditMiddleware, security=runtime.security, trail=runtime.trail)
+    # Host allowlist, body limits before parsing, security headers, the token cookie (issue 14).
+    app.add_middleware(HttpGuard, security=runtime.security)
+    strict.install(app)  # 422s that echo NaN or lone surrogates stay 422s
+    for router in (
+        system.router,
+        language.router,
+        drones.router,
+        sim.router,
+        tts.router,
+        flights.router,
+    ):
         app.include_router(router, prefix="/api/v1")
-    app.include_router(
-        runtime.fleet.router(dependencies=[Depends(role_by_method)]), prefix="/api/v1"
-    )
+    for router in (speech.router, tls.router):  # issue 15: speech, HTTPS for phones
+        app.include_router(router, prefix="/api/v1")
+    app.include_router(runtime.fleet.router(dependencies=[Depends(fleet_access)]), prefix="/api/v1")
     for router in runtime.extra_routers():
         app.include_router(router)
 

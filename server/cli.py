@@ -1,4 +1,4 @@
-"""The ``uav-console`` command: serve, sim, vehicle, interpret, patrol, bench.
+"""The ``uav-console`` command: serve, sim, vehicle, interpret, patrol, bench, replay.
 
 Each subcommand imports what it needs lazily, so ``interpret`` stays quick to start.
 """
@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import os
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -23,7 +24,12 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("serve", help="run the console (default: on the simulator)")
     s.add_argument("--host", default=None)
     s.add_argument("--port", type=int, default=None)
-    s.add_argument("--drone", default=None, help="'sim' (default), 'none', or a drone's IP")
+    s.add_argument(
+        "--drone",
+        default=None,
+        help="'sim' (default), 'sim-mavlink', 'none', an AR.Drone's IP, or a MAVLink connection "
+        "(tcp:HOST:PORT, udpin:0.0.0.0:14550, …); a fleet may list one per drone, comma-separated",
+    )
     s.add_argument("--world", default=None, help="indoor | outdoor | path to a world file")
     s.add_argument("--fleet", type=int, default=None, help="number of simulated drones")
     s.add_argument("--token", default=None, help="pilot token (default: generated and stored)")
@@ -32,11 +38,30 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--rosbridge-port", type=int, default=None, help="also serve rosbridge here")
     s.add_argument("--data-dir", type=Path, default=None)
     s.add_argument("--seed", type=int, default=None)
+    s.add_argument("--asr-model", type=Path, default=None, help="CTranslate2 Whisper directory")
+    s.add_argument("--recognizer", choices=("server", "browser", "auto"), default=None)
+    s.add_argument("--cert", type=Path, default=None, help="TLS certificate (PEM) for HTTPS")
+    s.add_argument("--key", type=Path, default=None, help="its private key (PEM)")
+    s.add_argument("--no-tls", action="store_true", help="plain HTTP even on a non-loopback --host")
+    s.add_argument(
+        "--vehicles",
+        choices=("inline", "process"),
+        default=None,
+        help="each drone's flight stack in the web process (inline) or its own process",
+    )
 
     sim = sub.add_parser("sim", help="the simulator alone, behind the AR.Drone protocol")
-    sim.add_argument("--addr", default="127.0.0.2")
+    sim.add_argument(
+        "--addr", default=None, help="default 127.0.0.2 (AR.Drone), 127.0.0.9 (MAVLink)"
+    )
     sim.add_argument("--world", default="indoor")
     sim.add_argument("--speed", type=float, default=1.0)
+    sim.add_argument(
+        "--protocol",
+        choices=("ardrone", "mavlink"),
+        default="ardrone",
+        help="mavlink: a PX4-like autopilot on TCP 5760 (several clients) and UDP 14580",
+    )
 
     v = sub.add_parser("vehicle", help="one drone's stack joining a central server")
     v.add_argument("--central", required=True, help="ws://HOST:8000/rosbridge")
@@ -44,12 +69,30 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--drone", default="sim")
     v.add_argument("--token", default=None)
     v.add_argument("--world", default="outdoor")
+    v.add_argument("--ca", type=Path, default=None, help="CA file for a wss:// central")
+    v.add_argument("--fingerprint", default=None, help="pinned SHA-256 of the central's cert")
+    v.add_argument("--prefix", default=None, help="topic prefix (default /NAME; '' for one drone)")
+    v.add_argument("--index", type=int, default=None, help="simulator address / station index")
+    v.add_argument("--safety-host", default="127.0.0.1", help="the safety port's address")
+    v.add_argument("--safety-port", type=int, default=0, help="the safety port (0: any free)")
+    v.add_argument("--parent-pid", type=int, default=None, help=argparse.SUPPRESS)
 
     i = sub.add_parser("interpret", help="NLU only: text -> JSON commands")
     i.add_argument("text", nargs="*")
+    i.add_argument("--audio", nargs="+", metavar="FILE.wav", help="offline speech: WAV files")
+    i.add_argument("--asr-model", type=Path, default=None, help="CTranslate2 Whisper directory")
 
     pa = sub.add_parser("patrol", help="persistent patrol experiment in lockstep", add_help=False)
     pa.add_argument("rest", nargs=argparse.REMAINDER)
+
+    r = sub.add_parser("replay", help="the console, read-only, on a recorded flight (MCAP)")
+    r.add_argument("file", type=Path, help="a recording (GET /api/v1/flights/{id})")
+    r.add_argument("--speed", type=float, default=1.0, help="playback speed (default 1)")
+    r.add_argument("--host", default=None)
+    r.add_argument("--port", type=int, default=None)
+    r.add_argument("--token", default=None, help="token for the page (default: generated)")
+    r.add_argument("--recover", action="store_true", help="play a file cut short by a crash")
+    r.add_argument("--paused", action="store_true", help="start paused at the beginning")
 
     b = sub.add_parser("bench", help="run the benchmarks in bench/ and print their tables")
     b.add_argument("names", nargs="*", help="bench modules (default: all)")
@@ -68,21 +111,46 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "serve":
             return _serve(args)
+        if args.command == "sim" and args.protocol == "mavlink":
+            from drone.mavlink.simserver import run_mavlink_sim
+            from drone.sim.world import load_world
+
+            addr = args.addr or "127.0.0.9"
+            asyncio.run(run_mavlink_sim(addr, load_world(args.world), speed=args.speed))
+            return 0
         if args.command == "sim":
             from drone.sim.server import run_sim
 
-            asyncio.run(run_sim(args.addr, args.world, args.speed))
+            asyncio.run(run_sim(args.addr or "127.0.0.2", args.world, args.speed))
             return 0
         if args.command == "vehicle":
+            if args.central.rstrip("/").endswith("/vehicle-link"):
+                from server.vehicles.main import whole_vehicle_main
+
+                return whole_vehicle_main(args)
             from server.fleet.client import vehicle_main
 
             return vehicle_main(args)
+        if args.command == "interpret" and args.audio:
+            from server.speech.cli import interpret_audio_main
+
+            settings = Settings.from_env(asr_model=args.asr_model)
+            return interpret_audio_main(
+                list(args.text) + list(args.audio),
+                sys.stdout,
+                model_dir=settings.asr_model,
+                model_sha256=settings.asr_model_sha256,
+            )
         if args.command == "interpret":
             from server.language.cli import interpret_main
 
             return interpret_main(args.text, sys.stdin, sys.stdout)
         if args.command == "bench":
             return _bench(args.names, args.quick)
+        if args.command == "replay":
+            from server.recorder.replay_cli import replay_main
+
+            return replay_main(args)
     except SettingsError as exc:
         print(f"uav-console: {exc}", file=sys.stderr)
         return 2
@@ -95,6 +163,7 @@ def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from server.app import create_app
+    from server.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
 
     settings = Settings.from_env(
         host=args.host,
@@ -108,8 +177,29 @@ def _serve(args: argparse.Namespace) -> int:
         rosbridge_port=args.rosbridge_port,
         data_dir=args.data_dir,
         seed=args.seed,
+        asr_model=args.asr_model,
+        recognizer=args.recognizer,
+        cert=args.cert,
+        key=args.key,
+        tls=False if args.no_tls else None,
+        asr_preload=True,
+        # `--vehicles process` runs each drone's flight stack in its own supervised process
+        # (issue 14). Inline stays the default until every console feature (direct-action
+        # refusals, MAVLink drones, ...) works through the vehicle link.
+        vehicles=args.vehicles or os.environ.get("UAVC_VEHICLES") or "inline",
     )
+    if settings.recognizer not in ("server", "browser", "auto"):
+        raise SettingsError(
+            f"recognizer must be server, browser or auto, not {settings.recognizer!r}"
+        )
+    from server.tls import TLSError, tls_for
+
+    try:
+        tls_files = tls_for(settings)
+    except TLSError as exc:
+        raise SettingsError(str(exc)) from exc
     app = create_app(settings, announce=True)
+    app.state.runtime.tls = tls_files
     config = uvicorn.Config(
         app,
         host=settings.host,
@@ -117,6 +207,11 @@ def _serve(args: argparse.Namespace) -> int:
         log_level="warning",
         # uvicorn cuts off absurd frames; below this the endpoint answers with a status error.
         ws_max_size=4 * settings.max_frame_bytes,
+        ssl_certfile=str(tls_files.cert) if tls_files else None,
+        ssl_keyfile=str(tls_files.key) if tls_files else None,
+        # per-IP connection cap and a header deadline (slowloris; issue 14)
+        http=guarded_h11(ConnectionLimits()),
+        timeout_keep_alive=KEEP_ALIVE_S,
     )
     # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
     with contextlib.suppress(KeyboardInterrupt):

@@ -20,6 +20,7 @@ import collections
 import contextlib
 import itertools
 import json
+import logging
 import threading
 from collections.abc import Awaitable, Callable, Iterator
 from dataclasses import dataclass, field
@@ -27,7 +28,11 @@ from typing import Any
 
 Message = dict[str, Any]
 Callback = Callable[[Message], None]
+# (canonical topic, type, message): sees every message published on the graph (the recorder).
+Tap = Callable[[str, str, Message], None]
 ServiceHandler = Callable[[Message], Awaitable[Message]]
+
+log = logging.getLogger("uav_console.graph")
 
 INTERNAL = "internal"
 DEFAULT_QUEUE_LENGTH = 100
@@ -138,6 +143,7 @@ class Graph:
         self._loop_thread: int | None = None
         self._lock = threading.RLock()
         self._ids = itertools.count(1)
+        self._taps: tuple[Tap, ...] = ()
 
     # -- loop -----------------------------------------------------------------------------
     def bind_loop(self, loop: asyncio.AbstractEventLoop) -> None:
@@ -177,8 +183,20 @@ class Graph:
             topic = self._topics.get(key)
             if topic is None:
                 return
-            topic.publishers.discard(owner)
+            self._drop_publisher(topic, owner)
             self._forget_if_unused(topic)
+
+    @staticmethod
+    def _drop_publisher(topic: _Topic, owner: str) -> None:
+        """``owner`` no longer publishes ``topic``; a latched message of a topic nobody
+        publishes any more expires with its publisher (a client's latched message must not
+        outlive its connection: it would greet every later subscriber)."""
+        if owner not in topic.publishers:
+            return
+        topic.publishers.discard(owner)
+        if not topic.publishers:
+            topic.last = None
+            topic.latch = False
 
     def _forget_if_unused(self, topic: _Topic) -> None:
         if not topic.publishers and not topic.subscriptions and not topic.latch:
@@ -204,6 +222,9 @@ class Graph:
             if topic.latch:
                 topic.last = msg
             subscriptions = list(topic.subscriptions)
+            type_name = topic.type
+        for tap in self._taps:
+            tap(key, type_name, msg)
         if not subscriptions:
             return
         if self._on_loop_thread():
@@ -216,8 +237,15 @@ class Graph:
 
     @staticmethod
     def _deliver(subscriptions: list[Subscription], msg: Message) -> None:
+        # One subscriber's bug must not cost the others their message (issue 14): each
+        # callback is isolated, and the failure logged with the topic and the subscriber.
         for sub in subscriptions:
-            sub.callback(msg)
+            try:
+                sub.callback(msg)
+            except Exception:
+                log.exception(
+                    "subscriber %s of %s failed; other subscribers served", sub.owner, sub.topic
+                )
 
     def subscribe(
         self, name: str, callback: Callback, *, type: str | None = None, owner: str = INTERNAL
@@ -264,11 +292,27 @@ class Graph:
         """Remove everything ``owner`` (e.g. a closed connection) advertised or subscribed."""
         with self._lock:
             for topic in list(self._topics.values()):
-                topic.publishers.discard(owner)
+                self._drop_publisher(topic, owner)
                 topic.subscriptions = [s for s in topic.subscriptions if s.owner != owner]
                 self._forget_if_unused(topic)
             for name in [n for n, s in self._services.items() if s.owner == owner]:
                 del self._services[name]
+
+    def add_tap(self, tap: Tap) -> Callable[[], None]:
+        """Call ``tap(topic, type, msg)`` for every message published on any topic.
+
+        A tap runs in the publishing thread, before delivery, and must only hand the message
+        on (e.g. append it to a queue): it sees every topic without subscribing to any, so it
+        is not listed as a subscriber and keeps no topic alive. Returns a function removing it.
+        """
+        with self._lock:
+            self._taps = (*self._taps, tap)
+
+        def remove() -> None:
+            with self._lock:
+                self._taps = tuple(t for t in self._taps if t is not tap)
+
+        return remove
 
     def latched(self, name: str) -> Message | None:
         topic = self._topics.get(canonical(name))

@@ -12,6 +12,8 @@ import math
 import time
 from typing import Any
 
+from server.mavros_msgs import MAVROS_MESSAGES
+
 Field = tuple[str, str]
 
 PRIMITIVES: dict[str, Any] = {
@@ -129,6 +131,8 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
         ("speak", "bool"),
         ("utterance", "string"),
         ("commands", "string"),
+        ("drone", "string"),  # the drone that answers (fleets)
+        ("alarm", "string"),  # the ANS monitor that raised it (battery, link, …), else ""
     ),
     "uav_console/DialogState": (
         ("header", "std_msgs/Header"),
@@ -153,7 +157,22 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
         ("drones", "uav_console/DroneStatus[]"),
         ("events", "string[]"),
     ),
+    # ros/ros_comm rosgraph_msgs/Log.msg; its level constants (DEBUG=1 … FATAL=16) are in
+    # server.ros1.definitions. On /rosout, Foxglove tells ROS 1 from ROS 2 by this type.
+    "rosgraph_msgs/Log": (
+        ("header", "std_msgs/Header"),
+        ("level", "byte"),
+        ("name", "string"),
+        ("msg", "string"),
+        ("file", "string"),
+        ("function", "string"),
+        ("line", "uint32"),
+        ("topics", "string[]"),
+    ),
 }
+
+
+MESSAGES.update(MAVROS_MESSAGES)  # /mavros/... topics of MAVLink drones (issue 16)
 
 
 def is_array(field_type: str) -> bool:

@@ -23,20 +23,30 @@ from drone.camera import CameraModel
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World, load_world
 from drone.vehicle import Vehicle
+from server.audit_trail import AuditTrail
 from server.captioner import BadFrame, Captioner, CaptionerUnavailable, describe_frame
+from server.captioner.grounding import ground_marker_ids, seen_markers
 from server.captioner.service import NOTHING, load_captioner, unavailable_text
 from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
 from server.dialog.manager import DialogManager
 from server.fleet.service import FleetService
 from server.graph import Graph
 from server.language.nlu import default_nlu
+from server.mavlink_stack import drone_kind, is_mavlink, start_mavlink
+from server.mavros_node import MavrosNode
+from server.recorder.index import FlightIndex, FlightInfo
+from server.recorder.recorder import Recorder, config_from_settings
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router, serve_rosbridge_port
+from server.rosout import Rosout
 from server.security import Security, TokenStore
 from server.settings import Settings
+from server.speech.service import SpeechConfig, SpeechService
 from server.store import AuditLog
 from server.tasks.manager import TaskManager
+from server.tls import TLSFiles, display_host
 from server.vehicle_node import VehicleNode
+from server.vehicles.central import VehicleCentral
 
 log = logging.getLogger("uav_console")
 
@@ -130,21 +140,44 @@ class Runtime:
         self.bridge = BridgeContext(self.graph, self.security, s)
         self.nlu = default_nlu(str(s.grammar_dir))
         self.audit = AuditLog(s.data_dir / "audit.db")
+        self.trail = AuditTrail(self.audit)  # intent/outcome rows of direct actions (issue 14)
+        self.bridge.audit = self.trail
+        self.security.lease.on_change = self._lease_changed
         self._routers: list[APIRouter] = [make_router(self.bridge)]
         self.fleet = FleetService(self.graph, self.world)
         self._tasks: list[asyncio.Task[Any]] = []
         self._captioner: Captioner | CaptionerUnavailable = load_captioner(s.model_dir)
         self.started_at = time.time()
+        self.tls: TLSFiles | None = None  # set by `serve` when it serves HTTPS
+        self.speech = SpeechService(
+            SpeechConfig(s.asr_model, s.asr_model_sha256, s.asr_workers, queue=s.asr_queue),
+            self.nlu,
+        )
+        # vehicle processes (``--vehicles process``) and remote vehicles: link, discovery
+        self.vehicles = VehicleCentral(self)
+        self._routers.append(self.vehicles.router())
+        # Flight recorder (server/recorder): every graph topic to MCAP, one file per session.
+        recorder_config = config_from_settings(s)
+        self.flight_index = FlightIndex(recorder_config.directory, recorder_config.budget_bytes)
+        self.recorder: Recorder | None = None
+        if s.recorder:
+            self.recorder = Recorder(self.graph, recorder_config, drones=lambda: self.drones)
+            self.flight_index = self.recorder.index
+        self.rosout = Rosout(self.graph)
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         self.graph.bind_loop(asyncio.get_running_loop())
+        self.rosout.attach()
+        if self.recorder is not None:
+            await asyncio.to_thread(self.recorder.start)  # repairs what a crash left first
+            self.audit.recording = self.recorder.touch
         self.graph.advertise_service(
             "/console/describe", "uav_console/Describe", self._describe_service
         )
         if isinstance(self._captioner, CaptionerUnavailable):
             log.warning(self.captioner_status())
-        if self.settings.drone == "sim" and self.settings.sim_speed != 1.0:
+        if self.settings.drone.startswith("sim") and self.settings.sim_speed != 1.0:
             log.warning(
                 "simulator at %.1f× real time: the EKF and the 100 Hz PID run on the wall clock, "
                 "so the simulated drone reacts %.1f× faster than they expect; autonomous flight "
@@ -153,6 +186,10 @@ class Runtime:
                 self.settings.sim_speed,
             )
         count = 0 if self.settings.drone == "none" else max(1, self.settings.fleet)
+        await self.vehicles.start()
+        if self.settings.vehicles == "process" and self.vehicles.can_spawn(self.settings.drone):
+            await self.vehicles.spawn(count)
+            count = 0
         for index in range(count):
             name = f"uav{index + 1}"
             prefix = "" if count == 1 else f"/{name}"
@@ -161,6 +198,7 @@ class Runtime:
             if stack.tasks is not None:
                 self.fleet.add_local(stack.name, stack.vehicle, stack.tasks)
         await self.fleet.start()
+        await self.speech.start(preload=self.settings.asr_preload)
         if self.settings.rosbridge_port:
             port = self.settings.rosbridge_port
             serving = serve_rosbridge_port(self.settings.host, port, self.bridge)
@@ -168,8 +206,11 @@ class Runtime:
 
     async def _start_drone(self, name: str, prefix: str, index: int) -> DroneStack:
         s = self.settings
+        kind = drone_kind(s.drone, index)
+        if is_mavlink(kind):
+            return await self._start_mavlink_drone(name, prefix, index, kind)
         sim: SimServer | None = None
-        if s.drone == "sim":
+        if kind == "sim":
             addr, ports = sim_endpoint(index, s.sim_base_addr)
             sim = SimServer(addr, self.world, ports=ports, speed=s.sim_speed, seed=s.seed + index)
             await sim.start()
@@ -181,18 +222,31 @@ class Runtime:
                 config=DriverConfig(link_timeout_s=s.link_timeout_s),
             )
         else:
-            driver = ARDroneDriver(s.drone, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+            driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
         await driver.start()
         vehicle = Vehicle(name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
         await vehicle.start(driver)
-        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
+        tasks = TaskManager(
+            vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s, idle_search=True
+        )
         node = VehicleNode(
-            self.graph, vehicle, tasks, name, prefix, heartbeat_timeout_s=s.heartbeat_timeout_s
+            self.graph,
+            vehicle,
+            tasks,
+            name,
+            prefix,
+            heartbeat_timeout_s=s.heartbeat_timeout_s,
+            audit=self.audit,
         )
         await node.start()
+        self._start_dialog(name, prefix, vehicle, tasks)
+        return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
+
+    def _start_dialog(self, name: str, prefix: str, vehicle: Any, tasks: TaskManager) -> None:
+        """The drone's dialog manager (SNS + its ANS monitors), running until ``stop``."""
         dialog = DialogManager(
             self.graph,
-            s,
+            self.settings,
             TaskManagerPort(tasks),
             VehiclePort(vehicle, self.world),
             CallableDescriber(lambda: self.describe(name)),
@@ -201,12 +255,31 @@ class Runtime:
             nlu=self.nlu,
             drone=name,
             prefix=prefix,
+            fleet=self.fleet.central,
+            drones=lambda: list(self.drones) or [name],
         )
         self.dialogs[name] = dialog
         self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
+
+    async def _start_mavlink_drone(
+        self, name: str, prefix: str, index: int, kind: str
+    ) -> DroneStack:
+        """A PX4/ArduPilot drone (issue 16): the autopilot flies, the console sends targets."""
+        s = self.settings
+        parts = await start_mavlink(name, kind, index, self.world, s)
+        vehicle: Any = parts.vehicle
+        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
+        node = MavrosNode(
+            self.graph, vehicle, tasks, name, prefix, heartbeat_timeout_s=s.heartbeat_timeout_s
+        )
+        await node.start()
+        self._start_dialog(name, prefix, vehicle, tasks)
+        driver: Any = parts.driver
+        sim: Any = parts.sim
         return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
 
     async def stop(self) -> None:
+        await self.vehicles.stop()
         for task in self._tasks:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -222,9 +295,23 @@ class Runtime:
                 await stack.driver.stop()
             if stack.sim is not None:
                 await stack.sim.stop()
+        await self.speech.stop()
+        if self.recorder is not None:
+            self.audit.recording = None
+            await asyncio.to_thread(self.recorder.stop)
+        self.rosout.detach()
         self.audit.close()
         if isinstance(self._captioner, Captioner):
             self._captioner.close()
+
+    def _lease_changed(self, previous: str | None, holder: str | None, how: str) -> None:
+        """Audit a change of pilot (off the loop: the row is fsynced)."""
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            self.trail.lease_changed(previous, holder, how)
+            return
+        loop.run_in_executor(None, self.trail.lease_changed, previous, holder, how)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -233,6 +320,16 @@ class Runtime:
 
     def extra_routers(self) -> list[APIRouter]:
         return list(self._routers)
+
+    def flights(self) -> list[FlightInfo]:
+        """The flight recordings, oldest first (the one being recorded with ``ended`` None)."""
+        if self.recorder is not None:
+            return self.recorder.flights()
+        return self.flight_index.listing()
+
+    def recording_id(self) -> str | None:
+        """The id of the flight being recorded now, if any."""
+        return self.recorder.current_id if self.recorder is not None else None
 
     def captioner_status(self) -> str:
         """'ready', or why scene description is unavailable (said at start-up and in /health)."""
@@ -255,11 +352,12 @@ class Runtime:
             raise LookupError(f"no drone '{drone}'")
         frame = stack.driver.latest_frame
         if isinstance(self._captioner, Captioner) and frame is not None:
+            seen = seen_markers(stack.vehicle.snapshot())
             try:
                 caption = await self._captioner.describe(frame)
             except BadFrame as exc:
                 return f"I cannot describe this camera image: {exc}.", None
-            return caption.text or NOTHING, caption.ms
+            return ground_marker_ids(caption.text or NOTHING, seen), caption.ms
         return await describe_frame(self._captioner, frame), None
 
     async def _describe_service(self, args: dict[str, Any]) -> dict[str, Any]:
@@ -269,8 +367,14 @@ class Runtime:
 
     def announcement(self) -> list[str]:
         """The pilot's clickable URL (Jupyter style), then the observer's, indented."""
-        base = f"http://{self.settings.host}:{self.settings.port}/"
-        return [
+        scheme = "https" if self.tls is not None else "http"
+        base = f"{scheme}://{display_host(self.settings.host)}:{self.settings.port}/"
+        lines = [
             f"{base}?token={self.tokens.pilot_token}",
             f"  observer (watch only): {base}?token={self.tokens.observer_token}",
         ]
+        if self.tls is not None:
+            lines.append(f"  certificate SHA-256: {self.tls.fingerprint}")
+            if self.tls.ca is not None:
+                lines.append(f"  trust once on a phone: {base}api/v1/tls/ca.pem ({self.tls.ca})")
+        return lines

@@ -4,7 +4,12 @@
 - :class:`TokenStore` makes a pilot and an observer token on first start and keeps them in
   ``<data_dir>/tokens.json`` with mode 0600 (as Jupyter keeps its token); ``--token`` overrides.
 - :class:`PilotLease`: one pilot connection commands at a time; another pilot takes over only
-  explicitly, and the previous holder is told (its revoke callback runs).
+  explicitly, and the previous holder is told (its revoke callback runs). Holder ids are not
+  secret (rosapi lists connections); each holding gets a secret ``key``, told only to the
+  holder, which REST callers name in ``X-Pilot-Lease`` (issue 14: a second pilot used an id
+  an observer could read).
+- Only the server publishes ``/console/*`` and ``/fleet/*`` (replies, state, fleet status), but
+  for ``/console/utterance``, which a pilot sends; a fake "battery critical" reply is refused.
 - Origin: a browser always sends ``Origin``; a WebSocket whose Origin is neither the served
   origin (the request's ``Host``) nor in ``allow_origins`` is refused (cross-site WebSocket
   hijacking). Clients that send no Origin (roslibpy, Node) are not browsers and pass.
@@ -12,12 +17,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import hmac
+import ipaddress
 import json
 import os
 import re
 import secrets
+import tempfile
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +40,13 @@ TOKEN_FILE = "tokens.json"
 
 # Control topics (DESIGN §4): pilot only, and only for the lease holder. Fleet form: /uavN/...
 CONTROL_TOPIC_RE = re.compile(r"^(/uav\d+)?(/cmd_vel|/ardrone/.+|/console/utterance)$")
+# Server-only topics: the console's replies/state and the fleet's status (DESIGN §4).
+# (A remote vehicle publishes its own ``/NAME/fleet/ltm_status``: that one stays open to pilots.)
+SERVER_TOPIC_RE = re.compile(r"^(/fleet(/.*)?|(/[^/]+)?/console(/.*)?)$")
+PILOT_CONSOLE_TOPIC_RE = re.compile(r"^(/[^/]+)?/console/utterance$")
+# Safety commands any pilot may publish without the lease (DESIGN §5: any pilot may land).
+ANY_PILOT_TOPIC_RE = re.compile(r"^(/uav\d+)?/ardrone/land$")
+TOKEN_COOKIE = "uavc_token"  # set on the first load of the console (tokens out of URLs)
 # Services an observer may call: introspection and ones that change nothing.
 READ_ONLY_SERVICE_RE = re.compile(
     r"^(/uav\d+)?(/rosapi/(?!set_param$|delete_param$).+|/console/interpret|/console/describe"
@@ -78,29 +93,54 @@ class TokenStore:
             raise ValueError("the pilot and observer tokens must differ")
 
     def _load_or_create(self) -> dict[str, str]:
+        secure_dir(self.path.parent)
         try:
             data = json.loads(self.path.read_text())
             if isinstance(data.get("pilot"), str) and isinstance(data.get("observer"), str):
                 return {"pilot": data["pilot"], "observer": data["observer"]}
-        except (OSError, ValueError):
+        except (OSError, ValueError, AttributeError):
             pass  # missing or unreadable: make new tokens below
         data = {"pilot": new_token(), "observer": new_token()}
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh)
-        os.chmod(self.path, 0o600)
+        write_private_atomically(self.path, json.dumps(data))
         return data
 
     def role_for(self, token: str | None) -> Role | None:
-        """The role a token grants (constant-time comparison), or None."""
-        if not token:
+        """The role a token grants (constant-time comparison), or None.
+
+        Any string is answered, never raised on: a lone surrogate (``"\\ud800"`` from JSON)
+        cannot be UTF-8 and simply matches no token.
+        """
+        if not token or not isinstance(token, str):
             return None
-        if hmac.compare_digest(token.encode(), self.pilot_token.encode()):
+        raw = token.encode("utf-8", "surrogatepass")
+        if hmac.compare_digest(raw, self.pilot_token.encode()):
             return Role.PILOT
-        if hmac.compare_digest(token.encode(), self.observer_token.encode()):
+        if hmac.compare_digest(raw, self.observer_token.encode()):
             return Role.OBSERVER
         return None
+
+
+def secure_dir(path: Path) -> None:
+    """Create ``path`` (and parents) and make it 0700: tokens and the audit log live there."""
+    path.mkdir(parents=True, exist_ok=True, mode=0o700)
+    os.chmod(path, 0o700)
+
+
+def write_private_atomically(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` (mode 0600) so a reader sees the old file or the new one,
+    never a half-written one: a temporary file in the same directory, fsynced, renamed."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        os.fchmod(fd, 0o600)
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
 
 
 class LeaseHeld(Exception):
@@ -114,12 +154,32 @@ class LeaseState:
 
 
 class PilotLease:
-    """Who may command right now. Holders are opaque ids (a connection, a REST token…)."""
+    """Who may command right now. Holders are ids (a connection, ``rest:…``), which are not
+    secret; the holding's secret is :meth:`key_of`, told only to the holder."""
+
+    PUBLIC_NAME = "another pilot"  # what non-holders are told about the holder
 
     def __init__(self) -> None:
         self._holder: str | None = None
         self._since: float | None = None
+        self._key: str | None = None
         self._on_revoke: dict[str, Callable[[str], None]] = {}
+        # called (previous, new holder, how) whenever the holder changes: the audit trail
+        self.on_change: Callable[[str | None, str | None, str], None] | None = None
+
+    def _changed(self, previous: str | None, holder: str | None, how: str) -> None:
+        if self.on_change is not None and previous != holder:
+            self.on_change(previous, holder, how)
+
+    def key_of(self, holder: str) -> str | None:
+        """The secret of the current holding, if ``holder`` holds the lease."""
+        return self._key if self._holder == holder else None
+
+    def key_matches(self, key: str | None) -> bool:
+        """Whether ``key`` is the current holding's secret (constant time)."""
+        if not key or self._key is None:
+            return False
+        return hmac.compare_digest(key.encode("utf-8", "surrogatepass"), self._key.encode())
 
     @property
     def state(self) -> LeaseState:
@@ -143,15 +203,19 @@ class PilotLease:
         if self._holder in (None, holder):
             if self._holder is None:
                 self._since = now
+                self._key = secrets.token_urlsafe(18)
+                self._changed(None, holder, "acquire")
             self._holder = holder
             return True
         if not take_over:
             raise LeaseHeld(
-                f"another pilot ({self._holder}) holds the pilot lease; "
+                "another pilot holds the pilot lease; "
                 f"take over explicitly (call {LEASE_SERVICE} with take_over: true)"
             )
         previous = self._holder
         self._holder, self._since = holder, now
+        self._key = secrets.token_urlsafe(18)
+        self._changed(previous, holder, "take_over")
         cb = self._on_revoke.get(previous)
         if cb is not None:
             cb(holder)
@@ -160,7 +224,8 @@ class PilotLease:
     def release(self, holder: str) -> None:
         self._on_revoke.pop(holder, None)
         if self._holder == holder:
-            self._holder = self._since = None
+            self._holder = self._since = self._key = None
+            self._changed(holder, None, "release")
 
     def holds(self, holder: str) -> bool:
         return self._holder == holder
@@ -186,6 +251,10 @@ class Security:
         return bool(READ_ONLY_SERVICE_RE.match(_canonical(service)))
 
     def can_publish(self, role: Role | None, topic: str) -> bool:
+        """Pilots publish, but not on the server's own ``/console/*`` and ``/fleet/*``."""
+        name = _canonical(topic)
+        if SERVER_TOPIC_RE.match(name) and not PILOT_CONSOLE_TOPIC_RE.match(name):
+            return False
         return role is Role.PILOT
 
     def can_call(self, role: Role | None, service: str) -> bool:
@@ -198,6 +267,8 @@ class Security:
         if service:
             name = _canonical(service_or_topic)
             return not self.is_read_only_service(name) and not name.startswith("/rosapi/")
+        if ANY_PILOT_TOPIC_RE.match(_canonical(service_or_topic)):
+            return False  # any pilot may land (DESIGN §5), lease or not
         return self.is_control_topic(service_or_topic)
 
     @staticmethod
@@ -217,17 +288,60 @@ class Security:
         if parts.scheme not in ("http", "https") or not parts.hostname:
             return False
         default = 443 if parts.scheme == "https" else 80
-        netloc = f"{parts.hostname.lower()}:{parts.port or default}"
+        try:  # ``.port`` raises on "127.0.0.1:8123.evil.example": not an origin we serve
+            netloc = f"{parts.hostname.lower()}:{parts.port or default}"
+        except ValueError:
+            return False
         served = {f"{self.settings.host.lower()}:{self.settings.port}"}
         if host_header:
-            h = urlsplit("//" + host_header.strip())
-            if h.hostname:
-                served.add(f"{h.hostname.lower()}:{h.port or default}")
+            parsed = parse_host(host_header, default)
+            if parsed is not None and self.host_allowed(parsed[0]):
+                served.add(f"{parsed[0]}:{parsed[1]}")
         return netloc in served
 
+    def host_allowed(self, hostname: str) -> bool:
+        """Whether a request naming ``hostname`` in ``Host`` is for us (DNS rebinding guard).
 
-def token_from(headers: Mapping[str, str], query: Mapping[str, str]) -> str | None:
-    """The token of a request: ``?token=`` or ``Authorization: Bearer …``."""
+        An IP literal, ``localhost``, the served host, ``allow_hosts`` and single-label names
+        (``testserver``, a machine's bare hostname: only local resolution can answer those, not
+        an attacker's DNS) pass; any other name may be an attacker's domain re-pointed at
+        127.0.0.1, so the request is refused.
+        """
+        name = hostname.lower().rstrip(".")
+        allowed = {a.lower() for a in self.settings.allow_hosts}
+        if "*" in allowed or name in allowed or name == self.settings.host.lower():
+            return True
+        if name == "localhost" or name.endswith(".localhost") or "." not in name.strip("[]:"):
+            return True
+        try:
+            ipaddress.ip_address(name.strip("[]"))
+        except ValueError:
+            return False
+        return True
+
+
+def parse_host(host_header: str, default_port: int) -> tuple[str, int] | None:
+    """``Host`` as (lower-case hostname, port), or None when it is malformed."""
+    raw = host_header.strip()
+    if not raw or any(c in raw for c in "/?#@ \\"):
+        return None
+    parts = urlsplit("//" + raw)
+    try:
+        port = parts.port
+    except ValueError:  # "127.0.0.1:abc", a port out of range
+        return None
+    if not parts.hostname:
+        return None
+    return parts.hostname.lower(), port or default_port
+
+
+def token_from(
+    headers: Mapping[str, str],
+    query: Mapping[str, str],
+    cookies: Mapping[str, str] | None = None,
+) -> str | None:
+    """The token of a request: ``?token=``, ``Authorization: Bearer …`` or the console's
+    cookie (set on the first load, so the token can leave the address bar)."""
     token = query.get("token")
     if token:
         return token
@@ -235,6 +349,8 @@ def token_from(headers: Mapping[str, str], query: Mapping[str, str]) -> str | No
     scheme, _, value = auth.partition(" ")
     if scheme.lower() == "bearer" and value.strip():
         return value.strip()
+    if cookies:
+        return cookies.get(TOKEN_COOKIE) or None
     return None
 
 
@@ -247,7 +363,7 @@ def require_role(security: Security, *roles: Role | str) -> Callable[..., Any]:
     wanted_set = set(wanted)
 
     async def dependency(request: Request) -> Role:
-        role = security.role_for(token_from(request.headers, request.query_params))
+        role = security.role_for(token_from(request.headers, request.query_params, request.cookies))
         if role is None:
             raise HTTPException(
                 status_code=401,

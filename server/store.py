@@ -11,11 +11,13 @@ commanded what" is exactly what must not be lost when something goes wrong.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sqlite3
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,6 +38,23 @@ CREATE TABLE IF NOT EXISTS audit (
 );
 CREATE INDEX IF NOT EXISTS audit_time ON audit(time);
 """
+# Added with the flight recorder: the id of the flight recording (GET /api/v1/flights) that
+# holds what happened around the row ("" when nothing was being recorded).
+RECORDING_COLUMN = "ALTER TABLE audit ADD COLUMN recording TEXT NOT NULL DEFAULT ''"
+
+
+log = logging.getLogger(__name__)
+
+
+def _text(value: str) -> str:
+    """``value`` storable as UTF-8: lone surrogates escaped (``\\ud800``). SQLite refuses
+    them with UnicodeEncodeError, which is not a sqlite3.Error: an utterance holding one flew
+    the drone and left no row (issue 14)."""
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        return value.encode("utf-8", "backslashreplace").decode("utf-8")
+    return value
 
 
 class AuditError(Exception):
@@ -55,6 +74,7 @@ class AuditEntry:
     action: str
     outcome: str
     state: str
+    recording: str = ""
 
 
 class AuditLog:
@@ -68,7 +88,10 @@ class AuditLog:
         """
         self.path = str(path)
         self._clock = clock
+        # Returns the flight recording's id for a new row (set by the runtime when recording).
+        self.recording: Callable[[], str] | None = None
         self._lock = threading.Lock()
+        self._writer: ThreadPoolExecutor | None = None  # append_later's one thread (in order)
         try:
             if self.path != ":memory:":
                 Path(self.path).parent.mkdir(parents=True, exist_ok=True)
@@ -79,6 +102,9 @@ class AuditLog:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.executescript(SCHEMA)
+            columns = {r[1] for r in self._db.execute("PRAGMA table_info(audit)")}
+            if "recording" not in columns:
+                self._db.execute(RECORDING_COLUMN)
         except (sqlite3.Error, OSError) as exc:
             raise AuditError(f"cannot open audit log {self.path}: {exc}") from exc
 
@@ -103,30 +129,50 @@ class AuditLog:
         """
         row = (
             self._clock() if now is None else now,
-            role,
-            source,
-            drone,
-            utterance,
+            _text(role),
+            _text(source),
+            _text(drone),
+            _text(utterance),
             confidence,
-            json.dumps(commands),
-            action,
-            outcome,
-            state,
+            _text(json.dumps(commands)),
+            _text(action),
+            _text(outcome),
+            _text(state),
+            self.recording() if self.recording is not None else "",
         )
         with self._lock:
             try:
                 cur = self._db.execute(
                     "INSERT INTO audit (time, role, source, drone, utterance, confidence,"
-                    " commands, action, outcome, state) VALUES (?,?,?,?,?,?,?,?,?,?)",
+                    " commands, action, outcome, state, recording)"
+                    " VALUES (?,?,?,?,?,?,?,?,?,?,?)",
                     row,
                 )
             except sqlite3.Error as exc:
                 raise AuditError(f"cannot write audit log {self.path}: {exc}") from exc
             return int(cur.lastrowid or 0)
 
+    def append_later(self, **entry: Any) -> Future[int]:
+        """:meth:`append` on the log's own writer thread, in call order; returns at once.
+
+        For callers on the event loop whose command must reach the drone before the fsync of
+        its audit row (a direct emergency or land: ``synchronous=FULL`` costs milliseconds,
+        tens under load, and the driver sends from the same loop). A failed write is logged.
+        """
+        with self._lock:
+            if self._writer is None:
+                self._writer = ThreadPoolExecutor(1, thread_name_prefix="audit")
+            writer = self._writer
+        fut = writer.submit(lambda: self.append(**entry))
+        fut.add_done_callback(_log_failure)
+        return fut
+
     def recent(self, limit: int = 50, drone: str | None = None) -> list[AuditEntry]:
         """The newest ``limit`` entries, newest first (optionally of one drone)."""
-        sql = "SELECT * FROM audit"
+        sql = (
+            "SELECT id, time, role, source, drone, utterance, confidence, commands, action,"
+            " outcome, state, recording FROM audit"
+        )
         args: tuple[Any, ...] = ()
         if drone is not None:
             sql += " WHERE drone = ?"
@@ -136,11 +182,21 @@ class AuditLog:
             rows = self._db.execute(sql, (*args, max(0, int(limit)))).fetchall()
         return [
             AuditEntry(
-                r[0], r[1], r[2], r[3], r[4], r[5], r[6], json.loads(r[7]), r[8], r[9], r[10]
+                r[0], r[1], r[2], r[3], r[4], r[5], r[6], json.loads(r[7]), r[8], r[9], r[10], r[11]
             )
             for r in rows
         ]
 
     def close(self) -> None:
+        """Finish pending :meth:`append_later` writes, then close the database."""
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.shutdown(wait=True)
         with self._lock:
             self._db.close()
+
+
+def _log_failure(fut: Future[int]) -> None:
+    exc = fut.exception()
+    if exc is not None:
+        log.error("audit log write failed: %s", exc)

@@ -91,6 +91,7 @@ class VehicleNode:
         heartbeat_timeout_s: float = 1.0,
         image_hz: float = 15.0,
         jpeg_quality: int = 80,
+        audit: Any = None,
     ) -> None:
         self.graph = graph
         self.vehicle = vehicle
@@ -118,6 +119,8 @@ class VehicleNode:
             }.items()
         }
         self._jogging = False
+        # server.store.AuditLog (or None): jogs and /ardrone/* commands are audited like buttons
+        self.audit = audit
         self._last_operator: float | None = None
         self._last_task: tuple[Any, ...] | None = None
         self._last_image_t = -math.inf
@@ -176,17 +179,43 @@ class VehicleNode:
         except (TypeError, ValueError, AttributeError) as exc:
             log.warning("%s: bad /cmd_vel %r: %s", self.name, msg, exc)
             return
-        self._jogging = any(v != 0.0 for v in vals)
+        jogging = any(v != 0.0 for v in vals)
+        if jogging != self._jogging:
+            what = "jog started " + "/".join(f"{v:+.2f}" for v in vals) if jogging else "jog ended"
+            self._audit("jog", what)
+        self._jogging = jogging
         self._last_operator = self.clock()
 
+    def _audit(self, action: str, outcome: str) -> None:
+        """One audit row for a topic command (start and end of a jog, /ardrone/*)."""
+        if self.audit is None:
+            return
+        try:
+            # On the log's writer thread: a jog or a landing never waits for the fsync.
+            write = getattr(self.audit, "append_later", self.audit.append)
+            write(
+                utterance="",
+                commands=[{"action": action}],
+                action="executed",
+                outcome=outcome,
+                role="pilot",  # only pilots may publish these topics (security.py)
+                source="topic",
+                drone=self.name,
+            )
+        except Exception as exc:  # an audit failure must never stop a jog or a landing
+            log.error("%s: audit log write failed: %s", self.name, exc)
+
     def _on_takeoff(self, _msg: dict[str, Any]) -> None:
+        self._audit("takeoff", "takeoff sent (/ardrone/takeoff)")
         self.tasks.cancel("take-off requested")
         self.vehicle.takeoff()
 
     def _on_land(self, _msg: dict[str, Any]) -> None:
         self.tasks.preempt("land")
+        self._audit("land", "land sent (/ardrone/land)")
 
     def _on_reset(self, _msg: dict[str, Any]) -> None:
+        self._audit("reset", "reset sent (/ardrone/reset)")
         self.tasks.cancel("reset requested")
         self.vehicle.reset()
 

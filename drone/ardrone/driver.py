@@ -31,12 +31,13 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from drone.ardrone import at
 from drone.ardrone.errors import DriverNotStartedError, NavdataError, VideoError
 from drone.ardrone.navdata import DroneState, Navdata, decode_navdata, navdata_init_datagram
+from drone.ardrone.plausibility import NavdataPlausibility, PlausibilityConfig
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +55,8 @@ class DriverConfig:
     init_retry_s: float = 0.5  # resend the navdata init datagram while nothing arrives
     config_retry_s: float = 0.5  # resend a CONFIG whose ACK bit has not appeared
     emergency_hold_s: float = 1.0  # keep the emergency bit this long if navdata never confirms
+    # sequence-jump and battery-slope checks on unauthenticated navdata (plausibility.py)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
 
 
 class LinkState(enum.Enum):
@@ -91,7 +94,8 @@ class LinkRestored:
 
 @dataclass(frozen=True)
 class NavdataRejected:
-    """A datagram on 5554 that did not decode (it is dropped; the link state is unchanged)."""
+    """A datagram on 5554 that did not decode, or failed a plausibility check (dropped, or its
+    battery held at the last plausible level; the link state is unchanged)."""
 
     now: float
     error: str
@@ -130,12 +134,15 @@ class DriverProtocol:
         self.encoder = at.ATEncoder()
         self.state = LinkState.IDLE
         self.latest: Navdata | None = None  # last navdata accepted
+        self.plausibility = NavdataPlausibility(self.options.plausibility)
         self.last_navdata_at: float | None = None
         self._ref = at.REF_BASE
         self._pcmd = at.Pcmd.hover()
         self._urgent = False  # the next datagram is due now (land / emergency)
         self._emergency_until: float | None = None  # holding the emergency bit until then
         self._emergency_target: bool | None = None  # EMERGENCY state we are waiting to see
+        self._sent_emergency_bit = False  # the last AT*REF sent had the emergency bit
+        self._edge_first = False  # send the bit cleared once before holding it again
         self._queue: deque[at.ATCommand] = deque()  # one-shot commands, FIFO
         self._comwdg = False
         self._pending_config: at.Config | None = None  # waiting for the ACK bit
@@ -254,6 +261,9 @@ class DriverProtocol:
         self._pcmd = at.Pcmd.hover()
         self._emergency_target = target
         self._emergency_until = math.inf  # set to now + hold on the first send
+        # The drone toggles on the bit's rising edge: if the last REF sent still had it (a reset
+        # right after the emergency was seen), one REF without it must go first.
+        self._edge_first = self._sent_emergency_bit
         self._urgent = True
 
     def _require_started(self) -> None:
@@ -280,12 +290,19 @@ class DriverProtocol:
         self._next_at = max(self._next_at + self.options.at_period_s, now)
         if self._next_at <= now:
             self._next_at = now + self.options.at_period_s
-        if self._emergency_until is not None:
+        ref = self._ref
+        if self._edge_first:
+            self._edge_first = False
+            ref &= ~at.REF_EMERGENCY_BIT
+            self._urgent = True  # the bit itself follows at once
+        elif self._emergency_until is not None:
             if self._emergency_until == math.inf:
                 self._emergency_until = now + self.options.emergency_hold_s
             elif now >= self._emergency_until:
                 self._release_emergency_bit()
-        commands: list[at.ATCommand] = [at.Ref(self._ref), self._pcmd]
+                ref = self._ref
+        self._sent_emergency_bit = bool(ref & at.REF_EMERGENCY_BIT)
+        commands: list[at.ATCommand] = [at.Ref(ref), self._pcmd]
         if self._comwdg:
             commands.append(at.Comwdg())
             self._comwdg = False
@@ -363,6 +380,16 @@ class DriverProtocol:
             and nav.sequence > 1
         ):
             return events
+        if prev is None or self.state is LinkState.LOST or nav.sequence <= 1:
+            self.plausibility.accept_sequence(nav.sequence, now)  # (re)start of a stream
+        # Navdata is unauthenticated: a forged packet must neither hijack the sequence nor
+        # fake a battery collapse (drone/ardrone/plausibility.py, issue 14).
+        verdict = self.plausibility.check(nav, now)
+        if verdict.reason is not None:
+            events.append(NavdataRejected(now, verdict.reason))
+        if verdict.navdata is None:
+            return events
+        nav = verdict.navdata
         was_lost = self.state is LinkState.LOST
         self.latest = nav
         self.last_navdata_at = now

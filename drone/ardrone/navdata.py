@@ -5,7 +5,10 @@ little-endian: ``u32 header 0x55667788, u32 drone state, u32 sequence, u32 visio
 option blocks ``u16 tag, u16 size (including these 4 bytes), payload``; the last option is the
 checksum (tag 0xFFFF, size 8, u32 = sum of every preceding byte, ``navdata_compute_cks``).
 
-Options decoded here: demo (tag 0, 148 bytes, ``navdata_demo_t``), GPS (tag 27, 216 bytes, the
+Options decoded here: demo (tag 0, 148 bytes, ``navdata_demo_t``), raw pressure (tag 21,
+18 bytes, ``navdata_pressure_raw_t``: i32 up, i16 ut, i32 Temperature_meas, i32 Pression_meas —
+the barometer's compensated temperature in 0.1 °C and pressure in Pa, which ardrone_autonomy
+copies into ``temp`` and ``pressure``), GPS (tag 27, 216 bytes, the
 firmware 2.4 layout used by ardrone_autonomy's ``gps`` branch: float64 latitude, longitude,
 elevation, hdop, u32 data_available, rest opaque) and the checksum. Unknown options are skipped
 by their size and kept raw so that encode(decode(x)) == x.
@@ -32,10 +35,12 @@ from drone.ardrone.errors import (
 
 NAVDATA_MAGIC = 0x55667788  # navdata_common.h NAVDATA_HEADER
 TAG_DEMO = 0  # navdata_keys.h NAVDATA_DEMO_TAG
+TAG_PRESSURE_RAW = 21  # navdata_keys.h NAVDATA_PRESSURE_RAW_TAG
 TAG_GPS = 27  # ardrone_autonomy gps branch, firmware 2.4.x
 TAG_CHECKSUM = 0xFFFF  # NAVDATA_CKS_TAG
 DEMO_SIZE = 148  # sizeof(navdata_demo_t)
 GPS_SIZE = 216
+PRESSURE_SIZE = 18  # sizeof(navdata_pressure_raw_t), packed
 CHECKSUM_SIZE = 8  # sizeof(navdata_cks_t)
 NAVDATA_PORT = 5554
 
@@ -46,6 +51,7 @@ _OPTION = struct.Struct("<HH")
 _DEMO = struct.Struct("<IIfffifffI")
 _DEMO_PAD = DEMO_SIZE - _OPTION.size - _DEMO.size  # 104 bytes of deprecated camera fields
 _GPS = struct.Struct("<ddddI")
+_PRESSURE = struct.Struct("<ihii")  # up, ut, Temperature_meas, Pression_meas
 _GPS_PAD = GPS_SIZE - _OPTION.size - _GPS.size
 _CKS = struct.Struct("<HHI")
 
@@ -143,6 +149,20 @@ class Gps:
 
 
 @dataclass(frozen=True)
+class PressureRaw:
+    """The barometer option (tag 21): raw ADC words and the compensated readings."""
+
+    up: int  # uncompensated pressure (ADC word)
+    ut: int  # uncompensated temperature (ADC word)
+    temperature_dc: int  # Temperature_meas, 0.1 °C
+    pressure_pa: int  # Pression_meas, Pa
+
+    @property
+    def temperature_c(self) -> float:
+        return self.temperature_dc / 10.0
+
+
+@dataclass(frozen=True)
 class BodyState:
     """Navdata in REP 103 terms (body FLU, radians, metres, m/s), as ardrone_autonomy converts."""
 
@@ -168,6 +188,7 @@ class Navdata:
     demo: Demo | None = None
     gps: Gps | None = None
     unknown: tuple[tuple[int, bytes], ...] = ()  # (tag, payload) of options this codec skips
+    pressure: PressureRaw | None = None  # tag 21, when general:navdata_options asks for it
     checksum: int = field(default=0, compare=False)  # as received; recomputed on encode
 
     @property
@@ -202,8 +223,9 @@ def ros_navdata_fields(nav: Navdata, tm_us: float = 0.0) -> dict[str, Any]:
     """The ``ardrone_autonomy/Navdata`` message fields (all but ``header``), converted exactly as
     ardrone_autonomy's ``ardrone_driver.cpp`` does: ``state`` = major control state, rotX = phi,
     rotY = −theta, rotZ = −psi (degrees), altd in mm, vx, vy = −vy, vz = −vz (mm/s), ``tm`` in µs.
-    Fields the demo option does not carry (magnetometer, pressure, wind, accelerations, motors,
-    tags) are zero/empty. A packet without demo option gives zeros and ``state`` 0 (unknown).
+    ``pressure`` (Pa) and ``temp`` (0.1 °C) come from the raw-pressure option when the packet
+    has one. Fields no decoded option carries (magnetometer, wind, accelerations, motors, tags)
+    are zero/empty. A packet without demo option gives zeros and ``state`` 0 (unknown).
     """
     d = nav.demo
     fields: dict[str, Any] = {
@@ -212,8 +234,8 @@ def ros_navdata_fields(nav: Navdata, tm_us: float = 0.0) -> dict[str, Any]:
         "magX": 0,
         "magY": 0,
         "magZ": 0,
-        "pressure": 0,
-        "temp": 0,
+        "pressure": nav.pressure.pressure_pa if nav.pressure else 0,
+        "temp": nav.pressure.temperature_dc if nav.pressure else 0,
         "wind_speed": 0.0,
         "wind_angle": 0.0,
         "wind_comp_angle": 0.0,
@@ -274,6 +296,10 @@ def encode_navdata(nav: Navdata) -> bytes:
             )
         )
         parts.append(bytes(_DEMO_PAD))
+    if nav.pressure is not None:
+        pr = nav.pressure
+        parts.append(_OPTION.pack(TAG_PRESSURE_RAW, PRESSURE_SIZE))
+        parts.append(_PRESSURE.pack(pr.up, pr.ut, pr.temperature_dc, pr.pressure_pa))
     if nav.gps is not None:
         g = nav.gps
         parts.append(_OPTION.pack(TAG_GPS, GPS_SIZE))
@@ -306,6 +332,7 @@ def decode_navdata(data: bytes) -> Navdata:
     _, state, sequence, vision = _HEADER.unpack_from(data, 0)
     demo: Demo | None = None
     gps: Gps | None = None
+    pressure: PressureRaw | None = None
     unknown: list[tuple[int, bytes]] = []
     offset = _HEADER.size
     while True:
@@ -330,6 +357,8 @@ def decode_navdata(data: bytes) -> Navdata:
             if size != DEMO_SIZE:
                 raise NavdataOptionSizeError(f"demo option has size {size}, expected {DEMO_SIZE}")
             demo = Demo(*_DEMO.unpack_from(data, offset + 4))
+        elif tag == TAG_PRESSURE_RAW and size == PRESSURE_SIZE:
+            pressure = PressureRaw(*_PRESSURE.unpack_from(data, offset + 4))
         elif tag == TAG_GPS and size == GPS_SIZE:
             gps = Gps(*_GPS.unpack_from(data, offset + 4))
         else:
@@ -345,6 +374,7 @@ def decode_navdata(data: bytes) -> Navdata:
         gps=gps,
         unknown=tuple(unknown),
         checksum=cks,
+        pressure=pressure,
     )
 
 

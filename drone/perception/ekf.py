@@ -7,9 +7,21 @@ State (filterpy notation; every symbol commented where it is used)::
 Predict (at the navdata rate, ~15 Hz demo / 200 Hz full): constant velocity, yaw integrated
 from the yaw rate the navdata gives (difference of successive psi); process noise is the
 discrete white-noise-acceleration model (Bar-Shalom, *Estimation with Applications to
-Tracking*, §6.3.3). Navdata update: z = [v_forward, v_left, v_up, altitude] with
-h(x) = [R(ψ)ᵀ v_xy, vz, pz] (ardrone_autonomy's body-frame velocities; altitude from
-ultrasound over a flat floor). Marker update: z = [px, py, pz, ψ] from one marker's PnP pose,
+Tracking*, §6.3.3). Its vertical acceleration level is the drone's own, not a smoothing knob:
+the onboard controller reaches ``control_vz_max`` (0.7 m/s indoor, 1 m/s outdoor) with a lag
+of ~0.25 s, so a climb-to-descent reversal accelerates at up to ~5 m/s²; σa,z = 3 m/s² covers
+it (a σ of 0.5 m/s² made every navdata packet of such a reversal an "outlier", issue 13 §1).
+Navdata update: z = [v_forward, v_left, v_up, altitude] with h(x) = [R(ψ)ᵀ v_xy, vz, pz]
+(ardrone_autonomy's body-frame velocities; altitude from ultrasound over a flat floor), fused
+component by component — planar velocity (2 dof), vertical speed (1), altitude (1) — each with
+its own gate, so one implausible component never drops the others (the ultrasound, the most
+trusted height source, is never locked out by a velocity jump). A component rejected
+``nav_reinit_after`` times in a row re-initialises that part of the state from navdata
+(counted in ``EkfStats.navdata_reinits``), and while a component keeps being rejected the
+estimate says so (:attr:`Estimate.disagreement`) for the ANS to tell the operator. A drone
+standing landed (``NavdataInput.landed``) gets no process noise: it cannot wander, so its pose
+stays as certain as when it touched down.
+Marker update: z = [px, py, pz, ψ] from one marker's PnP pose,
 H linear, R from ``markers.py`` (grows with distance and viewing angle).
 
 Numerics: Joseph-form covariance update P = (I−KH)P(I−KH)ᵀ + KRKᵀ (stays symmetric positive
@@ -44,6 +56,7 @@ from drone.perception.errors import EstimatorError
 NX = 7  # state size
 IX, IY, IZ, IYAW, IVX, IVY, IVZ = range(NX)
 CHI2_999 = {1: 10.83, 2: 13.82, 3: 16.27, 4: 18.47}  # χ² 99.9 % quantiles by dof
+NAV_COMPONENTS = ("velocity", "vertical speed", "altitude")  # navdata parts, gated one by one
 
 
 def wrap(a: float) -> float:
@@ -61,6 +74,7 @@ class NavdataInput:
     vz: float  # up m/s
     altitude_m: float  # ultrasound height over the floor
     yaw_rate: float  # CCW rad/s (from successive psi)
+    landed: bool = False  # on the floor with the motors off: the drone cannot move
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,6 +105,9 @@ class Estimate:
     P: np.ndarray = field(repr=False)  # 7×7 covariance (a private copy)
     localised: bool = False  # at least one marker fix has been accepted
     last_fix_t: float | None = None
+    # navdata components (NAV_COMPONENTS) the filter has rejected ``disagree_after`` times in a
+    # row: the estimate and the drone's own sensors disagree (ANS alert)
+    disagreement: tuple[str, ...] = ()
 
     @property
     def position_sigma_m(self) -> float:
@@ -110,13 +127,15 @@ class EkfConfig:
     """Noise levels (1-σ) and bookkeeping; defaults suit the AR.Drone 2.0 and its simulator."""
 
     accel_sigma_xy: float = 1.0  # m/s², white acceleration (process noise)
-    accel_sigma_z: float = 0.5  # m/s²
+    accel_sigma_z: float = 3.0  # m/s²: control_vz_max / vz lag ≈ 0.7 / 0.25 (module docstring)
     yaw_rate_sigma: float = 0.05  # rad/s, error of the navdata yaw rate
     vel_sigma: float = 0.08  # m/s, navdata optical-flow velocity noise
     vz_sigma: float = 0.08  # m/s
     alt_sigma: float = 0.03  # m, ultrasound
     history_s: float = 1.0  # how far back a late fix may reach
     reinit_after: int = 8  # consecutive rejected fixes before re-initialising from a fix
+    nav_reinit_after: int = 8  # consecutive rejections of a navdata component (~0.5 s at 15 Hz)
+    disagree_after: int = 3  # consecutive rejections before the estimate reports disagreement
     init_pos_sigma: float = 3.0  # m, before any fix
     init_yaw_sigma: float = math.pi  # rad, before any fix
 
@@ -130,6 +149,8 @@ class EkfStats:
     fixes_too_old: int = 0
     fixes_late: int = 0
     reinitialisations: int = 0
+    navdata_reinits: int = 0  # a navdata component re-initialised after persistent rejection
+    navdata_component_rejects: dict[str, int] = field(default_factory=dict)  # by component
     last_nis: float = 0.0  # normalised innovation squared of the last marker fix
 
 
@@ -141,6 +162,7 @@ class _Entry:
     omega: float  # yaw rate in force after this event
     nav: NavdataInput | None  # the navdata event that produced this entry
     fix: tuple[MarkerFix, np.ndarray] | None = None  # or the marker fix (and its R)
+    nav_rejects: dict[str, int] = field(default_factory=dict)  # rejections in a row, then
 
 
 def _finite(*vals: float) -> bool:
@@ -162,6 +184,7 @@ class ExtendedKalmanFilter:
         self.last_fix_t: float | None = None
         self.stats = EkfStats()
         self._rejects_in_row = 0
+        self._nav_rejects_in_row = dict.fromkeys(NAV_COMPONENTS, 0)
         self._history: deque[_Entry] = deque()
         self._lock = threading.Lock()
         self.latest = self._snapshot()
@@ -235,8 +258,16 @@ class ExtendedKalmanFilter:
                 self._publish()
 
     # -- filter equations ---------------------------------------------------------------------
-    def _predict(self, dt: float, omega: float) -> None:
+    def _predict(self, dt: float, omega: float, still: bool = False) -> None:
+        """Propagate by ``dt``; ``still``: the drone stands landed (no process noise at all —
+        a drone on the floor does not wander, so its pose stays as certain as when it landed,
+        and a later take-off needs no tag search to find itself again)."""
         c = self.cfg
+        if still:  # on the floor the velocity is known: zero, exactly (no noise to integrate)
+            vel = [IVX, IVY, IVZ]
+            self.x[vel] = 0.0
+            self.P[vel, :] = 0.0
+            self.P[:, vel] = 0.0
         # F: state transition Jacobian (constant velocity; yaw driven by the input ω)
         F = np.eye(NX)
         F[IX, IVX] = F[IY, IVY] = F[IZ, IVZ] = dt
@@ -254,6 +285,8 @@ class ExtendedKalmanFilter:
             Q[ip, iv] = Q[iv, ip] = q * dt**3 / 2
             Q[iv, iv] = q * dt**2
         Q[IYAW, IYAW] = (c.yaw_rate_sigma * dt) ** 2 + 1e-8 * dt  # ω error, plus a tiny floor
+        if still:
+            Q[:] = 0.0
         self.P = F @ self.P @ F.T + Q
 
     def _update(
@@ -274,27 +307,99 @@ class ExtendedKalmanFilter:
         return True, d2
 
     def _apply_navdata(self, nav: NavdataInput) -> bool:
+        """Predict to ``nav.t``, then fuse each navdata component under its own gate.
+
+        Returns False when any component was rejected (and not re-initialised).
+        """
         c = self.cfg
-        self._predict(nav.t - self.t, nav.yaw_rate)
+        self._predict(nav.t - self.t, nav.yaw_rate, still=nav.landed)
         self.t = nav.t
         self.omega = nav.yaw_rate
+        ok = True
+        # altitude first: the most trusted height source (ultrasound, σ ~ 3 cm)
+        ok &= self._nav_component("altitude", IZ, nav.altitude_m, c.alt_sigma**2, nav)
+        ok &= self._nav_component("vertical speed", IVZ, nav.vz, c.vz_sigma**2, nav)
         psi, vx, vy = self.x[IYAW], self.x[IVX], self.x[IVY]
         cs, sn = math.cos(psi), math.sin(psi)
-        # h(x): body-frame velocities (Rᵀ(ψ)·v), vertical speed, height
-        hx = np.array([cs * vx + sn * vy, -sn * vx + cs * vy, self.x[IVZ], self.x[IZ]])
-        H = np.zeros((4, NX))  # Jacobian ∂h/∂x
+        # h(x): body-frame velocities Rᵀ(ψ)·v, and its Jacobian ∂h/∂x
+        hx = np.array([cs * vx + sn * vy, -sn * vx + cs * vy])
+        H = np.zeros((2, NX))
         H[0, IYAW], H[0, IVX], H[0, IVY] = -sn * vx + cs * vy, cs, sn
         H[1, IYAW], H[1, IVX], H[1, IVY] = -cs * vx - sn * vy, -sn, cs
-        H[2, IVZ] = 1.0
-        H[3, IZ] = 1.0
-        z = np.array([nav.vx_body, nav.vy_body, nav.vz, nav.altitude_m])  # measurement
-        R = np.diag([c.vel_sigma**2, c.vel_sigma**2, c.vz_sigma**2, c.alt_sigma**2])
-        ok, _ = self._update(z - hx, H, R, gate=True)
+        y = np.array([nav.vx_body, nav.vy_body]) - hx
+        R = np.eye(2) * c.vel_sigma**2
+        ok &= self._nav_component("velocity", (y, H, R), 0.0, 0.0, nav)
         if ok:
             self.stats.navdata_updates += 1
-        else:  # e.g. the ultrasound jumps onto a table: keep the prediction
+        else:
             self.stats.navdata_rejected += 1
-        return ok
+        return bool(ok)
+
+    def _update_direct(self, i: int, z: float, r: float) -> bool:
+        """Gated update of a measurement of state ``i`` itself (H = eᵢ, scalar R = ``r``).
+
+        The general update specialised: S = Pᵢᵢ + r, K = P·eᵢ / S, and the Joseph form
+        (I−KH)P(I−KH)ᵀ + K r Kᵀ reduces exactly to P − S·K·Kᵀ (symmetric by construction);
+        no matrix inverse, a third of the cost of the general path.
+        """
+        y = z - self.x[i]
+        S = self.P[i, i] + r
+        if y * y / S > CHI2_999[1]:
+            return False
+        K = self.P[:, i] / S
+        self.x = self.x + K * y
+        self.x[IYAW] = wrap(self.x[IYAW])
+        self.P = self.P - S * np.outer(K, K)
+        self.P = (self.P + self.P.T) / 2
+        return True
+
+    def _nav_component(
+        self,
+        name: str,
+        which: int | tuple[np.ndarray, np.ndarray, np.ndarray],
+        z: float,
+        r: float,
+        nav: NavdataInput,
+    ) -> bool:
+        """Gated update of one navdata component; re-initialise it after persistent rejection.
+
+        A single implausible value (the ultrasound jumping onto a table, a glitch of the optical
+        flow) is gated out; ``nav_reinit_after`` in a row means the *estimate* is what is wrong
+        (navdata is the drone's own sensing), so that part of the state restarts from navdata.
+        """
+        if isinstance(which, int):  # a state measured directly (altitude, vertical speed)
+            ok = self._update_direct(which, z, r)
+        else:  # (innovation, Jacobian, R)
+            ok, _ = self._update(*which, gate=True)
+        if ok:
+            self._nav_rejects_in_row[name] = 0
+            return True
+        rejects = self.stats.navdata_component_rejects
+        rejects[name] = rejects.get(name, 0) + 1
+        self._nav_rejects_in_row[name] += 1
+        if self._nav_rejects_in_row[name] < self.cfg.nav_reinit_after:
+            return False
+        self._reinit_from_navdata(name, nav)
+        self._nav_rejects_in_row[name] = 0
+        self.stats.navdata_reinits += 1
+        return True
+
+    def _reinit_from_navdata(self, name: str, nav: NavdataInput) -> None:
+        c = self.cfg
+        if name == "altitude":  # height and vertical speed go together
+            idx, values, var = [IZ, IVZ], [nav.altitude_m, nav.vz], [c.alt_sigma, c.vz_sigma]
+        elif name == "vertical speed":
+            idx, values, var = [IVZ], [nav.vz], [c.vz_sigma]
+        else:
+            psi = self.x[IYAW]
+            cs, sn = math.cos(psi), math.sin(psi)
+            idx = [IVX, IVY]
+            values = [cs * nav.vx_body - sn * nav.vy_body, sn * nav.vx_body + cs * nav.vy_body]
+            var = [c.vel_sigma, c.vel_sigma]
+        self.x[idx] = values
+        self.P[idx, :] = 0.0
+        self.P[:, idx] = 0.0
+        self.P[idx, idx] = np.square(var)
 
     def _apply_fix(self, fix: MarkerFix, R: np.ndarray) -> bool:
         if fix.t > self.t:
@@ -343,6 +448,7 @@ class ExtendedKalmanFilter:
         base = self._history[i]
         later = list(self._history)[i + 1 :]
         self.x, self.P, self.t, self.omega = base.x.copy(), base.P.copy(), base.t, base.omega
+        self._nav_rejects_in_row = dict(base.nav_rejects)
         while len(self._history) > i + 1:
             self._history.pop()
         # Over [t_n, fix.t] the yaw turned at the rate the *next* navdata reports (its rate is
@@ -371,7 +477,17 @@ class ExtendedKalmanFilter:
     def _remember(
         self, nav: NavdataInput | None, fix: tuple[MarkerFix, np.ndarray] | None = None
     ) -> None:
-        self._history.append(_Entry(self.t, self.x.copy(), self.P.copy(), self.omega, nav, fix))
+        self._history.append(
+            _Entry(
+                self.t,
+                self.x.copy(),
+                self.P.copy(),
+                self.omega,
+                nav,
+                fix,
+                dict(self._nav_rejects_in_row),
+            )
+        )
         while self._history and self._history[0].t < self.t - self.cfg.history_s:
             self._history.popleft()
 
@@ -389,6 +505,9 @@ class ExtendedKalmanFilter:
             P=self.P.copy(),
             localised=self.localised,
             last_fix_t=self.last_fix_t,
+            disagreement=tuple(
+                n for n in NAV_COMPONENTS if self._nav_rejects_in_row[n] >= self.cfg.disagree_after
+            ),
         )
 
     def _publish(self) -> None:

@@ -12,7 +12,9 @@ It behaves as the drone does on the wire (Developer Guide SDK 2.0 §6–§7):
 * navdata (``receive_navdata_request`` then ``navdata_due``): bootstrap packets (state bit 11, no
   options) until ``general:navdata_demo`` is set; then demo + checksum at 15 Hz, or at 200 Hz when
   ``navdata_demo`` is FALSE; the GPS option (tag 27) only when ``general:navdata_options`` asks for
-  bit 27 and the world has a GPS origin.
+  bit 27 and the world has a GPS origin; the raw-pressure option (tag 21) only when it asks for
+  bit 21: the International Standard Atmosphere at the drone's height above sea level (the
+  world's GPS elevation, or sea level indoors), with the barometer's noise.
 
 Time: ``step(dt)`` advances the simulator clock ``time``; the ``now`` arguments are on that clock
 (the socket server and ``InMemoryLink`` pass ``sim.time``).
@@ -30,11 +32,13 @@ from drone.ardrone import at
 from drone.ardrone.errors import ATParseError
 from drone.ardrone.navdata import (
     TAG_GPS,
+    TAG_PRESSURE_RAW,
     CtrlState,
     Demo,
     DroneState,
     Gps,
     Navdata,
+    PressureRaw,
     encode_navdata,
 )
 from drone.sim.battery import Battery
@@ -65,6 +69,11 @@ class SimConfig:
     velocity_noise_m_s: float = 0.015  # optical-flow speed estimate
     attitude_noise_rad: float = 0.001
     wind_bit_m_s: float = 4.0  # "too much wind" state bit above this air speed
+    sea_level_pressure_pa: float = 101325.0  # ISA (ISO 2533)
+    # None: ISA's 15 °C at sea level less 6.5 °C/km outdoors; a heated room's 21 °C indoors
+    ground_temperature_c: float | None = None
+    pressure_noise_pa: float = 10.0  # Parrot's AR.Drone 2.0 spec: pressure sensor ±10 Pa
+    temperature_noise_c: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -139,6 +148,8 @@ class SimDrone:
         )
         self.gps_origin = getattr(world, "gps_origin", None)
         self.rng = np.random.default_rng(self.config.seed)
+        # its own stream: asking for the barometer does not change the other sensors' noise
+        self._baro_rng = np.random.default_rng([self.config.seed, TAG_PRESSURE_RAW])
         self.time = 0.0
         self.settings: dict[str, str] = {}
         self.rejected_at = 0  # malformed AT datagrams ignored
@@ -321,6 +332,9 @@ class SimDrone:
             sequence=self.navdata_sequence,
             demo=self._demo_option(),
             gps=self._gps_option() if self._navdata_options & (1 << TAG_GPS) else None,
+            pressure=(
+                self._pressure_option() if self._navdata_options & (1 << TAG_PRESSURE_RAW) else None
+            ),
         )
 
     def _demo_option(self) -> Demo:
@@ -346,6 +360,23 @@ class SimDrone:
             vz_mm_s=-(b.vz + n_vel[2]) * 1000.0 if moving else 0.0,  # drone: down positive
             num_frames=self.frames,
         )
+
+    def _pressure_option(self) -> PressureRaw:
+        """ISA barometric formula p = p0·(1 − L·h/T0)^(g·M/(R·L)) at the drone's height above
+        sea level (ISO 2533 troposphere: L 0.0065 K/m, T0 288.15 K, exponent 5.25588)."""
+        c, rng = self.config, self._baro_rng
+        elevation = self.gps_origin.alt_m if self.gps_origin is not None else 0.0
+        h = elevation + self.physics.body.z
+        p = c.sea_level_pressure_pa * (1.0 - 2.25577e-5 * h) ** 5.25588
+        if c.ground_temperature_c is not None:
+            temp = c.ground_temperature_c
+        elif self.world is not None and getattr(self.world, "indoor", False):
+            temp = 21.0
+        else:
+            temp = 15.0 - 0.0065 * h
+        p += rng.normal(0.0, c.pressure_noise_pa)
+        temp += rng.normal(0.0, c.temperature_noise_c)
+        return PressureRaw(up=0, ut=0, temperature_dc=round(temp * 10.0), pressure_pa=round(p))
 
     def _gps_option(self) -> Gps | None:
         o = self.gps_origin

@@ -232,6 +232,7 @@ class World:
     start: PlanarPose = PlanarPose(0.0, 0.0, 0.0, 0.0)
     surfaces: Surfaces = field(default_factory=Surfaces)
     source: str = ""
+    limits: Mapping[str, float] | None = None  # the file's ``limits:`` (drone.limits.limits_of)
 
     @property
     def indoor(self) -> bool:
@@ -339,6 +340,7 @@ class World:
                 "z": self.start.z,
                 "yaw_deg": math.degrees(self.start.yaw_rad),
             },
+            "limits": _limits_dict(self),
         }
 
     def to_json(self) -> str:
@@ -583,7 +585,8 @@ def parse_world(data: Any, source: str = "<memory>") -> World:
             kw["tile_m"] = c.num(sd["tile_m"], "surfaces.tile_m", lo=0.05, hi=100.0)
         surfaces = Surfaces(**kw)
 
-    return World(
+    limits = _parse_limits(c, d["limits"]) if d.get("limits") is not None else None
+    world = World(
         name=name,
         kind=kind,
         bounds=bounds,
@@ -595,7 +598,36 @@ def parse_world(data: Any, source: str = "<memory>") -> World:
         start=start,
         surfaces=surfaces,
         source=source,
+        limits=limits,
     )
+    from drone.limits import LimitsError, limits_of
+
+    try:
+        limits_of(world)
+    except LimitsError as exc:
+        raise c.fail("limits", str(exc)) from None
+    return world
+
+
+def _limits_dict(world: World) -> dict[str, Any]:
+    from drone.limits import limits_of
+
+    lim = limits_of(world)
+    return {
+        "ceiling_m": lim.ceiling_m,
+        "floor_m": lim.floor_m,
+        "wall_margin_m": lim.wall_margin_m,
+        "fence": {"x_min": lim.x_min, "x_max": lim.x_max, "y_min": lim.y_min, "y_max": lim.y_max},
+    }
+
+
+def _parse_limits(c: _Ctx, raw: Any) -> dict[str, float]:
+    d = c.mapping(raw, "limits")
+    known = ("ceiling_m", "floor_m", "wall_margin_m")
+    for key in d:
+        if key not in known:
+            raise c.fail(f"limits.{key}", f"unknown limit; known: {', '.join(known)}")
+    return {k: c.num(d[k], f"limits.{k}", lo=0.0) for k in known if k in d}
 
 
 def _enu_to_geo(origin: GeoPoint, pos: Vec3) -> GeoPoint:

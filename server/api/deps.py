@@ -8,6 +8,9 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request
 
 from server.runtime import DroneStack, Runtime
+from server.security import TOKEN_COOKIE
+
+REST_HOLDER = "rest"  # the lease holder id of REST callers after a take-over
 
 
 def get_runtime(request: Request) -> Runtime:
@@ -18,7 +21,7 @@ def _token_from(request: Request) -> str | None:
     auth = request.headers.get("authorization", "")
     if auth.lower().startswith("bearer "):
         return auth[7:].strip()
-    return request.query_params.get("token")
+    return request.query_params.get("token") or request.cookies.get(TOKEN_COOKIE)
 
 
 def caller_role(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]) -> str:
@@ -47,8 +50,9 @@ def check_lease(request: Request, runtime: Runtime, actions: set[str]) -> None:
     """A pilot on REST commands only while no other pilot holds the lease (DESIGN §5).
 
     Safety actions (land, emergency, hover) always get through. The holder itself (the console
-    page, whose rosbridge session holds the lease) names it in ``X-Pilot-Lease``.
-    ``?take_over=true`` takes the lease from its holder, who is told, and leaves it free.
+    page, whose rosbridge session holds the lease) names the holding's secret key (told only to
+    it by ``/console/lease``) in ``X-Pilot-Lease``. ``?take_over=true`` takes the lease from its
+    holder, who is told; REST then keeps it (the other pilot must take it back explicitly).
 
     Raises:
         HTTPException: 409 naming the holder and how to take over.
@@ -57,17 +61,16 @@ def check_lease(request: Request, runtime: Runtime, actions: set[str]) -> None:
         return
     lease = runtime.security.lease
     holder = lease.state.holder
-    if holder is None or request.headers.get("x-pilot-lease") == holder:
+    if holder is None or holder == REST_HOLDER:
+        return
+    if lease.key_matches(request.headers.get("x-pilot-lease")):
         return
     if request.query_params.get("take_over", "").lower() in ("1", "true", "yes"):
-        taker = f"rest:{request.client.host if request.client else 'unknown'}"
-        lease.acquire(taker, time.time(), take_over=True)
-        lease.release(taker)
+        lease.acquire(REST_HOLDER, time.time(), take_over=True)
         return
     raise HTTPException(
         status_code=409,
-        detail=f"another pilot ({holder}) holds the pilot lease; "
-        "repeat with ?take_over=true to take it over",
+        detail="another pilot holds the pilot lease; repeat with ?take_over=true to take it over",
     )
 
 
@@ -77,6 +80,20 @@ def role_by_method(request: Request, runtime: Annotated[Runtime, Depends(get_run
     if request.method not in ("GET", "HEAD", "OPTIONS"):
         return pilot_role(role)
     return role
+
+
+def fleet_access(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]) -> str:
+    """The fleet router's guard: reading needs any role; starting a mission needs a pilot and
+    the lease (409 otherwise); stopping one needs a pilot only (any pilot may stop)."""
+    role = role_by_method(request, runtime)
+    if request.method == "POST":
+        check_lease(request, runtime, {"mission"})
+    return role
+
+
+def lease_dep(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]) -> None:
+    """A dependency for commands that are not safety actions: the lease must be free or ours."""
+    check_lease(request, runtime, {"command"})
 
 
 def drone_stack(drone_id: str, runtime: Annotated[Runtime, Depends(get_runtime)]) -> DroneStack:
@@ -91,3 +108,4 @@ RuntimeDep = Annotated[Runtime, Depends(get_runtime)]
 RoleDep = Annotated[str, Depends(caller_role)]
 PilotDep = Annotated[str, Depends(pilot_role)]
 DroneDep = Annotated[DroneStack, Depends(drone_stack)]
+LeaseDep = Annotated[None, Depends(lease_dep)]

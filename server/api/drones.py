@@ -11,6 +11,7 @@ from fastapi.responses import StreamingResponse
 
 from server.api.deps import DroneDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import ActionResult, Describe
+from server.direct_actions import command_source, perform
 
 router = APIRouter(prefix="/drones", tags=["drones"])
 
@@ -41,16 +42,25 @@ async def describe(stack: DroneDep, runtime: RuntimeDep, _role: RoleDep) -> Desc
 
 
 @router.post("/{drone_id}/{action}", response_model=ActionResult)
-def act(
+async def act(
     action: Action, request: Request, stack: DroneDep, runtime: RuntimeDep, _role: PilotDep
 ) -> ActionResult:
     """Direct control; land and emergency reach the wire ahead of anything queued.
 
     Anything but land, emergency and hover needs the pilot lease to be free (409 otherwise).
+    A take-off the drone cannot do now is not sent: ``accepted: false`` and ``detail`` says why
+    and what to do. ``X-Command-Source`` (button, keyboard, map) is recorded in the audit log.
     """
     check_lease(request, runtime, {action})
-    detail = stack.direct(action)
-    return ActionResult(drone=stack.name, action=action, accepted=True, detail=detail)
+    out = perform(
+        stack,
+        runtime.dialogs.get(stack.name),
+        runtime.audit,
+        action,
+        source=command_source(request.headers.get("x-command-source")),
+        battery_low_pct=runtime.settings.battery_low_pct,
+    )
+    return ActionResult(drone=stack.name, action=action, accepted=out.accepted, detail=out.detail)
 
 
 @router.get("/{drone_id}/video.mjpg")

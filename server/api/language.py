@@ -6,6 +6,7 @@ from fastapi import APIRouter, HTTPException, Request
 
 from server.api.deps import PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import CommandRequest, CommandResponse, InterpretRequest, InterpretResponse
+from server.dialog.addressing import parse_address, recipients
 
 router = APIRouter(tags=["language"])
 
@@ -28,14 +29,29 @@ async def command(
 
     Needs the pilot lease to be free unless all it asks is land, emergency or hover (409).
     """
-    check_lease(request, runtime, {c["action"] for c in runtime.interpret(body.text, None)})
+    address = parse_address(body.text)
+    check_lease(request, runtime, {c["action"] for c in runtime.interpret(address.text, None)})
     name = body.drone or runtime.default_drone
-    dialog = runtime.dialogs.get(name)
-    if dialog is None:
+    if name not in runtime.dialogs:
         raise HTTPException(status_code=404, detail=f"no drone '{name}'")
+    # "uav2 take off", "all drones land": the sentence names its drones (issue 18).
+    targets = recipients(address, name, list(runtime.dialogs))
+    if not targets:
+        named = ", ".join(address.names or ())
+        raise HTTPException(
+            status_code=404,
+            detail=f"there is no drone {named} (drones here: {', '.join(runtime.dialogs)})",
+        )
     # A stated confidence means recognised speech: below the threshold it is not executed.
     source = "speech" if "confidence" in body.model_fields_set else "rest"
-    result = await dialog.handle_utterance(
-        body.text, confidence=body.confidence, source=source, role=role
+    results = [
+        await runtime.dialogs[t].handle_utterance(
+            body.text, confidence=body.confidence, source=source, role=role
+        )
+        for t in targets
+    ]
+    return CommandResponse(
+        reply=" ".join(r.reply for r in results),
+        commands=results[0].commands,
+        accepted=all(r.accepted for r in results),
     )
-    return CommandResponse(reply=result.reply, commands=result.commands, accepted=result.accepted)

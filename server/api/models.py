@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, Field
+
+from server.api.strict import StrictBody
+
+# Wind a simulator fault may blow: well beyond what an AR.Drone survives (Beaufort 11,
+# ~30 m/s), finite (issue 14: [1e308, 1e308] was accepted).
+MAX_WIND_MPS = 30.0
+WindComponent = Annotated[float, Field(ge=-MAX_WIND_MPS, le=MAX_WIND_MPS)]
 
 
-class InterpretRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class InterpretRequest(StrictBody):
     text: str = Field(max_length=2000)
     state: str | None = Field(default=None, description="dialog state whose grammars apply")
 
@@ -18,8 +24,7 @@ class InterpretResponse(BaseModel):
     commands: list[dict[str, Any]]
 
 
-class CommandRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class CommandRequest(StrictBody):
     text: str = Field(max_length=2000)
     confidence: float = Field(default=1.0, ge=0.0, le=1.0)
     drone: str | None = None
@@ -38,12 +43,11 @@ class Health(BaseModel):
     captioner: str = Field(description="'ready' or why scene description is unavailable")
 
 
-class FaultRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class FaultRequest(StrictBody):
     kind: Literal["link_loss", "battery", "wind", "clear"]
     duration_s: float | None = Field(default=None, ge=0, le=3600)
     battery_pct: float | None = Field(default=None, ge=0, le=100)
-    wind_mps: tuple[float, float] | None = None
+    wind_mps: tuple[WindComponent, WindComponent] | None = None
 
 
 class ActionResult(BaseModel):

@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter, HTTPException
 
-from server.api.deps import DroneDep, PilotDep, RoleDep
+from server.api.deps import DroneDep, LeaseDep, PilotDep, RoleDep
 from server.api.models import FaultRequest
 
 router = APIRouter(prefix="/sim", tags=["simulator"])
@@ -21,8 +21,10 @@ def truth(stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
 
 
 @router.post("/{drone_id}/fault")
-def fault(body: FaultRequest, stack: DroneDep, _role: PilotDep) -> dict[str, Any]:
-    """Inject a fault: link loss for a while, battery drained to a level, a wind gust, or clear."""
+def fault(body: FaultRequest, stack: DroneDep, _role: PilotDep, _lease: LeaseDep) -> dict[str, Any]:
+    """Inject a fault: link loss for a while, battery drained to a level, a wind gust, or clear.
+
+    Needs the pilot lease to be free or held by the caller (409 otherwise)."""
     if stack.sim is None:
         raise HTTPException(status_code=404, detail=f"{stack.name} is a real drone: no faults")
     try:

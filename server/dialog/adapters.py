@@ -22,7 +22,10 @@ class TaskManagerPort:
         self.tm = tm
 
     def submit(self, commands: Sequence[Mapping[str, Any]]) -> list[TaskDecision]:
-        return [TaskDecision(bool(d.accepted), str(d.reason)) for d in self.tm.submit(commands)]
+        return [
+            TaskDecision(bool(d.accepted), str(d.reason), bool(getattr(d, "question", False)))
+            for d in self.tm.submit(commands)
+        ]
 
     def cancel(self) -> None:
         self.tm.cancel()
@@ -47,7 +50,7 @@ class TaskManagerPort:
                 kind = "landing"
             elif kind == "searching":
                 kind = "marker_lost"
-            elif kind in ("cancelled", "preempted", "progress"):
+            elif kind in ("cancelled", "preempted"):
                 return
             callback(TaskEvent(kind, cmd, str(notice.text or "")))
             status = self.tm.status
@@ -67,6 +70,13 @@ class VehiclePort:
     def __init__(self, vehicle: Any, world: Any) -> None:
         self.vehicle = vehicle
         self._markers = frozenset(int(m.id) for m in getattr(world, "markers", ()))
+        self.bounds = getattr(world, "bounds", None)  # the geofence (server.dialog.monitors)
+        # the ANS altitude monitor watches the world's ceiling (drone/limits.py)
+        self.ceiling_m: float | None = None
+        if world is not None and hasattr(world, "bounds"):
+            from drone.limits import limits_of
+
+            self.ceiling_m = limits_of(world).ceiling_m
 
     def snapshot(self) -> VehicleSnapshot:
         s = self.vehicle.snapshot()
@@ -80,6 +90,15 @@ class VehiclePort:
             yaw_deg=math.degrees(float(s.yaw_rad)),
             visible_markers=tuple(int(m.id) for m in s.markers),
             ctrl_state=str(s.ctrl_state),
+            flight_mode=str(s.extra.get("flight_mode") or ""),
+            failsafe=str(s.extra.get("failsafe") or ""),
+            emergency=bool(s.emergency),
+            localised=bool(s.localised),
+            position_sigma_m=float(s.position_sigma_m),
+            battery_known=bool(getattr(s, "battery_known", True)),
+            estimator_disagreement=tuple(getattr(s, "estimator_disagreement", ())),
+            estimator_reinits=int(getattr(s, "estimator_reinits", 0)),
+            jog_limit=str(getattr(s, "jog_limit", "")),
         )
 
     def marker_ids(self) -> frozenset[int]:

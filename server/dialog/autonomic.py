@@ -36,6 +36,8 @@ class BatteryMonitor:
     _level: int = 0  # 0 ok, 1 low reported, 2 critical reported
 
     def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
+        if not snap.battery_known:
+            return None  # early navdata carries no battery reading: no alarm on a missing value
         b = snap.battery_pct
         if b > self.low_pct + self.hysteresis_pct:
             self._level = 0
@@ -67,6 +69,10 @@ class BatteryMonitor:
         return None
 
 
+# MAVLink flight modes in which the autopilot itself climbs, returns or lands (issue 16).
+AUTOPILOT_RETURN_MODES = ("AUTO.RTL", "AUTO.LAND", "RTL", "LAND", "SMART_RTL")
+
+
 @dataclass
 class AltitudeMonitor:
     """Above the ceiling: warn and descend back under it."""
@@ -86,6 +92,14 @@ class AltitudeMonitor:
             return None
         self._over = True
         down = round(snap.altitude_m - self.ceiling_m + self.margin_m, 2)
+        mode = snap.flight_mode
+        if mode in AUTOPILOT_RETURN_MODES:  # never fight an autopilot's own return or landing
+            return Alarm(
+                self.name,
+                "warn",
+                f"Altitude {snap.altitude_m:.1f} meters is above the ceiling of "
+                f"{self.ceiling_m:g} meters while the autopilot flies {mode}.",
+            )
         return Alarm(
             self.name,
             "warn",
@@ -106,6 +120,8 @@ class LinkMonitor:
     def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
         if not snap.link_ok and not self._lost:
             self._lost = True
+            if snap.failsafe:  # an autopilot (MAVLink): its own data-link failsafe acts (issue 16)
+                return Alarm(self.name, "alert", f"I lost the link to the drone. {snap.failsafe}.")
             return Alarm(
                 self.name, "alert", "I lost the link to the drone. It will hover on its own."
             )
@@ -117,7 +133,10 @@ class LinkMonitor:
 
 @dataclass
 class MarkersLostMonitor:
-    """While carrying out a task, no marker seen for ``after_s``: warn once."""
+    """While carrying out a task, no marker seen for ``after_s``: warn once; say when one is in
+    sight again. It never claims a search: whether to search is the task manager's decision
+    (it searches only when the estimate is no longer confident) and it says so itself, so the
+    monitor is silent outside EXECUTING (issue 13 item 8)."""
 
     after_s: float
     period_s: float = 0.5
@@ -126,15 +145,24 @@ class MarkersLostMonitor:
     _told: bool = False
 
     def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
-        if snap.visible_markers or state not in (State.EXECUTING, State.SEARCHING):
+        if state is not State.EXECUTING:
             self._since = None
             self._told = False
+            return None
+        if snap.visible_markers:
+            told, self._since, self._told = self._told, None, False
+            if told:
+                ids = ", ".join(str(m) for m in snap.visible_markers)
+                s = "s" if len(snap.visible_markers) > 1 else ""
+                return Alarm(self.name, "info", f"I can see marker{s} {ids} again.")
             return None
         if self._since is None:
             self._since = now
         if not self._told and now - self._since >= self.after_s:
             self._told = True
-            return Alarm(self.name, "warn", "I can no longer see any marker; searching.")
+            return Alarm(
+                self.name, "warn", "I can no longer see any marker; flying on my own estimate."
+            )
         return None
 
 
@@ -152,6 +180,13 @@ class Autonomic:
     monitors: Sequence[Any]
     _due: dict[str, float] = field(default_factory=dict)
     _heard: bool = False  # the drone has answered at least once
+
+    def __post_init__(self) -> None:
+        # Periods are kept by name: a second monitor of the same name would never run.
+        names = [m.name for m in self.monitors]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"ANS monitors need distinct names; repeated: {', '.join(dup)}")
 
     def step(self, snap: VehicleSnapshot, state: State, now: float) -> list[Alarm]:
         # Before the first navdata nothing is known (battery 0, link down): no false alarms.

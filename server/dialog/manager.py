@@ -16,7 +16,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from server.dialog import replies
+from server.dialog import assist, clarify, replies
+from server.dialog.addressing import parse_address, recipients
 from server.dialog.autonomic import (
     Alarm,
     AltitudeMonitor,
@@ -25,8 +26,19 @@ from server.dialog.autonomic import (
     LinkMonitor,
     MarkersLostMonitor,
 )
+from server.dialog.defaults import fill_defaults
 from server.dialog.errors import IllegalTransition
-from server.dialog.ports import DescribePort, TaskEvent, TaskPort, VehiclePort, VehicleSnapshot
+from server.dialog.monitors import extra_monitors
+from server.dialog.ports import (
+    DescribePort,
+    FleetPort,
+    TaskEvent,
+    TaskPort,
+    VehiclePort,
+    VehicleSnapshot,
+)
+from server.dialog.preflight import EMERGENCY_DOWN, DroneFacts, refusal
+from server.dialog.safety_monitors import EstimatorMonitor, JogLimitMonitor, ans_ceiling_m
 from server.dialog.states import MOTION, STATELESS, State, next_state
 from server.language.nlu import NLU, Interpretation, default_nlu
 from server.msgs import header
@@ -36,6 +48,10 @@ REPLY = "/console/reply"
 STATE = "/console/state"
 INTERPRET = "/console/interpret"
 PREEMPTING = ("emergency", "land", "hover")
+FLEET_ACTIONS = ("patrol_start", "patrol_stop")  # the whole fleet's, not this drone's state
+# Task-manager notices the operator hears (issue 13 item 8) and their levels; "failed" covers
+# a search that gave up.
+NOTICES = {"marker_lost": "warn", "marker_found": "info", "progress": "info"}
 
 
 class GraphLike(Protocol):
@@ -73,7 +89,7 @@ class DialogParams:
     confidence_threshold: float = 0.5
     battery_low_pct: float = 25.0
     battery_critical_pct: float = 12.0
-    altitude_ceiling_m: float = 2.8
+    altitude_ceiling_m: float | None = None  # None: the world's (VehiclePort.ceiling_m)
     ans_period_s: float = 0.5
     search_after_s: float = 1.5
 
@@ -106,9 +122,13 @@ class DialogManager:
         nlu: NLU | None = None,
         drone: str = "uav1",
         prefix: str = "",
+        fleet: FleetPort | None = None,
+        drones: Callable[[], list[str]] | None = None,
     ) -> None:
         """Args: ``prefix`` ("/uav2" in a fleet) goes before the state topic and the interpret
-        service; utterances carry a ``drone`` field and are filtered by ``drone``."""
+        service; utterances carry a ``drone`` field and are filtered by ``drone``, unless the
+        sentence names its drones ("uav2 land", "all drones land"); ``drones`` lists every
+        drone's name (for "there is no drone uav5")."""
         self.params = (
             params if isinstance(params, DialogParams) else DialogParams.from_settings(params)
         )
@@ -120,18 +140,28 @@ class DialogManager:
         self.clock = clock
         self.nlu = nlu or default_nlu()
         self.drone = drone
+        self.fleet = fleet
+        self.drones = drones or (lambda: [drone])
+        self._emergency_seen = False  # the drone's emergency bit seen since EMERGENCY began
         self.state_topic = f"{prefix}{STATE}"
         self.interpret_service = f"{prefix}{INTERPRET}"
         self._state = State.LANDED
+        self._question: clarify.Question | None = None  # "Which chair?" awaiting its answer
+        self._asked: dict[str, Any] | None = None
         self._pending: set[asyncio.Task[Any]] = set()
         self.replies: list[dict[str, Any]] = []  # every reply published (newest last), bounded
         p = self.params
         self.ans = Autonomic(
             [
                 BatteryMonitor(p.battery_low_pct, p.battery_critical_pct, period_s=p.ans_period_s),
-                AltitudeMonitor(p.altitude_ceiling_m, period_s=p.ans_period_s),
+                AltitudeMonitor(
+                    ans_ceiling_m(p.altitude_ceiling_m, vehicle_port), period_s=p.ans_period_s
+                ),
                 LinkMonitor(period_s=min(p.ans_period_s, 0.25)),
                 MarkersLostMonitor(p.search_after_s, period_s=p.ans_period_s),
+                *extra_monitors(vehicle_port, p.ans_period_s),
+                EstimatorMonitor(period_s=min(p.ans_period_s, 0.25)),
+                JogLimitMonitor(period_s=min(p.ans_period_s, 0.25)),
             ]
         )
         task_port.on_event(self._on_task_event)
@@ -182,6 +212,7 @@ class DialogManager:
         level: str = "info",
         utterance: str = "",
         commands: list[dict[str, Any]] | None = None,
+        alarm: str = "",
     ) -> None:
         msg = {
             "header": header(now=None),
@@ -190,6 +221,8 @@ class DialogManager:
             "speak": True,
             "utterance": utterance,
             "commands": json.dumps(commands or []),
+            "drone": self.drone,
+            "alarm": alarm,
         }
         self.replies.append(msg)
         del self.replies[:-200]
@@ -197,16 +230,35 @@ class DialogManager:
             self.graph.publish(REPLY, msg)
 
     def _log(self, **kw: Any) -> None:
-        if self.store is not None:
-            self.store.append(drone=self.drone, state=self._state.value, now=None, **kw)
+        if self.store is None:
+            return
+        row = {"drone": self.drone, "state": self._state.value, "now": None, **kw}
+        later = getattr(self.store, "append_later", None)
+        # A spoken stop must reach the wire before the fsync of its audit row: the driver sends
+        # from this loop (issue 18; bench/direct_actions.py measures the same for buttons).
+        if later is not None and any(c.get("action") in PREEMPTING for c in kw["commands"]):
+            later(**row)
+        else:
+            self.store.append(**row)
 
     # -- utterances ---------------------------------------------------------------------------
     def _on_utterance_msg(self, msg: Mapping[str, Any]) -> None:
         drone = str(msg.get("drone") or "")
-        if drone and drone != self.drone:
+        text = str(msg.get("text", ""))
+        address = parse_address(text)
+        if address.addressed:
+            selected = drone or self.drone
+            targets = recipients(address, selected, self.drones())
+            if self.drone not in targets:
+                if not targets and selected == self.drone:
+                    named = ", ".join(address.names or ())
+                    here = ", ".join(self.drones())
+                    self._reply(f"There is no drone {named}. Drones here: {here}.", "warn", text)
+                return
+        elif drone and drone != self.drone:
             return
         coro = self.handle_utterance(
-            str(msg.get("text", "")),
+            text,
             confidence=float(msg.get("confidence", 1.0) or 0.0),
             source=str(msg.get("source") or "speech"),
         )
@@ -226,10 +278,27 @@ class DialogManager:
     async def handle_utterance(
         self, text: str, confidence: float = 1.0, source: str = "text", role: str = "pilot"
     ) -> DialogResult:
-        """Interpret, check, execute and answer one utterance (also logged to the audit log)."""
+        """Interpret, check, execute and answer one utterance (also logged to the audit log:
+        an intent row before acting, the outcome after; issue 14).
+
+        A sentence that names its drone ("uav2, land") is answered with the drone's name; the
+        caller has already routed it here (``addressing.recipients``)."""
+        self._log(
+            utterance=text,
+            commands=[],
+            action="intent:utterance",
+            outcome="pending",
+            role=role,
+            source=source,
+            confidence=confidence,
+        )
         result, action = await self._handle(text, confidence, source, role)
         level = "info" if result.accepted else "warn"
-        self._reply(result.reply, level, text, result.commands)
+        said = result.reply
+        if parse_address(text).addressed and not said.startswith(f"{self.drone}:"):
+            said = f"{self.drone}: {said}"
+            result = DialogResult(said, result.commands, result.accepted)
+        self._reply(said, level, text, result.commands)
         self._log(
             utterance=text,
             commands=result.commands,
@@ -246,10 +315,13 @@ class DialogManager:
     ) -> tuple[DialogResult, str]:
         if source == "speech" and not confidence >= self.params.confidence_threshold:
             return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
-        interp: Interpretation = self.nlu.parse(text)
-        commands = interp.commands
+        interp: Interpretation = self.nlu.parse(parse_address(text).text)
+        commands = fill_defaults(interp.commands, self.vehicle.marker_ids())
         if not commands:
-            return DialogResult(replies.NOT_UNDERSTOOD, [], False), "not_understood"
+            if "minus" in interp.normalised.split():  # a signed number (nlu.py keeps the sign)
+                return DialogResult(replies.NEGATIVE_AMOUNT, [], False), "not_understood"
+            reply = assist.not_understood(text, self.nlu)
+            return DialogResult(reply, [], False), "not_understood"
         if interp.unparsed:
             part = " ".join(interp.unparsed)
             return DialogResult(
@@ -259,19 +331,42 @@ class DialogManager:
             ), "partly_understood"
         if role != "pilot" and any(c["action"] not in STATELESS for c in commands):
             return DialogResult(replies.OBSERVER, commands, False), "refused"
+        question, self._question = self._question, None
+        if clarify.is_answer(interp):
+            done = clarify.complete(question, interp, self.clock())
+            if isinstance(done, str):
+                self._question = question  # still waiting for a usable answer
+                return DialogResult(done, commands, False), "refused"
+            interp, commands = done, done.commands
+        else:
+            question = None  # any other sentence drops the question
         refusal = self._check(interp)
         if refusal is not None:
             return DialogResult(refusal, commands, False), "refused"
+        self._asked = None
         reply, ok = await self._execute(commands)
+        asked = next((i for i, p in enumerate(interp.parsed) if p.command == self._asked), None)
+        if asked is not None:
+            self._question = clarify.Question(interp.parsed, asked, self.clock())
+        elif not ok and question is not None:
+            self._question = question  # an answer that fits nothing: the question stands
         return DialogResult(reply, commands, ok), "executed" if ok else "refused"
 
     def _check(self, interp: Interpretation) -> str | None:
         """The reason to refuse the sentence, or None: each command in its predicted state."""
         state = self._state
         known = self.vehicle.marker_ids()
+        snap = self.vehicle.snapshot()
+        facts = DroneFacts(
+            snap.emergency, snap.battery_pct, snap.link_ok, snap.flying, snap.battery_known
+        )
         for p in interp.parsed:
             cmd = p.command
             action = cmd["action"]
+            # The drone's own state first: "Taking off." must never precede "reset it first".
+            why = refusal(action, facts, self.params.battery_low_pct)
+            if why is not None and state in (State.LANDED, State.EMERGENCY, State.LANDING):
+                return why
             active = self.nlu.grammar.active(state.value)
             if p.grammar not in active:
                 spec = self.nlu.grammar.states.get(state.value)
@@ -283,7 +378,7 @@ class DialogManager:
             for m in markers:
                 if known and m not in known:
                     return replies.unknown_marker(m)
-            if action in STATELESS:
+            if action in STATELESS or action in FLEET_ACTIONS:
                 continue
             try:
                 state = next_state(state, action)
@@ -297,12 +392,18 @@ class DialogManager:
         queue: list[dict[str, Any]] = []
         for i, cmd in enumerate(commands):
             action = cmd["action"]
-            if action == "query":
+            if action == "help":
+                said.append(assist.help_text(self._state))
+            elif action == "query":
                 item = cmd.get("item", "state")
                 said.append(replies.answer(item, self.vehicle.snapshot(), self._state))
             elif action == "describe":
                 said.append(await self._describe())
-            elif action == "cancel":
+            elif action in FLEET_ACTIONS and (
+                action == "patrol_start" or (self.fleet is not None and self.fleet.running())
+            ):
+                said.append(self._fleet_command(cmd))
+            elif action in ("cancel", "patrol_stop"):  # no fleet patrol: this drone's own
                 queue.clear()
                 self.tasks.cancel()
                 self._event("cancel")
@@ -319,11 +420,22 @@ class DialogManager:
         if queue:
             decisions = list(self.tasks.submit(list(queue)))
             refused = [d for d in decisions if not d.accepted]
+            asking = [c for c, d in zip(queue, decisions, strict=False) if d.question]
+            if asking:  # "Which chair? …": the next answer completes this command
+                self._asked = asking[0]
+                return next(d.reason for d in decisions if d.question), False
             if refused:
-                return refused[0].reason or "I cannot do that now.", False
+                return assist.operator_words(refused[0].reason or "I cannot do that now."), False
             for cmd in queue:
                 self._event(cmd["action"])
         return _merge(said), True
+
+    def _fleet_command(self, cmd: dict[str, Any]) -> str:
+        """Start or stop the Central patrol (the console's button does the same)."""
+        if self.fleet is None:
+            return "There is no fleet manager here to run a patrol."
+        reply = self.fleet.start() if cmd["action"] == "patrol_start" else self.fleet.stop()
+        return reply.text
 
     async def _describe(self) -> str:
         if self.describer is None:
@@ -343,12 +455,20 @@ class DialogManager:
         elif kind == "failed":
             why = f": {ev.detail}" if ev.detail else ""
             what = "the task" if ev.detail or not ev.command else replies.confirmation(ev.command)
+            if ev.command.get("action") == "search":
+                what = "the search"  # the search gave up (issue 13 item 8)
             self._reply(
                 f"I could not finish {what.lower()}{why}.",
                 "warn",
             )
+        elif kind == "landed" and ev.command.get("action") == "emergency":
+            self._reply(EMERGENCY_DOWN, "warn")
         elif kind == "landed":
             self._reply("Landed.")
+        elif kind in NOTICES and ev.detail:  # search started / marker found / leg reached
+            self._reply(
+                ev.detail + ("" if ev.detail.endswith((".", "?", "!")) else "."), NOTICES[kind]
+            )
         if kind == "started":
             action = str(ev.command.get("action", ""))
             if action in MOTION or action == "return_home":
@@ -366,7 +486,7 @@ class DialogManager:
             if alarm.action is not None:
                 self.tasks.preempt(alarm.action)
                 self._event(str(alarm.action["action"]))
-            self._reply(alarm.text, alarm.level)
+            self._reply(alarm.text, alarm.level, alarm=alarm.monitor)
             self._log(
                 utterance="",
                 commands=[dict(alarm.action)] if alarm.action else [],
@@ -386,12 +506,37 @@ class DialogManager:
         """
         if not snap.link_ok:
             return
+        if snap.emergency:
+            self._emergency_seen = True
+            self._set_state(State.EMERGENCY)
+            return
+        if self._state is State.EMERGENCY:
+            if self._emergency_seen:  # the drone left its emergency (Reset, or another client)
+                self._emergency_seen = False
+                self._set_state(State.LANDED)
+            return
         grounded = (State.LANDED, State.EMERGENCY)
         airborne = (State.AIRBORNE_IDLE, State.EXECUTING, State.SEARCHING, State.RETURNING)
         if snap.flying and self._state in grounded:
             self._set_state(State.AIRBORNE_IDLE)
         elif not snap.flying and self._state in airborne:
             self._set_state(State.LANDED)
+
+    def announce(self, text: str, level: str = "info") -> None:
+        """Say ``text`` to every console (a refusal of a button, an alert)."""
+        self._reply(text, level)
+
+    def note_direct(self, action: str) -> None:
+        """A button or REST call acted on the drone directly: follow it at once.
+
+        The snapshot would tell within an ANS period; the next sentence must not wait for it
+        (a typed "take off" right after EMERGENCY STOP is refused, not accepted).
+        """
+        if action == "reset" and self._state is State.EMERGENCY:
+            self._emergency_seen = False
+            self._set_state(State.LANDED)
+        elif action in ("emergency", "land", "hover"):
+            self._event(action)
 
     async def run(self, period_s: float | None = None) -> None:
         """Real-time ANS runner: step on absolute deadlines until cancelled."""
@@ -440,6 +585,7 @@ _CONFIRM_STARTS = (
     "Flying",
     "Patrolling",
     "Starting the patrol",
+    "Searching",
 )
 
 

@@ -26,6 +26,16 @@ class VehicleSnapshot:
     yaw_deg: float = 0.0
     visible_markers: tuple[int, ...] = ()
     ctrl_state: str = ""
+    # An autopilot's (MAVLink, issue 16): its flight mode, and what its failsafe does on link loss.
+    flight_mode: str = ""
+    failsafe: str = ""
+    emergency: bool = False  # navdata state bit 31: motors cut until a reset
+    localised: bool = True  # the EKF has had a marker fix
+    position_sigma_m: float = 0.0  # EKF 1-sigma position error
+    battery_known: bool = True  # False until navdata carries a battery reading
+    estimator_disagreement: tuple[str, ...] = ()  # navdata parts the EKF keeps rejecting
+    estimator_reinits: int = 0  # parts of the EKF state restarted from navdata so far
+    jog_limit: str = ""  # why the manual jog is being slowed or stopped ("" when it is not)
 
 
 @dataclass(frozen=True)
@@ -34,6 +44,7 @@ class TaskDecision:
 
     accepted: bool
     reason: str = ""
+    question: bool = False  # the reason is a question; the next answer fills the command
 
 
 @dataclass(frozen=True)
@@ -70,6 +81,24 @@ class VehiclePort(Protocol):
     def marker_ids(self) -> frozenset[int]:
         """Ids of the markers of the world (empty when unknown: then any id is accepted)."""
         ...
+
+
+class FleetReply(Protocol):
+    @property
+    def ok(self) -> bool: ...
+
+    @property
+    def text(self) -> str: ...
+
+
+class FleetPort(Protocol):
+    """The Central patrol (``server.fleet.central.CentralPatrol``): voice's way to the CTM."""
+
+    def start(self, threshold: float = ...) -> FleetReply: ...
+
+    def stop(self) -> FleetReply: ...
+
+    def running(self) -> list[str]: ...
 
 
 class DescribePort(Protocol):

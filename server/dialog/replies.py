@@ -10,6 +10,11 @@ from server.dialog.states import State, describe_state
 
 LOW_CONFIDENCE = "Sorry, I am not sure I heard that right. Could you repeat or rephrase?"
 NOT_UNDERSTOOD = "Sorry, I did not understand. Could you rephrase?"
+# A signed amount ("go forward -5 meters") is refused, never flown with its sign dropped.
+NEGATIVE_AMOUNT = (
+    "I do not fly negative distances or angles. Say the direction instead, "
+    "for example 'go back 5 meters'."
+)
 OBSERVER = "Only the pilot may command the drone."
 
 
@@ -31,7 +36,7 @@ def confirmation(cmd: Mapping[str, Any]) -> str:
     if a == "emergency":
         return "Emergency: cutting the motors"
     if a == "return_home":
-        return "Returning home"
+        return "Returning home to land there"
     if a == "cancel":
         return "Cancelled"
     if a == "move":
@@ -39,6 +44,11 @@ def confirmation(cmd: Mapping[str, Any]) -> str:
         verb = {"up": "Climbing", "down": "Descending"}.get(d, f"Moving {d}")
         dist = cmd.get("distance")
         return f"{verb} {_qty(dist, 'meter')}" if dist is not None else verb
+    if a in ("goto", "turn") and "object" in cmd and "marker" not in cmd:
+        what = object_words(cmd)
+        return f"Flying to {what}" if a == "goto" else f"Turning to face {what}"
+    if a == "search":
+        return "Searching for markers"
     if a == "turn":
         d, ang = cmd.get("direction"), cmd.get("angle")
         if d is None and ang == 180:
@@ -55,6 +65,12 @@ def confirmation(cmd: Mapping[str, Any]) -> str:
             f"Patrolling markers {join_and([str(m) for m in ms])}" if ms else "Starting the patrol"
         )
     return str(a)
+
+
+def object_words(cmd: Mapping[str, Any]) -> str:
+    """ "the red chair", "the nearest window", "the door" from a command's object slots."""
+    words = [str(cmd[k]) for k in ("which", "colour", "object") if cmd.get(k)]
+    return "the " + " ".join(words)
 
 
 def result(cmd: Mapping[str, Any]) -> str:

@@ -38,6 +38,7 @@ _FLYING_COMMON: dict[str, State] = {
     "failed": S.AIRBORNE_IDLE,
     "landing": S.LANDING,
     **{a: S.EXECUTING for a in MOTION},
+    "search": S.SEARCHING,  # tag search on request (issue 13 item 7)
 }
 
 TRANSITIONS: dict[State, dict[str, State]] = {
@@ -58,6 +59,7 @@ TRANSITIONS: dict[State, dict[str, State]] = {
         "hover": S.TAKING_OFF,
         "return_home": S.TAKING_OFF,
         **{a: S.TAKING_OFF for a in MOTION},  # queued behind the take-off
+        "search": S.TAKING_OFF,
     },
     S.AIRBORNE_IDLE: {**_FLYING_COMMON},
     S.EXECUTING: {**_FLYING_COMMON, "marker_lost": S.SEARCHING, "done": S.EXECUTING},
@@ -86,7 +88,7 @@ REASONS: dict[tuple[State, str], str] = {
     (S.LANDING, "hover"): "I am landing; tell me to take off again first.",
 }
 # Commands answered in place: never a transition.
-STATELESS = ("query", "describe")
+STATELESS = ("query", "describe", "help")
 
 
 def next_state(state: State, event: str) -> State:

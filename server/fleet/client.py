@@ -18,8 +18,10 @@ import contextlib
 import json
 import logging
 import os
+import ssl
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from server.fleet.errors import ClientError, FleetError
@@ -33,6 +35,7 @@ from server.fleet.messages import (
     STATUS_TYPE,
     LtmStatus,
 )
+from server.tls import TLSError, check_pinned, client_context
 
 log = logging.getLogger(__name__)
 
@@ -118,10 +121,18 @@ class VehicleClient:
         period_s: float = 0.05,
         step_tasks: Callable[[float], Any] | None = None,
         backoff_s: tuple[float, float] = (0.5, 5.0),
+        ca_file: Path | None = None,
+        fingerprint: str | None = None,
     ) -> None:
         if not url.startswith(("ws://", "wss://")):
             raise ClientError(f"--central must be a ws:// or wss:// URL, got {url!r}")
         self.url = url
+        # wss:// (issue 15): verify the central's certificate with a CA file or a pinned
+        # SHA-256 fingerprint; a wrong certificate stops the client with the reason.
+        self.fingerprint = fingerprint
+        self.ssl: ssl.SSLContext | None = (
+            client_context(ca_file, fingerprint) if url.startswith("wss://") else None
+        )
         self.core = BridgeClientCore(ltm)
         self.ltm = ltm
         self.token = token
@@ -153,7 +164,11 @@ class VehicleClient:
         headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
         while not stop.is_set():
             try:
-                async with connect(self.url, additional_headers=headers, max_size=None) as ws:
+                async with connect(
+                    self.url, additional_headers=headers, max_size=None, ssl=self.ssl
+                ) as ws:
+                    if self.ssl is not None and self.fingerprint is not None:
+                        check_pinned(ws.transport.get_extra_info("ssl_object"), self.fingerprint)
                     self._ws = ws
                     for frame in self.core.hello():
                         await ws.send(frame)
@@ -168,6 +183,13 @@ class VehicleClient:
                         t.cancel()
                         with contextlib.suppress(asyncio.CancelledError, Exception):
                             await t
+            except ssl.SSLCertVerificationError as exc:
+                raise ClientError(
+                    f"the central server's certificate is not trusted ({exc.verify_message}); "
+                    "give --ca FILE (its ca.pem) or --fingerprint SHA256 (printed by serve)"
+                ) from exc
+            except TLSError as exc:
+                raise ClientError(str(exc)) from exc
             except (OSError, InvalidHandshake, WebSocketException, TimeoutError) as exc:
                 log.warning("%s: central server unreachable (%s); retrying", self.ltm.name, exc)
             finally:
@@ -213,8 +235,9 @@ def vehicle_main(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     token = args.token or os.environ.get("UAVC_TOKEN")
     try:
-        asyncio.run(_vehicle(args.central, args.name, args.drone, args.world, token))
-    except FleetError as exc:
+        tls = (getattr(args, "ca", None), getattr(args, "fingerprint", None))
+        asyncio.run(_vehicle(args.central, args.name, args.drone, args.world, token, tls))
+    except (FleetError, TLSError) as exc:
         print(f"uav-console vehicle: {exc}", file=__import__("sys").stderr)
         return 2
     except KeyboardInterrupt:
@@ -222,7 +245,14 @@ def vehicle_main(args: argparse.Namespace) -> int:
     return 0
 
 
-async def _vehicle(central: str, name: str, drone: str, world_name: str, token: str | None) -> None:
+async def _vehicle(
+    central: str,
+    name: str,
+    drone: str,
+    world_name: str,
+    token: str | None,
+    tls: tuple[Path | None, str | None] = (None, None),
+) -> None:
     from drone.ardrone.driver import ARDroneDriver
     from drone.control.clock import MonotonicClock
     from drone.sim.server import SimServer, sim_endpoint
@@ -240,6 +270,11 @@ async def _vehicle(central: str, name: str, drone: str, world_name: str, token: 
         station = Enu(float(p[0]), float(p[1]), float(p[2]))
     else:
         station = Enu(world.start.x, world.start.y, 0.0)
+    from server.mavlink_stack import is_mavlink
+
+    if is_mavlink(drone):  # a PX4/ArduPilot drone (issue 16): tcp:…, udpin:…, sim-mavlink
+        await _mavlink_vehicle(central, name, drone, index, world, station, token)
+        return
     sim = None
     if drone == "sim":
         from server.settings import Settings
@@ -259,7 +294,15 @@ async def _vehicle(central: str, name: str, drone: str, world_name: str, token: 
     await vehicle.start(driver)
     tm = TaskManager(vehicle, world, clock)
     ltm = LocalTaskManager(name, vehicle, tm, station, origin=origin_of(world))
-    client = VehicleClient(central, ltm, token=token, clock=clock.now, step_tasks=tm.step)
+    client = VehicleClient(
+        central,
+        ltm,
+        token=token,
+        clock=clock.now,
+        step_tasks=tm.step,
+        ca_file=tls[0],
+        fingerprint=tls[1],
+    )
     try:
         await client.run()
     finally:
@@ -267,3 +310,26 @@ async def _vehicle(central: str, name: str, drone: str, world_name: str, token: 
         await driver.stop()
         if sim is not None:
             await sim.stop()
+
+
+async def _mavlink_vehicle(
+    central: str, name: str, drone: str, index: int, world: Any, station: Any, token: str | None
+) -> None:
+    """``vehicle --drone tcp:…``: a MAVLink drone's stack joining the central server."""
+    from server.fleet.geo import origin_of
+    from server.mavlink_stack import start_mavlink
+    from server.settings import Settings
+    from server.tasks.manager import TaskManager
+
+    parts = await start_mavlink(name, drone, index, world, Settings.from_env())
+    vehicle = parts.vehicle
+    tm = TaskManager(vehicle, world, vehicle.clock)
+    ltm = LocalTaskManager(name, vehicle, tm, station, origin=origin_of(world))
+    client = VehicleClient(central, ltm, token=token, clock=vehicle.clock.now, step_tasks=tm.step)
+    try:
+        await client.run()
+    finally:
+        await vehicle.stop(land=True)
+        await parts.driver.stop()
+        if parts.sim is not None:
+            await parts.sim.stop()

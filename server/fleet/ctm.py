@@ -20,14 +20,26 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from server.fleet.accuracy import GPS_ARRIVAL_RADIUS_M
+from server.fleet.continuity import (
+    CoverageTracker,
+    Join,
+    choose_join,
+    entry_on_leg,
+    owes_waypoints,
+    perimeter_m,
+)
 from server.fleet.errors import MissionError, NotFoundError
 from server.fleet.geo import Enu, Geo, to_enu, to_geo
 from server.fleet.messages import (
+    MAX_ROUTE_POINTS,
+    MISSION_NAME_PATTERN,
     FlightPlan,
     LtmStatus,
     Mission,
@@ -41,9 +53,15 @@ from server.fleet.planner import (
     lead_time_s,
     reserve_pct,
     should_dispatch,
+    transit_s,
 )
 
+ENTRY_GAIN_M = 1.0  # enter mid-leg only when that is at least this much nearer
 DRAIN_WINDOW_S = 60.0  # battery is reported in whole percent: estimate slope over a minute
+MARKER_STANDOFF_M = 1.0  # a marker-id waypoint lies this far in front of the marker (as "go to")
+
+
+RETURN_LAYER_M = 2.0  # drones fly home this far above the route (clear of the relief)
 
 
 @dataclass(frozen=True)
@@ -89,6 +107,12 @@ class MissionState:
     replacements: int = 0
     started_t: float | None = None
     state: str = "waiting"  # waiting (no drone yet), running, stopped
+    coverage: CoverageTracker | None = None  # live visits of the waypoints (continuity.py)
+    join: Join | None = None  # where the relief in flight joins the route
+    join_sent_t: float = 0.0  # when that relief was sent
+    relief_on_route_t: float | None = None  # when it reached the route (the handoff's time)
+    last_known: Enu | None = None  # the last position of an active drone that was lost
+    stopped_t: float | None = None
 
 
 class CentralTaskManager:
@@ -103,6 +127,11 @@ class CentralTaskManager:
         origin: GPS origin for lat/lon missions and status.
         world: for marker-id routes (``world.marker(id).position``).
         resend_s: a plan the LTM has not confirmed (status ``plan_id``) is sent again.
+        continuity: a relief joins where the patrolling drone is going next
+            (``server.fleet.continuity``); False: at the waypoint nearest its station (the
+            behaviour before, kept as the benchmark's baseline).
+        max_missions: missions held at once (stopped ones included until they expire).
+        stopped_keep_s: a stopped mission stays readable this long, then is forgotten.
     """
 
     def __init__(
@@ -115,6 +144,9 @@ class CentralTaskManager:
         origin: Geo | None = None,
         world: Any | None = None,
         resend_s: float = 3.0,
+        continuity: bool = True,
+        max_missions: int = 32,
+        stopped_keep_s: float = 600.0,
     ) -> None:
         self.model = model or FlightModel()
         self.stations = stations or StationModel()
@@ -123,6 +155,9 @@ class CentralTaskManager:
         self.origin = origin
         self.world = world
         self.resend_s = resend_s
+        self.continuity = continuity
+        self.max_missions = max_missions
+        self.stopped_keep_s = stopped_keep_s
         self.drones: dict[str, DroneRecord] = {}
         self.missions: dict[str, MissionState] = {}
         self.events: deque[tuple[float, str]] = deque(maxlen=200)
@@ -148,6 +183,9 @@ class CentralTaskManager:
                 rec.samples.popleft()
         else:
             rec.samples.clear()
+        ms = self.missions.get(rec.mission)
+        if ms is not None and ms.coverage is not None and ms.state != "stopped":
+            ms.coverage.observe(rec.name, status.position, status.flying, now)
 
     def on_plan_result(self, name: str, plan_id: int, ok: bool, reason: str, now: float) -> None:
         """An LTM's answer to a plan; a refusal or a transport failure is retried by ``step``."""
@@ -167,27 +205,62 @@ class CentralTaskManager:
         loop: bool = True,
         threshold: float = 0.30,
         mission_id: str | None = None,
+        headings_deg: Sequence[float] = (),
     ) -> Mission:
         """Hold a new patrol mission; drones are assigned at the next ``step``.
 
         Raises:
-            MissionError: an empty route, a threshold outside (0, 1), or a duplicate id.
+            MissionError: an empty route, a threshold outside (0, 1), a waypoint outside the
+                world's limits (fence, floor, ceiling), or a duplicate id.
         """
         if not route:
             raise MissionError("a mission needs at least one waypoint")
         if not 0.0 < threshold < 1.0:
             raise MissionError(f"handoff threshold must be in (0, 1), got {threshold}")
+        if len(route) > MAX_ROUTE_POINTS:
+            raise MissionError(f"a route has at most {MAX_ROUTE_POINTS} waypoints")
+        if mission_id is not None and not re.match(MISSION_NAME_PATTERN, mission_id):
+            raise MissionError(
+                "a mission name is 1-64 letters, digits, '_', '.' or '-', starting with a "
+                "letter or digit"
+            )
+        self.expire_stopped(now)
+        if len(self.missions) >= self.max_missions:
+            raise MissionError(
+                f"at most {self.max_missions} missions at once; stop one (stopped missions "
+                f"are forgotten {self.stopped_keep_s:g} s after they stop)"
+            )
+        self._check_limits(route)  # before an id is taken: a refused mission leaves no trace
         mid = mission_id or f"m{next(self._mission_ids)}"
+        while mission_id is None and mid in self.missions:
+            mid = f"m{next(self._mission_ids)}"
         if mid in self.missions:
             raise MissionError(f"mission {mid!r} exists")
         geo: tuple[tuple[float, float, float], ...] = ()
         if self.origin is not None:
             gs = [to_geo(p, self.origin) for p in route]
             geo = tuple((g.lat_deg, g.lon_deg, g.alt_m) for g in gs)
-        m = Mission(mid, tuple(route), loop, threshold, now, geo)
-        self.missions[mid] = MissionState(m)
+        if headings_deg and len(headings_deg) != len(route):
+            raise MissionError("give one heading per waypoint, or none")
+        m = Mission(mid, tuple(route), loop, threshold, now, geo, tuple(headings_deg))
+        self.missions[mid] = MissionState(m, coverage=CoverageTracker(tuple(route), now))
         self.event(now, f"mission {mid}: {len(route)} waypoints, handoff at {threshold:.0%}")
         return m
+
+    def _check_limits(self, route: Sequence[Enu]) -> None:
+        """Refuse up front a route outside the world's limits (fence, floor, ceiling): a mission
+        is never cut short in mid-air by a limit it was bound to meet (issue 13 §2). The return
+        layer (``RETURN_LAYER_M`` above the route) is kept under the ceiling by ``_send_home``
+        (in a room it is the ceiling itself)."""
+        if self.world is None or not hasattr(self.world, "bounds"):
+            return
+        from drone.limits import limits_of
+
+        lim = limits_of(self.world)
+        for k, p in enumerate(route):
+            why = lim.violation(p.x, p.y, p.z)
+            if why is not None:
+                raise MissionError(f"waypoint {k + 1}: {why}")
 
     def mission_from_request(self, req: MissionRequest, now: float) -> Mission:
         """Resolve a REST request (lat/lon/alt or marker ids) to map-frame waypoints.
@@ -207,10 +280,14 @@ class CentralTaskManager:
                 raise MissionError("no world is loaded to resolve marker ids")
             for mid in req.markers or ():
                 try:
-                    p = self.world.marker(mid).position
+                    marker = self.world.marker(mid)
                 except KeyError:
                     raise MissionError(f"unknown marker id {mid}") from None
-                route.append(Enu(float(p[0]), float(p[1]), req.altitude_m))
+                # In front of the marker, as "go to marker" flies (GotoMarkerTask.standoff_m):
+                # a marker hangs on a wall or a post, so its own position is not flyable (and
+                # lies outside the world's limits, issue 13).
+                p = marker.standoff(MARKER_STANDOFF_M)
+                route.append(Enu(float(p.x), float(p.y), req.altitude_m))
         return self.add_mission(
             route, now=now, loop=req.loop, threshold=req.handoff_threshold, mission_id=req.name
         )
@@ -224,6 +301,8 @@ class CentralTaskManager:
         ms = self.missions.get(mission_id)
         if ms is None:
             raise NotFoundError(f"no mission {mission_id!r}")
+        if ms.state != "stopped":
+            ms.stopped_t = now
         ms.state = "stopped"
         for name in (ms.active, ms.relief):
             if name is not None:
@@ -231,8 +310,16 @@ class CentralTaskManager:
         ms.active = ms.relief = None
         self.event(now, f"mission {mission_id} stopped")
 
-    def mission_info(self, mission_id: str) -> dict[str, Any]:
-        """The mission as ``GET /missions/{id}`` returns it.
+    def expire_stopped(self, now: float) -> None:
+        """Forget missions stopped more than ``stopped_keep_s`` ago."""
+        for mid, ms in list(self.missions.items()):
+            if ms.stopped_t is not None and now - ms.stopped_t > self.stopped_keep_s:
+                del self.missions[mid]
+                self.event(now, f"mission {mid} expired")
+
+    def mission_info(self, mission_id: str, now: float | None = None) -> dict[str, Any]:
+        """The mission as ``GET /missions/{id}`` returns it (``coverage`` when ``now`` is given:
+        time since each waypoint's last visit, the longest wait, revisits at each handoff).
 
         Raises:
             NotFoundError: no such mission.
@@ -252,6 +339,9 @@ class CentralTaskManager:
             "relief": ms.relief,
             "handoffs": ms.handoffs,
             "replacements": ms.replacements,
+            "coverage": (
+                ms.coverage.as_dict(now) if ms.coverage is not None and now is not None else None
+            ),
         }
 
     # ------------------------------------------------------------------ geometry
@@ -269,6 +359,7 @@ class CentralTaskManager:
     def step(self, now: float) -> list[Dispatch]:
         """Decide; returns the plans to send now."""
         self.decisions += 1
+        self.expire_stopped(now)
         out: list[Dispatch] = []
         for rec in self.drones.values():
             self._update_role(rec, now, out)
@@ -378,27 +469,42 @@ class CentralTaskManager:
                 why = self.drones[name].lost_reason
                 self.event(now, f"{name} failed on {m.id} ({why}); replacing it")
                 self.drones[name].mission = ""
+                lost = self.drones[name].status
+                if slot == "active" and lost is not None:
+                    ms.last_known = lost.position  # the replacement carries on from there
+                if ms.coverage is not None:
+                    ms.coverage.forget(name)
                 setattr(ms, slot, None)
                 ms.replacements += 1
         # relief on the route: hand over
         if ms.relief is not None:
             rr = self.drones[ms.relief]
             assert rr.status is not None
-            if self.on_route(rr.status.position, m):
+            if self.on_route(rr.status.position, m) and ms.relief_on_route_t is None:
+                ms.relief_on_route_t = now  # the relief covers the route from now on
+            if ms.relief_on_route_t is not None and not self._owed(ms, now):
+                took_over = ms.relief_on_route_t
                 old = ms.active
                 ms.active, ms.relief = ms.relief, None
                 rr.role = Role.PATROLLING
                 if ms.started_t is None:
                     ms.started_t = now
                     ms.state = "running"
+                joined_at = ms.join.index if ms.join is not None else -1
                 if old is not None:
                     ms.handoffs += 1
                     orec = self.drones[old]
                     b = orec.status.battery_pct if orec.status else float("nan")
                     self.event(now, f"handoff on {m.id}: {rr.name} relieves {old} ({b:.0f} %)")
                     self._send_home(orec, now, m, out)
+                    if ms.coverage is not None:
+                        ms.coverage.forget(old)
+                        ms.coverage.handoff(took_over, old, rr.name, joined_at, "handoff")
                 else:
                     self.event(now, f"{rr.name} patrolling {m.id}")
+                    if ms.last_known is not None and ms.coverage is not None:
+                        ms.coverage.handoff(took_over, "(lost)", rr.name, joined_at, "replacement")
+                ms.join, ms.last_known, ms.relief_on_route_t = None, None, None
         # the active drone must go home now (reserve), relief or not
         if ms.active is not None:
             ar = self.drones[ms.active]
@@ -417,20 +523,72 @@ class CentralTaskManager:
             if choice is None:
                 return
             rec, lead = choice
+            join = self._join(rec, ms) if self.continuity else None
+            if join is not None:
+                lead = join.relief_eta_s + self.model.margin_s
             if ms.active is not None:
                 ast = self.drones[ms.active].status
                 assert ast is not None
                 drain = self.drones[ms.active].drain_pct_s(self.model.drain_pct_s)
                 if not should_dispatch(ast.battery_pct, 100.0 * m.threshold, drain, lead):
                     return
-            self._dispatch(rec, ms, now, out)
+            self._dispatch(rec, ms, now, out, join)
+
+    def _join(self, rec: DroneRecord, ms: MissionState) -> Join:
+        """Where ``rec`` would join ``ms``'s route if dispatched now (continuity.py)."""
+        assert rec.status is not None
+        m = ms.mission
+        here = rec.status.position
+        eta = [self.model.takeoff_s + transit_s(here, wp, self.model) for wp in m.route]
+        active = None
+        if ms.active is not None:
+            st = self.drones[ms.active].status
+            active = st.position if st is not None else None
+        lap = ms.coverage.lap_s() if ms.coverage is not None else None
+        if lap is None:  # no lap seen yet: the model's speed plus a second's dwell a waypoint
+            lap = perimeter_m(m.route, m.loop) / self.model.speed_m_s + len(m.route)
+        join = choose_join(m.route, m.loop, eta, active, lap, last_known=ms.last_known)
+        if active is None and ms.last_known is not None:
+            # a replacement: enter on the lost drone's leg where it is nearest, then carry on
+            # from the waypoint the lost drone was flying to (the one that has waited longest)
+            q = entry_on_leg(m.route, m.loop, join.index, here)
+            if here.dist_xy(q) < here.dist_xy(m.route[join.index]) - ENTRY_GAIN_M:
+                t = self.model.takeoff_s + transit_s(here, q, self.model)
+                join = Join(join.index, t, None, q)
+        return join
+
+    def _owed(self, ms: MissionState, now: float) -> bool:
+        """Whether the patrolling drone still has waypoints to fly before the relief's join
+        (``continuity.owes_waypoints``): it goes on patrolling, the relief already on the
+        route, until it has flown them. Not past the time it was predicted to reach the join
+        plus the model's margin (a drone that stalls hands over anyway; one at its reserve
+        goes home regardless)."""
+        if ms.active is None or ms.join is None or ms.join.active_eta_s is None:
+            return False
+        st = self.drones[ms.active].status
+        if st is None or now - ms.join_sent_t > ms.join.active_eta_s + self.model.margin_s:
+            return False
+        cov = ms.coverage
+        visited = (
+            {k for k, v in enumerate(cov.visits) if v and v[-1] >= ms.join_sent_t}
+            if cov is not None
+            else set()
+        )
+        return owes_waypoints(ms.mission.route, ms.mission.loop, ms.join, st.position, visited)
 
     def _dispatch(
-        self, rec: DroneRecord, ms: MissionState, now: float, out: list[Dispatch]
+        self,
+        rec: DroneRecord,
+        ms: MissionState,
+        now: float,
+        out: list[Dispatch],
+        join: Join | None = None,
     ) -> None:
         assert rec.status is not None
         m = ms.mission
-        start = self.entry_index(rec.status.station, m.route)
+        start = join.index if join is not None else self.entry_index(rec.status.station, m.route)
+        ms.join = join if join is not None else Join(start, 0.0, None)
+        ms.join_sent_t, ms.relief_on_route_t = now, None
         plan = FlightPlan(
             next(self._plan_ids),
             PlanKind.PATROL,
@@ -439,11 +597,19 @@ class CentralTaskManager:
             loop=m.loop,
             start_index=start,
             cruise_z=m.altitude_m,
+            headings_deg=m.headings_deg,
+            join=join.point if join is not None else None,
+            # GPS-guided: the arrival radius comes from the GPS noise (server/fleet/accuracy.py)
+            tolerance_m=GPS_ARRIVAL_RADIUS_M if self.origin is not None else 1.0,
         )
         rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, Role.RELIEVING, m.id
         ms.relief = rec.name
         who = f"to relieve {ms.active}" if ms.active else "to patrol"
-        self.event(now, f"{rec.name} dispatched {who} on {m.id} ({rec.status.battery_pct:.0f} %)")
+        self.event(
+            now,
+            f"{rec.name} dispatched {who} on {m.id} ({rec.status.battery_pct:.0f} %), "
+            f"joining at waypoint {start + 1}",
+        )
         out.append(Dispatch(rec.name, plan))
 
     def _send_home(
@@ -455,6 +621,10 @@ class CentralTaskManager:
     ) -> None:
         # Return one layer above the route so it does not meet the relief climbing to it.
         z = (mission.altitude_m if mission else (rec.status.z if rec.status else 5.0)) + 2.0
+        if self.world is not None and hasattr(self.world, "bounds"):
+            from drone.limits import limits_of
+
+            z = min(z, limits_of(self.world).ceiling_m)  # a mission's layer was checked
         plan = FlightPlan(next(self._plan_ids), PlanKind.RETURN, cruise_z=max(z, 1.0))
         rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, Role.RETURNING, ""
         if out is not None:
@@ -486,6 +656,11 @@ class CentralTaskManager:
         header = {"stamp": stamp or {"sec": int(now), "nanosec": 0}, "frame_id": "map"}
         events = [f"{t:.1f} {text}" for t, text in list(self.events)[-20:]]
         return {"header": header, "drones": drones, "events": events}
+
+    def missions_status(self, now: float) -> list[dict[str, Any]]:
+        """Every mission not stopped, with live coverage (``/fleet/missions``)."""
+        live = [mid for mid, ms in self.missions.items() if ms.state != "stopped"]
+        return [self.mission_info(mid, now) for mid in live]
 
 
 def segment_distance(p: Enu, a: Enu, b: Enu) -> float:

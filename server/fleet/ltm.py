@@ -15,15 +15,17 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from server.fleet.accuracy import GPS_SIGMA_M
 from server.fleet.geo import Enu, Geo, to_enu, to_geo
 from server.fleet.messages import FlightPlan, LtmStatus, PlanKind
 from server.fleet.planner import FlightModel, reserve_pct
 
 ALTITUDE_MAX_MM = 20000  # control:altitude_max for outdoor flight (firmware default 3000 mm)
-# general:navdata_options: demo (tag 0) + GPS (tag 27, firmware 2.4 flight recorder)
-NAVDATA_OPTIONS = (1 << 0) | (1 << 27)
+# general:navdata_options: demo (tag 0) + raw pressure (tag 21, the barometer the console shows)
+# + GPS (tag 27, firmware 2.4 flight recorder); drone.vehicle.navdata_options asks the same
+NAVDATA_OPTIONS = (1 << 0) | (1 << 21) | (1 << 27)
 GPS_PERIOD_S = 1.0  # fuse one GPS fix a second (the flight recorder's rate)
-GPS_SIGMA_M = 1.5  # horizontal σ of a fix at HDOP 1 (consumer GPS, ~1.5 m UERE)
+# GPS_SIGMA_M: horizontal σ of a fix at HDOP 1 (server/fleet/accuracy.py)
 
 
 class LocalTaskManager:
@@ -145,11 +147,25 @@ class LocalTaskManager:
             if not s.flying:
                 cmds.append({"action": "takeoff"})
             n = len(plan.route)
-            order = [plan.route[(plan.start_index + k) % n] for k in range(n)]
+            idx = [(plan.start_index + k) % n for k in range(n)]
+            heads = plan.headings_deg
+            if plan.join is not None:  # enter the route here first, then go round from there
+                j = plan.join
+                cmds.append(
+                    {
+                        "action": "waypoints",
+                        "waypoints": [{"x": j.x, "y": j.y, "z": j.z}],
+                        "tolerance_m": plan.tolerance_m,
+                    }
+                )
             cmds.append(
                 {
                     "action": "waypoints",
-                    "waypoints": [{"x": p.x, "y": p.y, "z": p.z} for p in order],
+                    "waypoints": [
+                        {"x": plan.route[i].x, "y": plan.route[i].y, "z": plan.route[i].z}
+                        | ({"yaw_deg": heads[i]} if heads else {})
+                        for i in idx
+                    ],
                     "loop": plan.loop,
                     "tolerance_m": plan.tolerance_m,
                 }
@@ -164,6 +180,9 @@ class LocalTaskManager:
     def _home_commands(self, cruise_z: float, s: Any) -> list[dict[str, Any]]:
         st = self.station
         z = max(cruise_z, 1.0)
+        limits = getattr(self.vehicle, "limits", None)
+        if limits is not None:  # the world's ceiling (drone/limits.py), e.g. a room's 2.7 m
+            z = min(z, limits.ceiling_m)
         return [
             {
                 "action": "waypoints",

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
@@ -159,6 +159,12 @@ class FlightPlan:
     start_index: int = 0
     cruise_z: float = 5.0  # transit height to and from the station
     tolerance_m: float = 1.0  # waypoint arrival radius outdoors
+    # per waypoint, the heading to hold there (indoors: face the marker so the camera keeps
+    # localising); empty: face along the route
+    headings_deg: tuple[float, ...] = ()
+    # where to enter the route before waypoint ``start_index`` (a point of the route; None:
+    # straight to the waypoint); a replacement enters on the lost drone's leg, nearest its pad
+    join: Enu | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -170,6 +176,8 @@ class FlightPlan:
             "start_index": self.start_index,
             "cruise_z": self.cruise_z,
             "tolerance_m": self.tolerance_m,
+            **({"headings_deg": list(self.headings_deg)} if self.headings_deg else {}),
+            **({"join": {"x": j.x, "y": j.y, "z": j.z}} if (j := self.join) is not None else {}),
         }
 
     @classmethod
@@ -199,7 +207,14 @@ class FlightPlan:
         tol = _num(d, "tolerance_m", default=1.0)
         if tol <= 0:
             raise MessageError("field 'tolerance_m' must be > 0")
+        heads = d.get("headings_deg", [])
+        if not isinstance(heads, list) or (heads and len(heads) != len(route)):
+            raise MessageError("field 'headings_deg' must be a list with one heading a waypoint")
+        headings = tuple(_num({"h": h}, "h") for h in heads)
+        join = _point(d["join"], "join") if d.get("join") is not None else None
         return cls(
+            join=join,
+            headings_deg=headings,
             plan_id=pid,
             kind=kind,
             mission=_str(d, "mission", ""),
@@ -211,7 +226,15 @@ class FlightPlan:
         )
 
 
+# Bounds of a mission request (issue 14: a mission named "a/b" or 100 KB long could not be
+# stopped; routes and mission counts were unbounded). A name is a URL path segment.
+MISSION_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+MAX_ROUTE_POINTS = 200
+
+
 class GeoWaypoint(BaseModel):
+    model_config = ConfigDict(allow_inf_nan=False)
+
     lat: float = Field(ge=-90, le=90)
     lon: float = Field(ge=-180, le=180)
     alt: float | None = Field(default=None, description="metres above the ellipsoid")
@@ -220,12 +243,18 @@ class GeoWaypoint(BaseModel):
 class MissionRequest(BaseModel):
     """``POST /api/v1/missions``: a patrol route as lat/lon/alt waypoints or marker ids."""
 
-    waypoints: list[GeoWaypoint] | None = None
-    markers: list[int] | None = None
+    model_config = ConfigDict(allow_inf_nan=False)
+
+    waypoints: list[GeoWaypoint] | None = Field(default=None, max_length=MAX_ROUTE_POINTS)
+    markers: list[int] | None = Field(default=None, max_length=MAX_ROUTE_POINTS)
     altitude_m: float = Field(default=5.0, gt=0.3, le=100, description="height over the origin")
     loop: bool = True
     handoff_threshold: float = Field(default=0.30, gt=0.0, lt=1.0)
-    name: str | None = None
+    name: str | None = Field(
+        default=None,
+        pattern=MISSION_NAME_PATTERN,
+        description="1-64 letters, digits, '_', '.', '-' (it names the mission in URLs)",
+    )
 
     @model_validator(mode="after")
     def _one_route(self) -> MissionRequest:
@@ -245,6 +274,7 @@ class Mission:
     threshold: float = 0.30  # battery fraction at which the patrolling drone must leave
     created_t: float = 0.0
     geo: tuple[tuple[float, float, float], ...] = field(default=())
+    headings_deg: tuple[float, ...] = ()  # per waypoint (FlightPlan.headings_deg)
 
     @property
     def altitude_m(self) -> float:

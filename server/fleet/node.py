@@ -35,6 +35,9 @@ from server.msgs import stamp
 
 log = logging.getLogger(__name__)
 STATUS_SUFFIX = "/" + STATUS_TOPIC
+# Live missions with coverage (``std_msgs/String``, ``data`` = ``{"missions": [mission_info…]}``,
+# latched): time since each waypoint's last visit, longest wait, each handoff's revisit change.
+MISSIONS_TOPIC = "/fleet/missions"
 
 
 def status_topic(name: str) -> str:
@@ -71,6 +74,8 @@ class CtmNode:
         self._next_publish = 0.0
         self._wake = asyncio.Event()
         graph.advertise(FLEET_TOPIC, FLEET_TYPE, latch=True)
+        graph.advertise(MISSIONS_TOPIC, "std_msgs/String", latch=True)
+        self._had_missions = False
 
     def poke(self) -> None:
         """Decide now (a mission was added)."""
@@ -102,6 +107,10 @@ class CtmNode:
         if now >= self._next_publish:
             self._next_publish = now + self.publish_period_s
             self.graph.publish(FLEET_TOPIC, self.ctm.fleet_status(now, stamp()))
+            missions = self.ctm.missions_status(now)
+            if missions or self._had_missions:
+                self.graph.publish(MISSIONS_TOPIC, {"data": json.dumps({"missions": missions})})
+            self._had_missions = bool(missions)
 
     async def _send(self, name: str, plan: dict[str, Any], plan_id: int) -> None:
         try:

@@ -55,6 +55,8 @@ class PatrolConfig:
     lost_after_s: float = 3.0
     ctm_timeout_s: float = 15.0
     corridor_m: float = 2.5
+    continuity: bool = True  # relief joins where the patrolling drone goes next (continuity.py)
+    protocol: str = "ardrone"  # "mavlink": simulated PX4 quadrotors (issue 16)
 
 
 def _f(v: float | None) -> str:
@@ -133,6 +135,7 @@ class PatrolReport:
     handoffs: int
     replacements: int
     revisit_s: dict[str, dict[str, float | None]]
+    handoff_revisit: list[dict[str, Any]]  # per handoff: intervals straddling it (truth)
     battery_min: dict[str, float]
     bound: dict[str, Any]
     wall_s: float
@@ -161,6 +164,8 @@ class PatrolReport:
             "first_on_route_s": self.first_on_route_s,
             "gaps": [[round(a, 2), round(b, 2)] for a, b in self.gaps],
             "revisit_s": self.revisit_s,
+            "handoff_revisit": self.handoff_revisit,
+            "continuity": self.config.continuity,
             "battery_min_pct": {k: round(v, 1) for k, v in self.battery_min.items()},
             "bound": self.bound,
             "fail_at_s": self.config.fail_at_s,
@@ -264,14 +269,22 @@ class PatrolExperiment:
         self.world = load_world("outdoor")
         pads = station_positions(self.world, cfg.drones)
         yaw = self.world.start.yaw_rad
-        self.rig = LockstepRig(
-            self.world,
-            n_drones=cfg.drones,
-            seed=cfg.seed,
-            camera=False,
-            dt=cfg.dt,
-            starts=[(p.x, p.y, yaw) for p in pads],
-        )
+        self.rig: Any
+        if cfg.protocol == "mavlink":
+            from drone.mavlink.lockstep import MavlinkLockstepRig
+
+            self.rig = MavlinkLockstepRig(
+                self.world, cfg.drones, dt=cfg.dt, starts=[(p.x, p.y, yaw) for p in pads]
+            )
+        else:
+            self.rig = LockstepRig(
+                self.world,
+                n_drones=cfg.drones,
+                seed=cfg.seed,
+                camera=False,
+                dt=cfg.dt,
+                starts=[(p.x, p.y, yaw) for p in pads],
+            )
         flight = cfg.flight_time_s or FLIGHT_TIME_S
         for sim in self.rig.sims:
             sim.physics.battery.flight_time_s = flight
@@ -285,6 +298,7 @@ class PatrolExperiment:
             corridor_m=cfg.corridor_m,
             origin=self.origin,
             world=self.world,
+            continuity=cfg.continuity,
         )
         self.tasks = []
         self.ltms: list[LocalTaskManager] = []
@@ -431,6 +445,7 @@ class PatrolExperiment:
                 "max": round(max(d), 2) if d else None,
                 "visits": float(len(ts)),
             }
+        handoff_revisit = handoff_revisits(visits, self.ctm.missions[mission.id], t0)
         entry = route[self.ctm.entry_index(self.ltms[0].station, route)]
         bound = coverage_bound(
             self.ltms[0].station, entry, cfg.threshold, self.model, self.station_model
@@ -446,6 +461,7 @@ class PatrolExperiment:
             handoffs=ms.handoffs,
             replacements=ms.replacements,
             revisit_s=revisit,
+            handoff_revisit=handoff_revisit,
             battery_min={
                 n: min((r[4] for r in rows), default=float("nan")) for n, rows in tracks.items()
             },
@@ -456,6 +472,24 @@ class PatrolExperiment:
             tracks=tracks,
             route=[(p.x, p.y, p.z) for p in route],
         )
+
+
+def handoff_revisits(visits: dict[int, list[float]], ms: Any, t0: float) -> list[dict[str, Any]]:
+    """Per handoff (and replacement) of ``ms``: the true revisit intervals that straddle it,
+    against the median interval before it (the revisit-interval change a handoff costs)."""
+    from server.fleet.continuity import CoverageTracker
+
+    if ms.coverage is None:
+        return []
+    truth = CoverageTracker(ms.mission.route, t0)
+    for k, ts in visits.items():
+        truth.visits[k].extend(ts)
+    out = []
+    for h in ms.coverage.handoffs:
+        row: dict[str, Any] = {"t": round(h.t - t0, 1), "kind": h.kind, "join": h.join_index}
+        row.update(truth.straddling(h))
+        out.append(row)
+    return out
 
 
 def run_patrol(cfg: PatrolConfig) -> PatrolReport:
@@ -477,6 +511,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--dt", type=float, default=0.1, help="lockstep tick (s)")
     p.add_argument("--events", action="store_true", help="also print the CTM's event log")
+    p.add_argument("--protocol", choices=("ardrone", "mavlink"), default="ardrone")
     return p
 
 
@@ -497,6 +532,7 @@ def patrol_main(argv: Sequence[str]) -> int:
             charge_pct_s=args.charge_rate,
             fail_at_s=args.fail_at,
             fail_kind=args.fail_kind,
+            protocol=args.protocol,
         )
         exp = PatrolExperiment(cfg)
     except ValueError as exc:

@@ -37,16 +37,16 @@ def make_fleet_router(
         except MissionError as exc:
             raise HTTPException(status_code=422, detail=str(exc)) from exc
         changed()
-        return ctm.mission_info(m.id)
+        return ctm.mission_info(m.id, clock())
 
     @router.get("/missions")
     async def list_missions() -> list[dict[str, Any]]:
-        return [ctm.mission_info(mid) for mid in ctm.missions]
+        return [ctm.mission_info(mid, clock()) for mid in ctm.missions]
 
     @router.get("/missions/{mission_id}")
     async def get_mission(mission_id: str) -> dict[str, Any]:
         try:
-            return ctm.mission_info(mission_id)
+            return ctm.mission_info(mission_id, clock())
         except NotFoundError as exc:
             raise HTTPException(status_code=404, detail=str(exc)) from exc
 
@@ -58,7 +58,7 @@ def make_fleet_router(
         except NotFoundError as exc:
             raise HTTPException(status_code=404, detail=str(exc)) from exc
         changed()
-        return ctm.mission_info(mission_id)
+        return ctm.mission_info(mission_id, clock())
 
     @router.get("/fleet")
     async def fleet() -> dict[str, Any]:

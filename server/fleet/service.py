@@ -24,6 +24,7 @@ from typing import Any
 
 from fastapi import APIRouter, params
 
+from server.fleet.central import CentralPatrol, make_patrol_router
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import origin_of
 from server.fleet.ltm import LocalTaskManager
@@ -54,6 +55,8 @@ class FleetService:
             model=model, stations=stations, origin=origin_of(world), world=world
         )
         self.node = CtmNode(graph, self.ctm, clock=clock)
+        # the console's Central button and voice (start/stop the world's patrol)
+        self.central = CentralPatrol(self.ctm, world, clock=clock, on_change=self.node.poke)
         self.ltm_nodes: list[LtmNode] = []
         self.period_s = 1.0 / ltm_rate_hz
         self._task: asyncio.Task[None] | None = None
@@ -66,9 +69,11 @@ class FleetService:
         return ltm
 
     def router(self, dependencies: Sequence[params.Depends] | None = None) -> APIRouter:
-        return make_fleet_router(
+        router = make_fleet_router(
             self.ctm, clock=self.clock, dependencies=dependencies, on_change=self.node.poke
         )
+        router.include_router(make_patrol_router(self.central))
+        return router
 
     async def start(self) -> None:
         await self.node.start()

@@ -48,6 +48,7 @@ _NON_ASCII = re.compile(r"[^a-z0-9., ]+")
 _DIGIT_ALPHA = re.compile(r"(\d)(?!(?:st|nd|rd|th)\b)(?=[a-z])|(?<=[a-z])(?=\d)")
 _HAS_DIGIT = re.compile(r"\d")
 _NUMBER = re.compile(r"\d+(?:\.\d+)?")
+_SIGNED = re.compile(r"(?<![\w.])[-\u2212\u2013]\s*(?=\.?\d)")  # "-5", "− 5": a signed number
 _INT = re.compile(r"\d+")
 
 
@@ -122,6 +123,10 @@ class _Normaliser:
         s = text.lower().translate(_APOSTROPHES)
         s = self.rewrite.sub(lambda m: self.rewrite_map[m.group(0)], s)
         digits = _HAS_DIGIT.search(s) is not None
+        if digits and ("-" in s or "\u2212" in s or "\u2013" in s):
+            # A sign is kept as the word "minus", which no rule accepts: "go forward -5
+            # meters" used to lose its sign and fly forward (issue 14); now it is refused.
+            s = _SIGNED.sub(" minus ", s)
         if digits and "," in s:
             s = _DIGIT_COMMA.sub("", s)
         s = s.translate(_PUNCT_TABLE)

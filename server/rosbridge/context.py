@@ -59,6 +59,18 @@ class BridgeContext:
         stall_close_s: a client that has not read for this long while frames wait is closed
             with code 1008.
         auth_timeout_s: a connection without a token must send ``auth`` within this time.
+        preauth_max_bytes: the largest frame a connection may send before it authenticates
+            (an ``auth`` frame is ~100 bytes; issue 14: 16 MB frames before auth starved the
+            auth deadline, one PNG frame froze the loop).
+        offload_decode_bytes: frames at least this large are decoded in a worker thread, so
+            parsing them never holds the event loop the drones' safety shares.
+        max_calls_in_flight: concurrent ``call_service`` per connection (an observer flooding
+            ``/console/describe`` caused controller overruns); more get a failed response.
+        byte_rate_per_s / byte_burst: a token bucket of received bytes per connection, besides
+            the frame rate (a few huge frames are as heavy as many small ones).
+        max_connections_per_ip / max_connections_per_token: open WebSockets; beyond them a new
+            one is refused at the handshake (20 200 half-open connections exhausted the file
+            handles). Counts live in ``connections``.
     """
 
     graph: Graph
@@ -69,11 +81,21 @@ class BridgeContext:
     out_queue_bytes: int = 64 * 1024 * 1024
     stall_close_s: float = 10.0
     auth_timeout_s: float = 5.0
+    preauth_max_bytes: int = 4096
+    offload_decode_bytes: int = 64 * 1024
+    max_calls_in_flight: int = 8
+    byte_rate_per_s: float = 16 * 1024 * 1024
+    byte_burst: float = 64 * 1024 * 1024
+    max_connections_per_ip: int = 128
+    max_connections_per_token: int = 128
+    connections: collections.Counter[str] = field(default_factory=collections.Counter)
     clock: Callable[[], float] = time.monotonic
     wall_clock: Callable[[], float] = time.time
     json_cache: JsonCache = field(default_factory=JsonCache)
     # service type -> request field names in order, to map list ``args`` (rosapi fills this)
     request_fields: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    # intent/outcome rows for /ardrone/* commands (server.audit_trail.AuditTrail), if any
+    audit: Any = None
     _conn_ids: itertools.count[int] = field(default_factory=lambda: itertools.count(1))
 
     def new_owner(self, peer: str) -> str:

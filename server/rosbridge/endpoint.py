@@ -22,8 +22,9 @@ from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketState
 
 from server.rosbridge.context import BridgeContext
+from server.rosbridge.errors import BridgeError, FrameError
 from server.rosbridge.limits import OutQueue, TokenBucket
-from server.rosbridge.protocol import PROTOCOL_VERSION, BridgeProtocol
+from server.rosbridge.protocol import PROTOCOL_VERSION, BridgeProtocol, decode_payload
 from server.rosbridge.rosapi import register_rosapi
 from server.rosbridge.session import BridgeSession
 from server.security import LEASE_SERVICE, Role, token_from
@@ -38,6 +39,7 @@ __all__ = [
 
 CLOSE_POLICY = 1008  # RFC 6455 §7.4.1: policy violation (auth, Origin, rate, not reading)
 CLOSE_TOO_BIG = 1009  # RFC 6455 §7.4.1: message too big
+CLOSE_TRY_LATER = 1013  # IANA WebSocket close codes: try again later (connection caps)
 
 
 def server_version() -> str:
@@ -54,6 +56,7 @@ class _Connection:
         s = ctx.settings
         self.loop = asyncio.get_running_loop()
         self.protocol = BridgeProtocol(max_frame_bytes=s.max_frame_bytes)
+        self.protocol.authenticated = role is not None
         client = ws.client
         peer = f"{client.host}:{client.port}" if client else "?"
         self.out = OutQueue(ctx.out_queue_frames, ctx.out_queue_bytes)
@@ -70,6 +73,7 @@ class _Connection:
         )
         now = ctx.clock()
         self.bucket = TokenBucket(s.rate_limit_per_s, s.rate_burst, now)
+        self.byte_bucket = TokenBucket(ctx.byte_rate_per_s, ctx.byte_burst, now)
         self.limited = 0
         self.limited_since = now
         self.oversized = 0
@@ -85,8 +89,9 @@ class _Connection:
     def _pump(self) -> None:
         for frame in self.protocol.frames_to_send():
             self.out.push(frame)
-        if self.session.close_request and self.close_code is None:
-            self.close_code = self.session.close_request
+        request = self.session.close_request or self.protocol.close_request
+        if request and self.close_code is None:
+            self.close_code = request
         self.wake.set()
 
     def _close(self, code: int, reason: str) -> None:
@@ -102,6 +107,7 @@ class _Connection:
             await asyncio.wait({reader, writer, watchdog}, return_when=asyncio.FIRST_COMPLETED)
         finally:
             self.session.close()
+            self.out.clear()
             for t in (reader, writer, watchdog, *self.tasks):
                 t.cancel()
             for t in (reader, writer, watchdog):
@@ -126,6 +132,17 @@ class _Connection:
             text, data = message.get("text"), message.get("bytes")
             now = ctx.clock()
             size = len(text) if text is not None else len(data or b"")
+            if self.session.role is None and size > ctx.preauth_max_bytes:
+                # Nothing but a small auth frame before authenticating (issue 14): refused
+                # unread, and the connection closed.
+                self.protocol.send_status(
+                    "error",
+                    f"not authenticated: a frame of {size} bytes before auth (at most "
+                    f"{ctx.preauth_max_bytes} bytes until authenticated); closing",
+                )
+                self._pump()
+                self._close(CLOSE_POLICY, "large frame before authentication")
+                return
             if size > ctx.settings.max_frame_bytes:
                 self.oversized += 1
                 self.protocol.send_status(
@@ -137,7 +154,7 @@ class _Connection:
                 if self.oversized >= 2:
                     self._close(CLOSE_TOO_BIG, "frames over the size limit")
                 continue
-            if not self.bucket.take(now):
+            if not self.bucket.take(now) or not self.byte_bucket.take_n(now, size):
                 if now - self.limited_since > 1.0:  # within limits for a second: forgiven
                     self.limited = 0
                 self.limited_since = now
@@ -145,17 +162,24 @@ class _Connection:
                     self.protocol.send_status(
                         "error",
                         f"rate limit exceeded ({ctx.settings.rate_limit_per_s:g} frames/s, "
-                        f"burst {ctx.settings.rate_burst}); frames are being dropped",
+                        f"burst {ctx.settings.rate_burst}; {ctx.byte_rate_per_s:g} bytes/s, "
+                        f"burst {ctx.byte_burst:g}); frames are being dropped",
                     )
                     self._pump()
                 self.limited += 1
                 if self.limited > ctx.settings.rate_burst:
                     self._close(CLOSE_POLICY, "rate limit abused")
                 continue
-            if text is not None:
-                ops = self.protocol.receive_text(text, now)
+            payload: str | bytes = text if text is not None else (data or b"")
+            if size >= ctx.offload_decode_bytes:
+                # Parse big frames in a worker thread: json/cbor/zlib release the loop (and,
+                # between bytecodes, the GIL) so the drones' I/O and timers keep their pace.
+                decoded = await asyncio.to_thread(
+                    _decode_or_error, payload, ctx.settings.max_frame_bytes, self.protocol
+                )
+                ops = self.protocol.receive_decoded(decoded, ctx.clock())
             else:
-                ops = self.protocol.receive_bytes(data or b"", now)
+                ops = self.protocol.receive_frame(payload, now)
             for op in ops:
                 self.session.handle(op, now)
             self._pump()
@@ -195,6 +219,16 @@ class _Connection:
         return self._started + self.ctx.auth_timeout_s
 
 
+def _decode_or_error(payload: str | bytes, max_bytes: int, protocol: BridgeProtocol) -> Any:
+    """:func:`decode_payload`, with its error returned instead of raised (worker threads)."""
+    try:
+        return decode_payload(payload, max_bytes, expand_png=protocol.authenticated)
+    except BridgeError as err:
+        return err
+    except Exception as exc:  # defensive: a bug must cost one frame, not the connection
+        return FrameError(f"frame could not be handled: {type(exc).__name__}: {exc}")
+
+
 async def serve_rosbridge(websocket: WebSocket, ctx: BridgeContext) -> None:
     """Serve one rosbridge v2 connection until either side closes it."""
     loop = asyncio.get_running_loop()
@@ -204,17 +238,38 @@ async def serve_rosbridge(websocket: WebSocket, ctx: BridgeContext) -> None:
     if not ctx.security.origin_allowed(headers.get("origin"), headers.get("host")):
         await websocket.close(code=CLOSE_POLICY, reason="Origin not allowed")
         return
-    token = token_from(headers, websocket.query_params)
+    token = token_from(headers, websocket.query_params, websocket.cookies)
     role: Role | None = None
     if token is not None:
         role = ctx.security.role_for(token)
         if role is None:
             await websocket.close(code=CLOSE_POLICY, reason="invalid token")
             return
-    await websocket.accept()
-    conn = _Connection(websocket, ctx, role)
-    with contextlib.suppress(WebSocketDisconnect, ConnectionAbortedError, OSError):
-        await conn.run()
+    ip_key = "ip:" + (websocket.client.host if websocket.client else "?")
+    token_key = f"token:{role.value}" if role is not None else None
+    over = None
+    if ctx.connections[ip_key] >= ctx.max_connections_per_ip:
+        over = f"too many connections from this address (at most {ctx.max_connections_per_ip})"
+    elif token_key is not None and ctx.connections[token_key] >= ctx.max_connections_per_token:
+        over = f"too many connections with this token (at most {ctx.max_connections_per_token})"
+    if over is not None:
+        # Accepted only to say why (a refused handshake is a bare 403), then closed at once.
+        await websocket.accept()
+        await websocket.close(code=CLOSE_TRY_LATER, reason=over)
+        return
+    keys = [k for k in (ip_key, token_key) if k is not None]
+    for k in keys:
+        ctx.connections[k] += 1
+    try:
+        await websocket.accept()
+        conn = _Connection(websocket, ctx, role)
+        with contextlib.suppress(WebSocketDisconnect, ConnectionAbortedError, OSError):
+            await conn.run()
+    finally:
+        for k in keys:
+            ctx.connections[k] -= 1
+            if ctx.connections[k] <= 0:
+                del ctx.connections[k]
 
 
 def setup_graph(ctx: BridgeContext) -> None:
@@ -228,7 +283,8 @@ def setup_graph(ctx: BridgeContext) -> None:
             # Bridge clients are answered by their session (it knows who asks); this serves
             # internal callers, which only read the state.
             st = lease.state
-            return {"holder": st.holder or "", "held_by_me": False, "since": st.since or 0.0}
+            holder = lease.PUBLIC_NAME if st.holder else ""
+            return {"holder": holder, "held_by_me": False, "since": st.since or 0.0, "key": ""}
 
         ctx.graph.advertise_service(LEASE_SERVICE, "uav_console/Lease", lease_status)
 
@@ -266,7 +322,11 @@ async def serve_rosbridge_port(
     import uvicorn
     from fastapi import FastAPI
 
+    from server.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
+    from server.http_guard import HttpGuard
+
     app = FastAPI(title="uav-console rosbridge")
+    app.add_middleware(HttpGuard, security=ctx.security)
     app.include_router(make_router(ctx, root_ws=True))
     config = uvicorn.Config(
         app,
@@ -274,6 +334,8 @@ async def serve_rosbridge_port(
         port=port,
         log_level="warning",
         ws_max_size=4 * ctx.settings.max_frame_bytes,
+        http=guarded_h11(ConnectionLimits()),
+        timeout_keep_alive=KEEP_ALIVE_S,
         lifespan="off",
         timeout_graceful_shutdown=2,
     )

@@ -15,10 +15,14 @@ class TokenBucket:
         self.updated = now
 
     def take(self, now: float) -> bool:
+        return self.take_n(now, 1.0)
+
+    def take_n(self, now: float, n: float) -> bool:
+        """Take ``n`` tokens (e.g. bytes) if there are that many; True if taken."""
         self.tokens = min(self.burst, self.tokens + (now - self.updated) * self.rate)
         self.updated = now
-        if self.tokens >= 1.0:
-            self.tokens -= 1.0
+        if self.tokens >= n:
+            self.tokens -= n
             return True
         return False
 
@@ -47,6 +51,11 @@ class OutQueue:
         frame = self._q.popleft()
         self.bytes -= len(frame)
         return frame
+
+    def clear(self) -> None:
+        """Drop every waiting frame (the connection closed: free the memory now)."""
+        self._q.clear()
+        self.bytes = 0
 
     def __len__(self) -> int:
         return len(self._q)

@@ -17,18 +17,20 @@ import base64
 import binascii
 import itertools
 import json
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import cbor2
 
-from server.rosbridge import ops
+from server.rosbridge import cborraw, ops
 from server.rosbridge.encode import fragments, png_decode, png_frame
 from server.rosbridge.errors import (
     BridgeError,
     FrameError,
     FrameTooLarge,
+    NotAuthenticated,
     OpError,
     UnknownOp,
 )
@@ -41,6 +43,16 @@ COMPRESSIONS = ("none", "png", "cbor", "cbor-raw")
 LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
 DEFAULT_FRAGMENT_TIMEOUT_S = 600.0  # rosbridge_suite's defragmentation fragment_timeout
 MAX_FRAGMENT_BUFFERS = 16
+# Bounds of subscription parameters (issue 14). rosbridge_suite leaves them open; these are far
+# beyond what a console or roslibjs asks (defaults 0 / none) and keep one client from making the
+# server do per-message work out of proportion: four observers with fragment_size 1 on the
+# camera cost 8 link losses; a queue_length of 2**63 was accepted.
+MIN_FRAGMENT_SIZE = 1024  # characters of data per fragment
+MAX_QUEUE_LENGTH = 1000  # messages (also advertise's queue_size)
+MAX_THROTTLE_RATE_MS = 3_600_000  # one hour
+MAX_SERVICE_TIMEOUT_S = 3600.0
+# Before ``auth`` a connection may send only these ops (and only small frames: the endpoint).
+PREAUTH_OPS = frozenset({"auth", "status", "set_level"})
 
 
 @dataclass
@@ -55,7 +67,12 @@ def _frame_id(obj: dict[str, Any]) -> str | None:
     raw = obj.get("id")
     if raw is None:
         return None
-    return raw if isinstance(raw, str) else json.dumps(raw)
+    if isinstance(raw, str):
+        return raw
+    try:
+        return json.dumps(raw)
+    except (TypeError, ValueError):  # CBOR bytes, simple values, tags (found by bench/fuzz.py)
+        return repr(raw)[:200]
 
 
 class BridgeProtocol:
@@ -74,38 +91,39 @@ class BridgeProtocol:
         self._fragments: dict[str, _FragmentBuffer] = {}
         self._frag_ids = itertools.count(1)
         self.rejected = 0
+        # False until the connection authenticates: only PREAUTH_OPS are decoded further (no
+        # png inflation, no fragment buffers for a client without a token).
+        self.authenticated = True
+        self.close_request: tuple[int, str] | None = None
 
     # -- input ----------------------------------------------------------------------------
     def receive_text(self, text: str, now: float) -> list[ops.Op]:
         """Decode one text frame; rejected frames queue a status error and yield no op."""
+        return self.receive_frame(text, now)
+
+    def receive_bytes(self, data: bytes, now: float) -> list[ops.Op]:
+        """Decode one binary frame: a CBOR-encoded op object (as a client may send)."""
+        return self.receive_frame(data, now)
+
+    def receive_frame(self, payload: str | bytes, now: float) -> list[ops.Op]:
+        """Decode one frame (text: JSON, binary: CBOR) and apply it; never raises."""
         try:
-            if len(text) > self.max_frame_bytes:
-                raise FrameTooLarge(
-                    f"frame of {len(text)} bytes exceeds the limit of {self.max_frame_bytes} bytes"
-                )
-            try:
-                obj = json.loads(text)
-            except (ValueError, RecursionError) as exc:
-                raise FrameError(f"invalid JSON: {exc}") from exc
-            return self._receive_obj(obj, now, depth=0)
+            obj = decode_payload(payload, self.max_frame_bytes, expand_png=self.authenticated)
         except BridgeError as err:
             self.reject(err)
             return []
         except Exception as exc:  # defensive: a bug must cost one frame, not the connection
             self.reject(FrameError(f"frame could not be handled: {type(exc).__name__}: {exc}"))
             return []
+        return self.receive_decoded(obj, now)
 
-    def receive_bytes(self, data: bytes, now: float) -> list[ops.Op]:
-        """Decode one binary frame: a CBOR-encoded op object (as a client may send)."""
+    def receive_decoded(self, obj: Any, now: float) -> list[ops.Op]:
+        """Apply a frame already decoded by :func:`decode_payload` (maybe in a worker thread,
+        so a large frame never holds the event loop); a :class:`BridgeError` in its place (the
+        decoding failed) is answered like any rejected frame. Never raises."""
         try:
-            if len(data) > self.max_frame_bytes:
-                raise FrameTooLarge(
-                    f"frame of {len(data)} bytes exceeds the limit of {self.max_frame_bytes} bytes"
-                )
-            try:
-                obj = cbor2.loads(data)
-            except Exception as exc:
-                raise FrameError(f"binary frames must hold one CBOR object: {exc}") from exc
+            if isinstance(obj, BridgeError):
+                raise obj
             return self._receive_obj(obj, now, depth=0)
         except BridgeError as err:
             self.reject(err)
@@ -123,6 +141,14 @@ class BridgeProtocol:
             raise FrameError("frame has no 'op' field", id=fid)
         if not isinstance(op, str):
             raise FrameError("'op' must be a string", id=fid)
+        if not self.authenticated and op not in PREAUTH_OPS:
+            self.close_request = (1008, "not authenticated")
+            raise NotAuthenticated(
+                f"not authenticated: {op!r} refused; connect with ?token=… or an Authorization "
+                'bearer header, or send {"op": "auth", "token": …} first',
+                id=fid,
+                op=op,
+            )
         if op == "fragment":
             text = self._defragment(obj, fid, now)
             if text is None:
@@ -139,6 +165,11 @@ class BridgeProtocol:
         if parser is None:
             raise UnknownOp(f"unknown op {op!r}", id=fid, op=op)
         return [parser(obj, op, fid)]
+
+    def close(self) -> None:
+        """Free what this connection buffered (fragments, unsent frames): on close."""
+        self._fragments.clear()
+        self._out.clear()
 
     def _nested(self, text: str, now: float, depth: int) -> list[ops.Op]:
         if depth > 2:
@@ -228,6 +259,12 @@ class BridgeProtocol:
         if compression == "cbor":
             body = {"op": "publish", "topic": topic, "msg": to_cbor_value(type_name, msg)}
             return [cbor2.dumps(body)]
+        if compression == "cbor-raw":
+            try:
+                return [cborraw.publish_frame(topic, type_name or "", msg)]
+            except cborraw.Ros1Error as exc:
+                err = {"op": "status", "level": "error", "msg": f"publish {topic}: {exc}"}
+                return [json.dumps(err)]
         text = '{"op":"publish","topic":' + json.dumps(topic) + ',"msg":' + msg_json + "}"
         return self._wrap(text, compression, fragment_size)
 
@@ -269,6 +306,47 @@ class BridgeProtocol:
     def frames_to_send(self) -> list[str | bytes]:
         out, self._out = self._out, []
         return out
+
+
+# -- decoding (pure; safe to run in a worker thread) --------------------------------------
+def decode_payload(payload: str | bytes, max_frame_bytes: int, *, expand_png: bool = True) -> Any:
+    """The object one frame holds: JSON for text, CBOR for binary; a top-level ``png`` op is
+    inflated and parsed too (when ``expand_png``), so all the heavy work of a frame happens
+    here. Pure and thread-safe: the endpoint runs it off the event loop for large frames.
+
+    Raises:
+        FrameTooLarge: over ``max_frame_bytes``.
+        FrameError: not JSON / CBOR.
+        OpError: a ``png`` whose data cannot be decoded.
+    """
+    if len(payload) > max_frame_bytes:
+        raise FrameTooLarge(
+            f"frame of {len(payload)} bytes exceeds the limit of {max_frame_bytes} bytes"
+        )
+    if isinstance(payload, str):
+        try:
+            obj = json.loads(payload)
+        except (ValueError, RecursionError) as exc:
+            raise FrameError(f"invalid JSON: {exc}") from exc
+    else:
+        try:
+            obj = cbor2.loads(payload)
+        except Exception as exc:
+            raise FrameError(f"binary frames must hold one CBOR object: {exc}") from exc
+    if expand_png and isinstance(obj, dict) and obj.get("op") == "png":
+        fid = _frame_id(obj)
+        data = _field(obj, "png", fid, "data", str, required=True)
+        try:
+            text = png_decode(base64.b64decode(data, validate=True), max_frame_bytes)
+        except (ValueError, binascii.Error) as exc:
+            raise OpError(f"png: cannot decode data: {exc}", id=fid, op="png") from exc
+        try:
+            obj = json.loads(text.rstrip("\n"))
+        except (ValueError, RecursionError) as exc:
+            raise FrameError(f"reassembled frame is not valid JSON: {exc}", id=fid) from exc
+        if isinstance(obj, dict) and obj.get("op") in ("png", "fragment"):
+            raise FrameError("png frames may not hold another png or fragment", id=fid)
+    return obj
 
 
 # -- field parsing ------------------------------------------------------------------------
@@ -320,14 +398,17 @@ def _int_field(
     required: bool = False,
     default: int | None = None,
     minimum: int = 0,
+    maximum: int | None = None,
 ) -> int | None:
     value = _field(obj, op, fid, name, (int, float), required=required)
     if value is None:
         return default
-    if isinstance(value, float) and not value.is_integer():
+    if isinstance(value, float) and not value.is_integer():  # also NaN and ±inf
         raise OpError(f"{op}: field '{name}' must be an integer", id=fid, op=op)
     if value < minimum:
         raise OpError(f"{op}: field '{name}' must be at least {minimum}", id=fid, op=op)
+    if maximum is not None and value > maximum:
+        raise OpError(f"{op}: field '{name}' must be at most {maximum}", id=fid, op=op)
     return int(value)
 
 
@@ -351,7 +432,7 @@ def _compression(obj: dict[str, Any], op: str, fid: str | None) -> str:
 
 
 def _fragment_size(obj: dict[str, Any], op: str, fid: str | None) -> int | None:
-    return _int_field(obj, op, fid, "fragment_size", minimum=1)
+    return _int_field(obj, op, fid, "fragment_size", minimum=MIN_FRAGMENT_SIZE)
 
 
 def _bool(obj: dict[str, Any], op: str, fid: str | None, name: str, default: bool) -> bool:
@@ -364,7 +445,8 @@ def _p_advertise(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
         type=_type(obj, op, fid, required=True) or "",
         id=fid,
         latch=_bool(obj, op, fid, "latch", False),
-        queue_size=_int_field(obj, op, fid, "queue_size", default=100) or 100,
+        queue_size=_int_field(obj, op, fid, "queue_size", default=100, maximum=MAX_QUEUE_LENGTH)
+        or 100,
     )
 
 
@@ -386,8 +468,12 @@ def _p_subscribe(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
         topic=_name(obj, op, fid, "topic"),
         id=fid,
         type=_type(obj, op, fid, required=False),
-        throttle_rate_ms=_int_field(obj, op, fid, "throttle_rate", default=0) or 0,
-        queue_length=_int_field(obj, op, fid, "queue_length", default=0) or 0,
+        throttle_rate_ms=_int_field(
+            obj, op, fid, "throttle_rate", default=0, maximum=MAX_THROTTLE_RATE_MS
+        )
+        or 0,
+        queue_length=_int_field(obj, op, fid, "queue_length", default=0, maximum=MAX_QUEUE_LENGTH)
+        or 0,
         fragment_size=_fragment_size(obj, op, fid),
         compression=_compression(obj, op, fid),
     )
@@ -399,6 +485,12 @@ def _p_unsubscribe(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
 
 def _p_call_service(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
     timeout = _field(obj, op, fid, "timeout", (int, float))
+    if timeout is not None and not math.isfinite(timeout):
+        raise OpError(f"{op}: field 'timeout' must be a finite number of seconds", id=fid, op=op)
+    if timeout is not None and timeout > MAX_SERVICE_TIMEOUT_S:
+        raise OpError(
+            f"{op}: field 'timeout' must be at most {MAX_SERVICE_TIMEOUT_S:g} s", id=fid, op=op
+        )
     if timeout is not None and timeout <= 0:
         timeout = None  # roslibjs: a non-positive timeout means none
     return ops.CallService(

@@ -17,6 +17,8 @@ from typing import Any
 
 from server import msgs
 from server.graph import Graph, canonical
+from server.ros1 import definition as ros1_definition
+from server.ros1 import has_definition
 from server.rosbridge.values import normalise_type
 
 Handler = Callable[[dict[str, Any]], Awaitable[dict[str, Any]]]
@@ -92,7 +94,17 @@ def typedefs(type_name: str) -> list[dict[str, Any]]:
 
 
 def full_text(type_name: str) -> str:
-    """The ``gendeps --cat`` style definition of a type (rosapi ``topics_and_raw_types``)."""
+    """The ``gendeps --cat`` style definition of a type (rosapi ``topics_and_raw_types``).
+
+    ROS 1 definitions (``server.ros1``: ``time`` stamps, ``Header`` with ``seq``), which is what
+    ``cbor-raw`` serialises and the recorder writes; "" for a type with no definition.
+    """
+    if has_definition(type_name):
+        return ros1_definition(type_name)
+    return _legacy_full_text(type_name)
+
+
+def _legacy_full_text(type_name: str) -> str:
     parts: list[str] = []
     for td in typedefs(type_name):
         lines = [

@@ -11,14 +11,16 @@ from __future__ import annotations
 import asyncio
 import itertools
 import json
+import re
 from collections.abc import Callable, Coroutine
 from typing import Any
 
 from server import graph as g
-from server.rosbridge import ops
+from server.rosbridge import cborraw, ops
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.errors import (
     BridgeError,
+    LimitError,
     MessageError,
     NotAuthenticated,
     NotFoundError,
@@ -31,6 +33,10 @@ from server.rosbridge.values import check_message, is_known_type, to_json_text
 from server.security import LEASE_SERVICE, LeaseHeld, Role
 
 Schedule = Callable[[float, Callable[[], None]], object]
+# Drone commands over rosbridge that the audit trail records (issue 14).
+_DRONE_COMMAND = re.compile(r"^(/uav\d+)?/ardrone/(takeoff|land|reset|emergency)$")
+MAX_AUDIT_PENDING = 16
+_JOG_TOPIC = re.compile(r"^(/uav\d+)?/cmd_vel$")
 Spawn = Callable[[Coroutine[Any, Any, None]], object]
 
 
@@ -64,6 +70,10 @@ class BridgeSession:
         self._pending: dict[str, asyncio.Future[Any]] = {}  # service_request id -> future
         self._request_ids = itertools.count(1)
         self._poll_scheduled: set[str] = set()
+        self.calls_in_flight = 0
+        self.audit_pending = 0
+        self._jogging: set[str] = set()  # /cmd_vel topics this connection is jogging on
+        self._audit_lock = asyncio.Lock()  # FIFO: this connection's rows in order
         self.close_request: tuple[int, str] | None = None
         self.closed = False
 
@@ -93,6 +103,7 @@ class BridgeSession:
             self.close_request = (1008, "invalid token")
             raise RefusedError("auth: invalid token", id=op.id)
         self.role = role
+        self.protocol.authenticated = True
         self.protocol.send_status("info", f"authenticated as {role.value}", id=op.id)
 
     def _set_level(self, op: ops.SetLevel, now: float) -> None:
@@ -140,16 +151,110 @@ class BridgeSession:
             if key not in self.advertised or op.latch:
                 self.graph.advertise(key, type_name, latch=op.latch, owner=self.owner)
                 self.advertised[key] = type_name
+            command = _DRONE_COMMAND.match(key)
+            if command is not None and self.ctx.audit is not None:
+                self._audited_publish(key, msg, command.group(2), command.group(1) or "")
+                return
+            jog = _JOG_TOPIC.match(key)
+            if jog is not None and self.ctx.audit is not None:
+                self._audit_jog(key, msg, jog.group(1) or "")
             self.graph.publish(key, msg)
         except g.GraphError as exc:
             raise OpError(f"publish to {topic}: {exc}") from exc
 
-    def _subscribe(self, op: ops.Subscribe, now: float) -> None:
-        if op.compression == "cbor-raw":
-            raise OpError(
-                "subscribe: compression cbor-raw (ROS-serialized bytes) is not supported "
-                "by this server; use cbor"
+    async def _audit_write(self, fn: Callable[..., Any], *args: Any, **kw: Any) -> Any:
+        """One audit write in a worker thread; writes of a connection keep their order."""
+        async with self._audit_lock:
+            return await asyncio.to_thread(fn, *args, **kw)
+
+    def _audit_jog(self, key: str, msg: dict[str, Any], prefix: str) -> None:
+        """A row when a jog starts and when it stops (not one per message: the page sends
+        ``/cmd_vel`` at 10 Hz while a key is held). The jog acts at once; its rows follow."""
+        moving = any(
+            isinstance(v, int | float) and v != 0
+            for part in ("linear", "angular")
+            for v in (msg.get(part) or {}).values()
+        )
+        if moving == (key in self._jogging):
+            return
+        if moving:
+            self._jogging.add(key)
+        else:
+            self._jogging.discard(key)
+        if self.audit_pending >= MAX_AUDIT_PENDING:
+            return  # rows of a jog toggled faster than they can be written: the next will do
+        what = "jog_start" if moving else "jog_stop"
+        drone = prefix.strip("/") or "uav1"
+        detail = f"publish {key} by {self.owner}"
+        self._spawn_published_rows(what, drone, detail, self.ctx.wall_clock())
+
+    def _spawn_published_rows(self, what: str, drone: str, detail: str, arrived: float) -> None:
+        """Write the intent and outcome rows of a publish that has already happened, in the
+        background, stamped with the time it arrived (counted in ``audit_pending``)."""
+        self.audit_pending += 1
+
+        async def write() -> None:
+            try:
+                await self._audit_write(
+                    self.ctx.audit.both,
+                    what,
+                    "published",
+                    role="pilot",
+                    source="rosbridge",
+                    drone=drone,
+                    detail=detail,
+                    at=arrived,
+                )
+            finally:
+                self.audit_pending -= 1
+
+        self._spawn(write())
+
+    def _audited_publish(self, key: str, msg: dict[str, Any], what: str, prefix: str) -> None:
+        """Publish a drone command with its audit rows (server.audit_trail): land and
+        emergency first and the rows after; the others after their intent row is committed."""
+        trail = self.ctx.audit
+        drone = prefix.strip("/") or "uav1"
+        detail = f"publish {key} by {self.owner}"
+        if self.audit_pending >= MAX_AUDIT_PENDING:
+            raise LimitError(
+                f"publish to {key} refused: {self.audit_pending} commands of this connection "
+                "are waiting for their audit rows"
             )
+        if what in ("land", "emergency"):
+            arrived = self.ctx.wall_clock()
+            self.graph.publish(key, msg)
+            self._spawn_published_rows(what, drone, detail, arrived)
+            return
+        self.audit_pending += 1
+
+        async def intent_first() -> None:
+            try:
+                iid = await self._audit_write(
+                    trail.intent,
+                    what,
+                    role="pilot",
+                    source="rosbridge",
+                    drone=drone,
+                    detail=detail,
+                )
+                if self.closed:
+                    result = "not published: the connection closed"
+                else:
+                    try:
+                        self.graph.publish(key, msg)
+                        result = "published"
+                    except g.GraphError as exc:
+                        result = f"failed: {exc}"
+                await self._audit_write(
+                    trail.outcome, iid, what, result, role="pilot", source="rosbridge", drone=drone
+                )
+            finally:
+                self.audit_pending -= 1
+
+        self._spawn(intent_first())
+
+    def _subscribe(self, op: ops.Subscribe, now: float) -> None:
         key = g.canonical(op.topic)
         existing = self.graph.topic_type(key)
         type_name = op.type or existing
@@ -160,6 +265,11 @@ class BridgeSession:
         if existing is not None and op.type is not None and existing != op.type:
             raise OpError(f"subscribe to {op.topic}: topic has type {existing}, not {op.type}")
         self._check_type(type_name, f"subscribe to {op.topic}", op.id)
+        if op.compression == "cbor-raw" and not cborraw.can_encode(type_name):
+            raise OpError(
+                f"subscribe to {op.topic}: compression cbor-raw (ROS 1 bytes) needs the message "
+                f"definition of {type_name}, which this server does not have; use cbor or none"
+            )
         params = SubParams(op.throttle_rate_ms, op.queue_length, op.fragment_size, op.compression)
         stream = self.streams.get(op.topic)
         if stream is not None:
@@ -201,7 +311,7 @@ class BridgeSession:
             return
         p = stream.params
         for msg in msgs:
-            text = "" if p.compression == "cbor" else self.ctx.json_cache.text(msg)
+            text = "" if p.compression in ("cbor", "cbor-raw") else self.ctx.json_cache.text(msg)
             self.protocol.send_publish(
                 stream.topic,
                 text,
@@ -246,9 +356,15 @@ class BridgeSession:
                 raise
         try:
             args = self._args(op, key)
+            if self.calls_in_flight >= self.ctx.max_calls_in_flight:
+                raise LimitError(
+                    f"call {op.service} refused: {self.calls_in_flight} calls of this connection "
+                    f"are still running (at most {self.ctx.max_calls_in_flight} at a time)"
+                )
         except BridgeError as err:
             self._service_failed(op, err.msg)
             raise
+        self.calls_in_flight += 1
         self._spawn(self._run_call(op, key, args))
 
     def _args(self, op: ops.CallService, key: str) -> dict[str, Any]:
@@ -268,6 +384,12 @@ class BridgeSession:
         return dict(zip(names, op.args, strict=False))
 
     async def _run_call(self, op: ops.CallService, key: str, args: dict[str, Any]) -> None:
+        try:
+            await self._run_call_counted(op, key, args)
+        finally:
+            self.calls_in_flight -= 1
+
+    async def _run_call_counted(self, op: ops.CallService, key: str, args: dict[str, Any]) -> None:
         timeout = op.timeout_s if op.timeout_s is not None else self.ctx.service_timeout_s
         try:
             values = await self.graph.call_service(key, args, timeout=timeout)
@@ -394,10 +516,15 @@ class BridgeSession:
             self._service_failed(op, err.msg)
             raise
         state = lease.state
+        mine = state.holder == self.owner
+        # The holder is told its holding's secret (what REST callers name in X-Pilot-Lease);
+        # everyone else only that someone holds it (issue 14: holder ids were readable).
+        key = lease.key_of(self.owner) or ""
         values = {
-            "holder": state.holder or "",
-            "held_by_me": state.holder == self.owner,
+            "holder": key if mine else (lease.PUBLIC_NAME if state.holder else ""),
+            "held_by_me": mine,
             "since": state.since or 0.0,
+            "key": key,
         }
         self.protocol.send_service_response(op.service, op.id, values, True)
 
@@ -415,6 +542,10 @@ class BridgeSession:
             if not fut.done():
                 fut.set_exception(g.ServiceError(f"the provider {self.owner} disconnected"))
         self._pending.clear()
+        self._poll_scheduled.clear()
+        self.advertised.clear()
+        self.provided.clear()
+        self.protocol.close()
         self.graph.drop_owner(self.owner)
         self.security.lease.release(self.owner)
 

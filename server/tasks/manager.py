@@ -33,6 +33,13 @@ localised — the task pauses (state SEARCHING,
 event "searching": "I lost sight of the markers, searching"), the drone holds its position and
 height and turns in yaw until a marker fix arrives ("marker_found"), then the task resumes.
 After two full turns without a marker the task fails.
+
+Idle search (issue 13 item 7, ``idle_search=True``): flying indoors with nothing to do, no
+marker for ``search_after_s`` and the estimate no longer confident, the manager starts a
+``search`` task itself (event "searching": "My position is uncertain; searching for markers"),
+which reports what it found or gives up after two turns. Not within ``IDLE_JOG_GRACE_S`` of a
+manual jog (the operator is flying by hand), and once per uncertainty: after a search that found
+nothing it waits for the next marker fix before searching again.
 """
 
 from __future__ import annotations
@@ -43,10 +50,12 @@ import threading
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from dataclasses import replace as dataclass_replace
 from typing import Any
 
 from drone.control.clock import Clock
 from drone.control.pid import Setpoint
+from drone.limits import limits_of
 from drone.vehicle import VehicleSnapshot
 from server.tasks.errors import CommandError, IllegalTransition
 from server.tasks.states import TaskEvent, TaskState, transition
@@ -67,6 +76,7 @@ log = logging.getLogger(__name__)
 SAFETY_ACTIONS = ("land", "emergency", "return_home", "hover")
 LOST_SIGMA_M = 0.3
 LOST_SIGMA_YAW_RAD = math.radians(10.0)
+IDLE_JOG_GRACE_S = 5.0  # no idle search this soon after the operator's last jog
 
 
 @dataclass(frozen=True)
@@ -77,6 +87,7 @@ class Decision:
     accepted: bool
     reason: str  # why refused, or what will happen
     task_id: int | None = None
+    question: bool = False  # refused with a question to the operator ("Which chair?")
 
 
 @dataclass(frozen=True)
@@ -123,8 +134,9 @@ class TaskManager(Context):
         search_after_s: float = 1.5,
         arrival: ArrivalRule | None = None,
         describe_hook: Callable[[VehicleSnapshot], str] | None = None,
-        margin_m: float = 0.35,
+        margin_m: float | None = None,
         ceiling_m: float | None = None,
+        idle_search: bool = False,
     ) -> None:
         self.vehicle = vehicle
         self.world = world
@@ -132,9 +144,15 @@ class TaskManager(Context):
         self.search_after_s = search_after_s
         self.arrival = arrival or ArrivalRule()
         self.describe_hook = describe_hook
-        self.margin_m = margin_m
-        b = world.bounds
-        self.ceiling_m = ceiling_m if ceiling_m is not None else (b.z_max - b.z_min) - 0.3
+        # the world's limits (drone/limits.py); ``margin_m``/``ceiling_m`` may only tighten them
+        lim = limits_of(world)
+        if margin_m is not None:
+            lim = dataclass_replace(lim, wall_margin_m=max(margin_m, 0.0))
+        if ceiling_m is not None:
+            lim = dataclass_replace(lim, ceiling_m=min(ceiling_m, lim.ceiling_m))
+        self.limits = lim
+        self.margin_m = lim.wall_margin_m
+        self.ceiling_m = lim.ceiling_m
         self._lock = threading.RLock()
         self._queue: deque[Task] = deque()
         self._current: Task | None = None
@@ -144,6 +162,9 @@ class TaskManager(Context):
         self._search_started: float | None = None
         self._search_marker_t: float | None = None
         self._last_now: float | None = None
+        self.idle_search = idle_search
+        self._last_jog = -math.inf
+        self._idle_searched_at_fix: float | None = None  # the fix before the last idle search
         vehicle.add_jog_listener(self._on_jog)
 
     # ------------------------------------------------------------------ Context
@@ -230,7 +251,8 @@ class TaskManager(Context):
                 task = build_task(cmd)
                 p = task.plan(p, self)
             except CommandError as exc:
-                decisions.append(Decision(cmd, False, exc.reason))
+                ask = bool(getattr(exc, "question", False))
+                decisions.append(Decision(cmd, False, exc.reason, question=ask))
                 tasks.append(None)
                 continue
             decisions.append(Decision(cmd, True, f"queued: {task.describe()}", task.id))
@@ -299,11 +321,33 @@ class TaskManager(Context):
             cur = self._current
             if cur is not None:
                 self._supervise(cur, now)
+            elif self.idle_search and not self._queue:
+                self._maybe_idle_search(now)
         self._flush()
         return self.status
 
     # ------------------------------------------------------------------ internals
+    def _maybe_idle_search(self, now: float) -> None:
+        """Start a tag search when hovering idle with an uncertain pose (module docstring)."""
+        world = self.world
+        if not (getattr(world, "indoor", False) and getattr(world, "markers", ())):
+            return
+        s = self.snapshot()
+        if not s.flying or s.ctrl_state not in ("HOVERING", "FLYING") or not s.localised:
+            return
+        if now - self._last_jog < IDLE_JOG_GRACE_S:
+            return
+        if self._idle_searched_at_fix is not None and s.last_marker_t == self._idle_searched_at_fix:
+            return  # searched already and found nothing since: do not spin for ever
+        if not self._lost(s, now):
+            return
+        self._idle_searched_at_fix = s.last_marker_t
+        self.emit("searching", "My position is uncertain; searching for markers")
+        self._queue.append(build_task({"action": "search"}))
+        self._start_next(now)
+
     def _on_jog(self) -> None:
+        self._last_jog = self.clock.now()
         if self._current is not None or self._queue:
             self.cancel("manual control took over", hold=False)
 
@@ -364,6 +408,10 @@ class TaskManager(Context):
     def _needs_search(self, task: Task, s: VehicleSnapshot, now: float) -> bool:
         if not task.needs_localisation or not s.flying:
             return False
+        return self._lost(s, now)
+
+    def _lost(self, s: VehicleSnapshot, now: float) -> bool:
+        """No usable position: never localised, or no marker lately and no confidence left."""
         if not s.localised:
             return True  # never seen a marker: do not fly anywhere on a made-up position
         since = s.last_marker_t

@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from drone.control.pid import Setpoint, wrap_angle
+from drone.limits import FlightLimits
 from drone.vehicle import VehicleSnapshot
 from server.tasks.errors import CommandError, RefusedError
 from server.tasks.states import TaskState
@@ -26,6 +27,7 @@ _ids = itertools.count(1)
 
 DIRECTIONS = ("forward", "backward", "left", "right", "up", "down")
 CRUISE_Z_M = 1.0  # height for return home and other legs without a stated height
+RTL_TIMEOUT_S = 300.0  # an autopilot's own return to launch (MAVLink): 120 m at 1 m/s and back
 MIN_Z_M = 0.3
 DEFAULT_MOVE_M = 1.0
 DEFAULT_TURN_DEG = 90.0
@@ -66,6 +68,7 @@ class Context:
     arrival: ArrivalRule
     margin_m: float
     ceiling_m: float
+    limits: FlightLimits
     describe_hook: Callable[[VehicleSnapshot], str] | None
 
     def snapshot(self) -> VehicleSnapshot:  # pragma: no cover - interface
@@ -133,19 +136,10 @@ def _need_flying(p: PlanState, what: str) -> None:
 
 
 def _inside(ctx: Context, x: float, y: float, z: float, what: str) -> None:
-    b = ctx.world.bounds
-    m = ctx.margin_m
-    ok = b.x_min + m <= x <= b.x_max - m and b.y_min + m <= y <= b.y_max - m
-    if not ok:
-        raise RefusedError(
-            f"I can't {what}: ({x:.1f}, {y:.1f}) is outside the room "
-            f"({b.x_max - b.x_min:.0f} × {b.y_max - b.y_min:.0f} m, "
-            f"keeping {m:.1f} m from the walls)."
-        )
-    if not MIN_Z_M <= z <= ctx.ceiling_m:
-        raise RefusedError(
-            f"I can't {what}: a height of {z:.1f} m is outside {MIN_Z_M:.1f}–{ctx.ceiling_m:.1f} m."
-        )
+    """Refuse up front a target outside the world's limits (fence, floor, ceiling)."""
+    why = ctx.limits.violation(x, y, z)
+    if why is not None:
+        raise RefusedError(f"I can't {what}: {why}.")
 
 
 class _Leg:
@@ -337,11 +331,21 @@ class GotoMarkerTask(LegsTask):
 
     def __init__(self, command: Mapping[str, Any]) -> None:
         super().__init__(command)
-        if "marker" not in command:
-            raise CommandError("'goto' needs 'marker'")
-        self.marker = _marker_id(command["marker"])
+        # "waypoint": the world's numbered waypoint (GPS worlds, issue 16); a marker elsewhere.
+        self.waypoint: int | None = None
+        if "marker" not in command and "waypoint" in command:
+            self.waypoint = _marker_id(command["waypoint"])
+        elif "marker" not in command:
+            raise CommandError("'goto' needs 'marker' or 'waypoint'")
+        self.marker = _marker_id(command["marker"]) if self.waypoint is None else self.waypoint
+        self.kind = "marker" if self.waypoint is None else "waypoint"
 
     def _standoff(self, ctx: Context) -> Setpoint:
+        if self.waypoint is not None and _has_waypoints(ctx):
+            self.kind = "waypoint"
+            x, y, z = _world_waypoint(ctx, self.waypoint)
+            return Setpoint(x, y, z, ctx.snapshot().yaw_rad)
+        self.kind = "marker"
         try:
             m = ctx.world.marker(self.marker)
         except KeyError:
@@ -354,18 +358,36 @@ class GotoMarkerTask(LegsTask):
 
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
         sp = self._standoff(ctx)
-        _need_flying(p, f"go to marker {self.marker}")
-        _inside(ctx, sp.x, sp.y, sp.z, f"go to marker {self.marker}")
+        _need_flying(p, f"go to {self.kind} {self.marker}")
+        _inside(ctx, sp.x, sp.y, sp.z, f"go to {self.kind} {self.marker}")
         return replace(p, x=sp.x, y=sp.y, z=sp.z, yaw_rad=sp.yaw_rad)
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
-        return [self._standoff(ctx)], [f"marker {self.marker}"]
+        return [self._standoff(ctx)], [f"{self.kind} {self.marker}"]
 
     def describe(self) -> str:
-        return f"go to marker {self.marker}"
+        return f"go to {self.kind} {self.marker}"
 
     def done_text(self) -> str:
-        return f"Reached marker {self.marker}"
+        return f"Reached {self.kind} {self.marker}"
+
+
+def _has_waypoints(ctx: Context | None) -> bool:
+    return ctx is not None and bool(getattr(ctx.world, "waypoints", ()))
+
+
+def _world_waypoint(ctx: Context, n: int) -> tuple[float, float, float]:
+    """Waypoint ``n`` of a GPS world (``wpN``, or the n-th in the file), map frame.
+
+    Raises:
+        RefusedError: no such waypoint (the reply lists the known ones).
+    """
+    wps = ctx.world.waypoints
+    for w in wps:
+        if w.id in (f"wp{n}", str(n)):
+            return float(w.position[0]), float(w.position[1]), float(w.position[2])
+    known = ", ".join(w.id.removeprefix("wp") for w in wps)
+    raise RefusedError(f"There is no waypoint {n}. Known waypoints: {known}.")
 
 
 class PatrolTask(LegsTask):
@@ -375,11 +397,13 @@ class PatrolTask(LegsTask):
 
     def __init__(self, command: Mapping[str, Any]) -> None:
         super().__init__(command)
-        raw = command.get("markers")
+        slot = "waypoints" if "markers" not in command and "waypoints" in command else "markers"
+        raw = command.get(slot)
         if not isinstance(raw, list | tuple) or not raw:
             raise CommandError("'patrol' needs 'markers', a non-empty list of marker ids")
         self.markers = [_marker_id(v) for v in raw]
-        self._gotos = [GotoMarkerTask({"action": "goto", "marker": m}) for m in self.markers]
+        one = slot.removesuffix("s")
+        self._gotos = [GotoMarkerTask({"action": "goto", one: m}) for m in self.markers]
 
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
         for g in self._gotos:
@@ -387,13 +411,14 @@ class PatrolTask(LegsTask):
         return p
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
-        return [g._standoff(ctx) for g in self._gotos], [f"marker {m}" for m in self.markers]
+        legs = [g._standoff(ctx) for g in self._gotos]
+        return legs, [f"{g.kind} {g.marker}" for g in self._gotos]
 
     def on_leg_done(self, ctx: Context, i: int) -> None:
-        ctx.emit("progress", f"Reached marker {self.markers[i]}")
+        ctx.emit("progress", f"Reached {self._gotos[i].kind} {self.markers[i]}")
 
     def describe(self) -> str:
-        return "patrol markers " + ", ".join(str(m) for m in self.markers)
+        return f"patrol {self._gotos[0].kind}s " + ", ".join(str(m) for m in self.markers)
 
 
 def _offset(direction: str, dist: float, yaw: float) -> tuple[float, float, float]:
@@ -430,7 +455,7 @@ class MoveTask(LegsTask):
         _need_flying(p, what)
         dx, dy, dz = _offset(self.direction, self.distance, p.yaw_rad)
         x, y, z = p.x + dx, p.y + dy, max(p.z, 0.8) + dz if dz else p.z
-        _inside(ctx, x, y, z if dz else max(z, MIN_Z_M), what)
+        _inside(ctx, x, y, z if dz else max(z, ctx.limits.floor_m), what)
         return replace(p, x=x, y=y, z=z)
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
@@ -495,6 +520,20 @@ class ReturnHomeTask(LegsTask):
     def __init__(self, command: Mapping[str, Any]) -> None:
         super().__init__(command)
         self._landing: LandTask | None = None
+        self._rtl = False
+
+    def start(self, ctx: Context, now: float) -> Outcome | None:
+        rtl = getattr(ctx.vehicle, "return_home", None)
+        if rtl is None:
+            return super().start(ctx, now)
+        # An autopilot (MAVLink) flies its own return to launch: climb, fly home, land.
+        Task.start(self, ctx, now)
+        if not ctx.snapshot().flying:
+            return Outcome(False, "I'm not flying")
+        rtl()
+        self._rtl = True
+        self.detail = "returning to launch"
+        return None
 
     def _home(self, ctx: Context, x: float, y: float) -> Any:
         stations = getattr(ctx.world, "stations", ())
@@ -513,6 +552,14 @@ class ReturnHomeTask(LegsTask):
         return [sp], [f"home station {h.id}"]
 
     def step(self, ctx: Context, now: float) -> Outcome | None:
+        if self._rtl:
+            s = ctx.snapshot()
+            assert self.started_at is not None
+            if not s.flying and s.ctrl_state in ("LANDED", "DEFAULT"):
+                return Outcome(True, "Back home and landed")
+            if now - self.started_at > RTL_TIMEOUT_S:
+                return Outcome(False, f"return to launch did not finish in {RTL_TIMEOUT_S:.0f} s")
+            return None
         if self._landing is not None:
             out = self._landing.step(ctx, now)
             if out is not None and out.ok:
@@ -534,7 +581,8 @@ class WaypointsTask(LegsTask):
 
     Command: ``{"action": "waypoints", "waypoints": [{"x":…, "y":…, "z":…} | {"lat":…, "lon":…,
     "alt":…}, …], "loop": false, "tolerance_m": 0.15, "yaw_deg": optional heading}``. Geodetic
-    points need the world's ``gps_origin`` (local ENU by pymap3d). Used by the fleet manager.
+    points need the world's ``gps_origin`` (local ENU by pymap3d). A waypoint may carry its own
+    ``yaw_deg`` (the fleet's indoor patrol faces each marker). Used by the fleet manager.
     """
 
     name = "waypoints"
@@ -592,9 +640,12 @@ class WaypointsTask(LegsTask):
         pts = self.points or self._resolve(ctx)
         legs = []
         px, py = s.x, s.y
-        for x, y, z in pts:
+        for k, (x, y, z) in enumerate(pts):
+            w = self.raw[k] if k < len(self.raw) and isinstance(self.raw[k], Mapping) else {}
             yaw = (
-                math.radians(self.yaw_deg)
+                math.radians(_num(w, "yaw_deg"))  # this waypoint's own heading
+                if "yaw_deg" in w
+                else math.radians(self.yaw_deg)
                 if self.yaw_deg is not None
                 else math.atan2(y - py, x - px)
             )
@@ -610,7 +661,9 @@ class WaypointsTask(LegsTask):
 
 
 class SearchTask(Task):
-    """Turn in place (holding height) until a marker is seen (tag search, on request)."""
+    """Turn in place (holding height) until a marker is seen (tag search, on request, or by
+    the task manager while idle when the pose is uncertain); reports what it found and where
+    that puts the drone."""
 
     name = "search"
 
@@ -631,7 +684,13 @@ class SearchTask(Task):
         assert self.started_at is not None
         if s.markers and s.last_marker_t is not None and s.last_marker_t != self._t0_marker:
             ctx.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad))
-            return Outcome(True, f"Found marker {s.markers[0].id}")
+            ids = sorted({int(m.id) for m in s.markers})
+            which = (
+                f"marker {ids[0]}"
+                if len(ids) == 1
+                else "markers " + ", ".join(map(str, ids[:-1])) + f" and {ids[-1]}"
+            )
+            return Outcome(True, f"Found {which}; I am at x {s.x:.1f}, y {s.y:.1f} meters")
         limit = SEARCH_MAX_TURNS * 2 * math.pi / SEARCH_RATE_RAD_S
         self.progress = min(1.0, (now - self.started_at) / limit)
         if now - self.started_at > limit:
@@ -688,4 +747,8 @@ def build_task(command: Any) -> Task:
     cls = TASK_TYPES.get(action) if isinstance(action, str) else None
     if cls is None:
         raise CommandError(f"unknown action {action!r}")
+    if action in ("goto", "turn") and "object" in command and "marker" not in command:
+        from server.tasks.objects import FaceObjectTask, GotoObjectTask  # imports this module
+
+        cls = GotoObjectTask if action == "goto" else FaceObjectTask
     return cls(command)

@@ -155,3 +155,17 @@ def test_near_miss_text_parses_or_raises_at_parse_error(text: str) -> None:
     except ATParseError:
         return
     assert all(isinstance(p, at.ATPacket) for p in packets)
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        # found by bench/fuzz.py (issue 14): non-ASCII bytes inside a quoted argument raised
+        # UnicodeDecodeError instead of the documented ATParseError
+        b'AT*CONFIG=3,"general\xff:navm","TRUE"\r',
+        b'AT*CONFIG=3,"general:navdata_demo","\xadRUE"\r',
+    ],
+)
+def test_fuzz_found_non_ascii_argument(data: bytes) -> None:
+    with pytest.raises(ATParseError, match="non-ASCII"):
+        at.parse_at(data)

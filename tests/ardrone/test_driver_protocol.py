@@ -138,6 +138,19 @@ def test_emergency_not_resent_when_already_in_emergency_and_reset_toggles() -> N
     assert not sent(proto, t + 0.4)[0].command.emergency_bit  # type: ignore[union-attr]
 
 
+def test_reset_right_after_the_emergency_is_seen_still_makes_an_edge() -> None:
+    """The bit toggles on its rising edge (SDK 2.0 §6.6): a reset asked before any datagram
+    went out with the bit cleared would only prolong the emergency's hold, and be lost."""
+    proto = DriverProtocol()
+    t = handshake(proto)
+    proto.emergency()
+    assert sent(proto, t + 0.01)[0].command.emergency_bit  # type: ignore[union-attr]
+    proto.receive_navdata(nav(10, DroneState.NAVDATA_DEMO | DroneState.EMERGENCY), t + 0.02)
+    proto.reset()  # before the next datagram
+    bits = [sent(proto, t + 0.03 + k * 1e-3)[0].command.emergency_bit for k in range(2)]  # type: ignore[union-attr]
+    assert bits == [False, True]  # cleared once, at once, then the bit itself
+
+
 def test_comwdg_answers_the_watchdog_bit() -> None:
     proto = DriverProtocol()
     t = handshake(proto)

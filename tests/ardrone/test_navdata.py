@@ -23,6 +23,7 @@ from drone.ardrone.navdata import (
     DroneState,
     Gps,
     Navdata,
+    PressureRaw,
     decode_navdata,
     encode_navdata,
 )
@@ -153,8 +154,12 @@ demos = st.builds(
 )
 f64 = st.floats(allow_nan=False, allow_infinity=False)
 gpss = st.builds(Gps, f64, f64, f64, f64, u32)
+i32 = st.integers(-(2**31), 2**31 - 1)
+pressures = st.builds(PressureRaw, i32, st.integers(-(2**15), 2**15 - 1), i32, i32)
 unknowns = st.lists(
-    st.tuples(st.integers(1, 0xFFFE).filter(lambda t: t not in (0, 27)), st.binary(max_size=40)),
+    st.tuples(
+        st.integers(1, 0xFFFE).filter(lambda t: t not in (0, 21, 27)), st.binary(max_size=40)
+    ),
     max_size=3,
 ).map(tuple)
 packets = st.builds(
@@ -165,6 +170,7 @@ packets = st.builds(
     st.none() | demos,
     st.none() | gpss,
     unknowns,
+    pressure=st.none() | pressures,
 )
 
 

@@ -229,6 +229,9 @@ def open_console(
         color_scheme=color_scheme,
         device_scale_factor=1,
         service_workers="block",
+        # The page's CSP has no 'unsafe-eval'; Playwright's string predicates need eval.
+        # test_5_csp.py loads the page under its CSP and checks nothing is blocked.
+        bypass_csp=True,
     )
     if init_script:
         ctx.add_init_script(init_script)

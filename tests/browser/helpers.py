@@ -54,7 +54,8 @@ SPEECH_STANDIN = """
   const synth = {
     speaking: false, pending: false, paused: false,
     speak(u) { state.spoken.push(u.text); },
-    cancel() {}, pause() {}, resume() {}, getVoices() { return []; },
+    cancel() {}, pause() {}, resume() {},
+    getVoices() { return [{ name: "stand-in", lang: "en-US" }]; },
     addEventListener() {}, removeEventListener() {},
   };
   Object.defineProperty(window, "speechSynthesis", { value: synth, configurable: true });

@@ -31,6 +31,7 @@ def test_drone_selector_switches_topics(browser: Any, fleet_server: ServerProces
         page.evaluate("""() => { window.__seen = [];
             uavConsole.ros.subscribe('/uav2/cmd_vel', 'geometry_msgs/Twist',
                                      m => window.__seen.push(m)); }""")
+        page.click("#arm-keys")  # keys that move the drone need keyboard flying on
         page.click("#camera-panel")
         page.keyboard.down("q")
         page.wait_for_timeout(300)

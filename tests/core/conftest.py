@@ -8,8 +8,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from server.app import create_app
 from server.settings import Settings
+from tests.app_client import app_client
 
 PILOT = "pilot-token-for-tests"
 OBSERVER = "observer-token-for-tests"
@@ -24,13 +24,5 @@ async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
         sim_base_addr="127.0.0.31",
         sim_speed=4.0,
     )
-    app = create_app(settings)
-    async with app.router.lifespan_context(app):
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(
-            transport=transport,
-            base_url="http://127.0.0.1:8000",
-            headers={"Authorization": f"Bearer {PILOT}"},
-        ) as client:
-            client.app = app  # type: ignore[attr-defined]
-            yield client
+    async with app_client(settings) as client:
+        yield client

@@ -198,12 +198,17 @@ async def test_rest_respects_the_pilot_lease_but_never_blocks_safety(
     held = await api.post("/api/v1/drones/uav1/takeoff")
     assert held.status_code == 409 and "take_over" in held.json()["detail"]
     assert (await api.post("/api/v1/command", json={"text": "take off"})).status_code == 409
-    as_holder = {"X-Pilot-Lease": "browser-pilot"}
+    # The holder id is not a credential (rosapi lists connections): only the holding's secret.
+    as_id = {"X-Pilot-Lease": "browser-pilot"}
+    assert (await api.post("/api/v1/drones/uav1/reset", headers=as_id)).status_code == 409
+    as_holder = {"X-Pilot-Lease": runtime.security.lease.key_of("browser-pilot")}
     assert (await api.post("/api/v1/drones/uav1/reset", headers=as_holder)).status_code == 200
     for safety in ("land", "emergency", "hover"):
         assert (await api.post(f"/api/v1/drones/uav1/{safety}")).status_code == 200
     assert (await api.post("/api/v1/command", json={"text": "land now"})).status_code == 200
     took = await api.post("/api/v1/drones/uav1/reset?take_over=true")
     assert took.status_code == 200
-    assert told and told[0].startswith("rest:")
-    assert runtime.security.lease.state.holder is None
+    # REST keeps the lease it took: the page must take it back explicitly (issue 14).
+    assert told == ["rest"]
+    assert runtime.security.lease.state.holder == "rest"
+    assert (await api.post("/api/v1/drones/uav1/reset")).status_code == 200

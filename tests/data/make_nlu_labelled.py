@@ -226,9 +226,11 @@ for _ in range(40):
     noun = R.choice(
         ["marker", "marker", "tag", "the marker", "marker number", "waypoint", "the tag"]
     )
+    # "waypoint N" names the world's numbered waypoint N (issue 16; a marker where there are none)
+    slot = "waypoint" if noun == "waypoint" else "marker"
     add(
         f"{R.choice(FILLERS)}{R.choice(gverbs)} {noun} {say(m)}{R.choice(TAILS)}",
-        {"action": "goto", "marker": m},
+        {"action": "goto", slot: m},
     )
 for text, m in [
     ("go to the third marker", 3),

@@ -62,8 +62,18 @@ def test_markers_lost_after_delay_only_while_executing() -> None:
     assert m.check(snap(), State.EXECUTING, 1.0) is None
     assert m.check(snap(), State.EXECUTING, 1.6) is not None
     assert m.check(snap(), State.EXECUTING, 2.0) is None
-    assert m.check(snap(visible_markers=(3,)), State.EXECUTING, 2.5) is None
+    lost = m.check(snap(), State.EXECUTING, 1.6 + 1e-9)  # (told above: not again)
+    assert lost is None
+    found = m.check(snap(visible_markers=(3,)), State.EXECUTING, 2.5)
+    assert found is not None and found.level == "info" and "marker 3 again" in found.text
+    assert m.check(snap(visible_markers=(3,)), State.EXECUTING, 3.0) is None
     assert m.check(snap(), State.AIRBORNE_IDLE, 9.0) is None
+    # never a claim of searching: the task manager decides and says so (issue 13 item 8)
+    m2 = MarkersLostMonitor(1.5)
+    m2.check(snap(), State.EXECUTING, 0.0)
+    told = m2.check(snap(), State.EXECUTING, 2.0)
+    assert told is not None and "search" not in told.text
+    assert m2.check(snap(), State.SEARCHING, 3.0) is None
 
 
 def test_each_monitor_runs_on_its_own_period() -> None:
@@ -81,6 +91,9 @@ def test_each_monitor_runs_on_its_own_period() -> None:
         ans.step(snap(), State.EXECUTING, i * 0.1)
     assert calls["a"] == pytest.approx([0.0, 0.5, 1.0, 1.5, 2.0])
     assert calls["b"] == pytest.approx([0.0, 1.0, 2.0])
+    # periods are kept by name: two monitors of one name are refused, not one silently muted
+    with pytest.raises(ValueError, match="repeated: a"):
+        Autonomic([Counting("a", 0.5), Counting("a", 0.25)])
 
 
 def test_transition_table_is_complete_and_strict() -> None:

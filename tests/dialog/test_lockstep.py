@@ -5,39 +5,14 @@ from __future__ import annotations
 
 import pytest
 
-from drone.lockstep import LockstepRig
-from drone.sim.world import load_world
-from server.dialog.adapters import TaskManagerPort, VehiclePort
-from server.dialog.manager import DialogManager
 from server.dialog.states import State
-from server.graph import Graph
-from server.language.nlu import NLU
-from server.settings import Settings
-from server.store import AuditLog
-from server.tasks import TaskManager
+from tests.dialog.lockstep_dialog import dialog_rig
 
 
 @pytest.mark.timeout(120)
 async def test_battery_low_mid_task_warns_and_returns_home() -> None:
-    world = load_world("indoor")
-    rig = LockstepRig(world, seed=3, camera=False, starts=[(4.0, 2.0, 0.0)])
-    tm = TaskManager(rig.vehicle, world, rig.clock)
-    rig.add_stepper(lambda now, dt: tm.step(now))
-    graph = Graph()
-    replies: list[dict] = []
-    graph.subscribe("/console/reply", replies.append, type="uav_console/Reply")
-    audit = AuditLog(":memory:", clock=rig.clock.now)
-    dm = DialogManager(
-        graph,
-        Settings(),
-        TaskManagerPort(tm),
-        VehiclePort(rig.vehicle, world),
-        None,
-        audit,
-        rig.clock.now,
-        nlu=NLU(),
-    )
-    rig.add_stepper(lambda now, dt: dm.step(now))
+    r = dialog_rig(seed=3)
+    rig, tm, dm, audit, replies = r.rig, r.tm, r.dm, r.audit, r.replies
     assert rig.wait_link()
 
     refused = await dm.handle_utterance("go forward 1 meter")

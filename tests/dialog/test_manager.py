@@ -202,7 +202,9 @@ def test_params_from_settings() -> None:
 async def test_every_reply_is_logged(text: str) -> None:
     rig = Rig()
     await rig.dm.handle_utterance(text)
-    assert len(rig.store.rows) == 1 and rig.store.rows[0]["outcome"] == rig.replies[-1]["text"]
+    # the intent before acting, the outcome after (issue 14)
+    assert rig.store.rows[0]["action"] == "intent:utterance"
+    assert len(rig.store.rows) == 2 and rig.store.rows[1]["outcome"] == rig.replies[-1]["text"]
 
 
 def test_utterance_topic_without_a_loop_is_handled_at_once() -> None:

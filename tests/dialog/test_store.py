@@ -77,3 +77,30 @@ def test_entries_survive_sigkill(tmp_path: Path) -> None:
     log = AuditLog(db)
     assert [e.utterance for e in log.recent(100)] == [f"u{i}" for i in reversed(range(20))]
     log.close()
+
+
+def test_append_later_writes_in_order_off_the_callers_thread(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import threading
+
+    from server.store import AuditLog
+
+    log = AuditLog(tmp_path / "audit.db")
+    caller = threading.get_ident()
+    seen_threads: list[int] = []
+    real = log.append
+
+    def spy(**kw):  # type: ignore[no-untyped-def]
+        seen_threads.append(threading.get_ident())
+        return real(**kw)
+
+    log.append = spy  # type: ignore[method-assign]
+    futs = [
+        log.append_later(utterance="", commands=[{"action": a}], action="executed", outcome=a)
+        for a in ("emergency", "reset", "takeoff")
+    ]
+    assert [f.result(timeout=5) for f in futs] == [1, 2, 3]
+    assert caller not in seen_threads
+    log.close()  # waits for pending writes
+    again = AuditLog(tmp_path / "audit.db")
+    assert [e.outcome for e in again.recent(3)] == ["takeoff", "reset", "emergency"]
+    again.close()

@@ -36,7 +36,7 @@ def test_compose_shape() -> None:
         sim_ip = services[f"sim{k}"]["networks"]["fleet"]["ipv4_address"]
         cmd = services[f"vehicle{k}"]["command"]
         assert cmd[cmd.index("--drone") + 1] == sim_ip
-        assert cmd[cmd.index("--central") + 1] == "ws://central:8000/rosbridge"
+        assert cmd[cmd.index("--central") + 1] == "ws://central:8000/vehicle-link"
         assert services[f"sim{k}"]["command"][2] == sim_ip
 
 

@@ -41,9 +41,15 @@ RULE_EXAMPLES = {
     "query.position": ("where are you", {"action": "query", "item": "position"}),
     "query.state": ("what are you doing", {"action": "query", "item": "state"}),
     "describe": ("what do you see", {"action": "describe"}),
+    "help": ("what can you do?", {"action": "help"}),
     "goto.marker": ("navigate to the marker number 7", {"action": "goto", "marker": 7}),
     "goto.ordinal": ("go to the third tag", {"action": "goto", "marker": 3}),
     "goto.number": ("fly to 4", {"action": "goto", "marker": 4}),
+    "goto.waypoint": ("fly to waypoint 3", {"action": "goto", "waypoint": 3}),
+    "patrol.waypoints": (
+        "patrol waypoints 1, 2, 3 and 4",
+        {"action": "patrol", "waypoints": [1, 2, 3, 4]},
+    ),
     "patrol.list": ("patrol markers 1, 3 and 5", {"action": "patrol", "markers": [1, 3, 5]}),
     "patrol.range": ("patrol markers 2 through 5", {"action": "patrol", "markers": [2, 3, 4, 5]}),
     "patrol.markers_first": ("markers 4 and 2 on patrol", {"action": "patrol", "markers": [4, 2]}),
@@ -78,6 +84,20 @@ RULE_EXAMPLES = {
         "move three feet to the right",
         {"action": "move", "direction": "right", "distance": 0.9144},
     ),
+    # issue 13 items 6, 7, 9: fleet patrol, objects, answers, tag search
+    "patrol_start.fleet": ("start the patrol with all drones", {"action": "patrol_start"}),
+    "patrol_stop.fleet": ("stop the patrol", {"action": "patrol_stop"}),
+    "search.markers": ("look for a tag", {"action": "search"}),
+    "goto.object": (
+        "fly to the red chair",
+        {"action": "goto", "object": "chair", "colour": "red"},
+    ),
+    "face.object": (
+        "face the north window",
+        {"action": "turn", "object": "window", "which": "north"},
+    ),
+    "goto.unknown_object": ("go to the fridge", {"action": "goto", "object": "fridge"}),
+    "choose.answer": ("the blue one", {"action": "choose", "colour": "blue"}),
 }
 
 
@@ -360,6 +380,11 @@ def test_word_salad_never_raises(words: list[str]) -> None:
             "goto",
             "patrol",
             "query",
+            "search",
+            "choose",
+            "help",
+            "patrol_start",
+            "patrol_stop",
         }
 
 
@@ -390,3 +415,34 @@ _NLU = NLU()
 )
 def test_phrasings_found_in_review(nlu: NLU, text: str, expected: list[dict]) -> None:
     assert nlu.interpret(text) == expected
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "go forward -5 meters",
+        "go forward \u22125 meters",
+        "fly left - 2 meters",
+        "turn left -90 degrees",
+        "go up -.5 meters",
+        "take off and go forward -3 meters",
+    ],
+)
+def test_a_signed_amount_is_never_flown_without_its_sign(text: str) -> None:
+    # Issue 14: "go forward -5 meters" lost its sign and flew forward.
+    commands = _NLU.interpret(text)
+    assert all("distance" not in c and "angle" not in c for c in commands), commands
+    assert "minus" in _NLU.normalise(text).split()
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("patrol markers 1-3", [{"action": "patrol", "markers": [1, 3]}]),
+        ("take-off", [{"action": "takeoff"}]),
+    ],
+)
+def test_hyphens_that_are_not_signs_still_work(
+    text: str, expected: list[dict[str, object]]
+) -> None:
+    assert _NLU.interpret(text) == expected

@@ -128,16 +128,17 @@ await scenario("queue", async () => {
 });
 
 await scenario("fragments", async () => {
-  // a raw subscribe with fragment_size: the server splits, roslibjs reassembles.
+  // a raw subscribe with fragment_size (the server's minimum, 1024): the server splits,
+  // roslibjs reassembles.
   const got = within(5000, "fragments", (ok) => b.on("/js/big", (m) => ok(m.msg)));
-  b.callOnConnection({ op: "subscribe", id: "subscribe:/js/big:frag", topic: "/js/big", type: "std_msgs/String", fragment_size: 16 });
+  b.callOnConnection({ op: "subscribe", id: "subscribe:/js/big:frag", topic: "/js/big", type: "std_msgs/String", fragment_size: 1024 });
   await sleep(300);
   // and the client sends a publish in fragments too
-  const text = JSON.stringify({ op: "publish", topic: "/js/big", msg: { data: "x".repeat(100) + "END" } });
-  const n = Math.ceil(text.length / 30);
+  const text = JSON.stringify({ op: "publish", topic: "/js/big", msg: { data: "x".repeat(3000) + "END" } });
+  const n = Math.ceil(text.length / 300);
   a.callOnConnection({ op: "advertise", topic: "/js/big", type: "std_msgs/String" });
   for (let i = 0; i < n; i++) {
-    a.callOnConnection({ op: "fragment", id: "frag-up-1", data: text.slice(i * 30, (i + 1) * 30), num: i, total: n });
+    a.callOnConnection({ op: "fragment", id: "frag-up-1", data: text.slice(i * 300, (i + 1) * 300), num: i, total: n });
   }
   return await got;
 });

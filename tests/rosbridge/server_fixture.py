@@ -24,9 +24,9 @@ from server.settings import Settings
 T = TypeVar("T")
 
 
-def free_port() -> int:
+def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
+        s.bind((host, 0))
         return int(s.getsockname()[1])
 
 
@@ -38,11 +38,12 @@ class RunningServer:
     pilot: str
     observer: str
     loop: asyncio.AbstractEventLoop
+    host: str = "127.0.0.1"
 
     def url(self, token: str | None = "pilot", path: str = "/rosbridge") -> str:
         tok = {"pilot": self.pilot, "observer": self.observer}.get(token or "", token)
         query = f"?token={tok}" if tok else ""
-        return f"ws://127.0.0.1:{self.port}{path}{query}"
+        return f"ws://{self.host}:{self.port}{path}{query}"
 
     def run(self, coro: Coroutine[Any, Any, T], timeout: float = 10.0) -> T:
         """Run ``coro`` on the server's loop (graph calls) and wait for its result."""
@@ -62,8 +63,9 @@ def running_server(tmp: Path, **ctx_overrides: Any) -> Iterator[RunningServer]:
     settings_overrides = {
         k: ctx_overrides.pop(k) for k in list(ctx_overrides) if hasattr(Settings, k)
     }
-    port = free_port()
-    settings = Settings(port=port, data_dir=tmp, **settings_overrides)
+    host = str(settings_overrides.pop("host", "127.0.0.1"))
+    port = free_port(host)
+    settings = Settings(host=host, port=port, data_dir=tmp, **settings_overrides)
     graph = Graph()
     tokens = TokenStore(tmp)
     ctx = BridgeContext(graph=graph, security=Security(settings, tokens), settings=settings)
@@ -82,7 +84,7 @@ def running_server(tmp: Path, **ctx_overrides: Any) -> Iterator[RunningServer]:
     app.include_router(make_router(ctx))
     config = uvicorn.Config(
         app,
-        host="127.0.0.1",
+        host=host,
         port=port,
         log_level="error",
         ws_max_size=4 * settings.max_frame_bytes,
@@ -99,7 +101,7 @@ def running_server(tmp: Path, **ctx_overrides: Any) -> Iterator[RunningServer]:
         time.sleep(0.01)
     try:
         yield RunningServer(
-            port, graph, ctx, tokens.pilot_token, tokens.observer_token, loop_box[0]
+            port, graph, ctx, tokens.pilot_token, tokens.observer_token, loop_box[0], host
         )
     finally:
         server.should_exit = True

@@ -81,7 +81,7 @@ def test_roslibjs_scenarios(srv: RunningServer, node: str) -> None:
     assert r["throttle"] == [1]
     # throttle_rate 300 ms, queue_length 2: the first at once, then the newest two (oldest dropped)
     assert r["queue"] == [1, 9, 10]
-    assert r["fragments"] == {"data": "x" * 100 + "END"}
+    assert r["fragments"] == {"data": "x" * 3000 + "END"}
     assert r["png"] == {"data": "through a png"}
     cbor = r["cbor"]
     assert cbor["dataIsBytes"] and cbor["data"] == [255, 216, 1, 2, 3, 255, 217]

@@ -18,8 +18,8 @@ export class Api {
     this.leaseHolder = null;
   }
 
-  async request(method, path, body, { timeoutMs = 8000 } = {}) {
-    const headers = { Accept: "application/json" };
+  async request(method, path, body, { timeoutMs = 8000, headers: extra = {} } = {}) {
+    const headers = { Accept: "application/json", ...extra };
     if (this.token) headers.Authorization = `Bearer ${this.token}`;
     // The pilot lease this page holds on its rosbridge session: REST commands speak for it.
     if (this.leaseHolder) headers["X-Pilot-Lease"] = this.leaseHolder;
@@ -77,9 +77,15 @@ export class Api {
     return this.get(`/drones/${encodeURIComponent(id)}`);
   }
 
-  /** POST /drones/{id}/{takeoff|land|hover|emergency|reset} */
-  action(id, action) {
-    return this.post(`/drones/${encodeURIComponent(id)}/${action}`, {}, { timeoutMs: 4000 });
+  /**
+   * POST /drones/{id}/{takeoff|land|hover|emergency|reset}; ``source`` (button, keyboard, map)
+   * goes to the server's audit log with the action.
+   */
+  action(id, action, source = "button") {
+    return this.post(`/drones/${encodeURIComponent(id)}/${action}`, {}, {
+      timeoutMs: 4000,
+      headers: { "X-Command-Source": source },
+    });
   }
 
   command(text, { confidence, drone } = {}) {

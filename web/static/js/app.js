@@ -3,6 +3,7 @@
 // Talks to the backend only through /rosbridge (rosbridge v2 JSON) and /api/v1 (bearer token),
 // DESIGN §4. Direct control never waits for the dialog.
 
+import { AlertBanner, checkVoices } from "./alerts.js";
 import { Api, ApiError } from "./api.js";
 import { CameraPanel } from "./camera.js";
 import { Controls } from "./controls.js";
@@ -18,9 +19,12 @@ import {
   refusedRole,
   roleFromStatus,
 } from "./session.js";
-import { SpeechInput } from "./speech.js";
+import { RecordingsMenu } from "./recordings.js";
+import { ReplayBar } from "./replay.js";
+import { StatusBar, flightLabel, lostWhileAway } from "./status.js";
+import { VoiceInput } from "./voice.js";
 import { TelemetryPanel } from "./telemetry.js";
-import { droneTopic, stampSeconds } from "./util.js";
+import { droneTopic, quaternionYaw, stampSeconds } from "./util.js";
 
 const $ = (id) => document.getElementById(id);
 const STATUS_POLL_MS = 1000;
@@ -44,6 +48,18 @@ class Console {
       () => Date.now() / 1000 + this.clockOffset,
     );
     this.telemetry = new TelemetryPanel(document);
+    this.status = new StatusBar(document);
+    this.telemetry.onFlight = (label, battery) => {
+      this.status.setFlight(label);
+      if (battery !== null && battery !== undefined) this.status.setBattery(battery);
+      this.map.setFlightLabel(this.drone, label);
+    };
+    this.telemetry.onLink = (text, level) => this.status.setLink(text, level);
+    this.alertBanner = new AlertBanner(
+      { banner: $("alert-banner"), text: $("alert-text"), ack: $("alert-ack") },
+      { onAck: (text) => this.dialog.addSystem(`Acknowledged: ${text}`) },
+    );
+    this.beforeDrop = null; // what the status bar showed when the connection dropped
     this.map = new MapPanel(
       $("map"),
       {
@@ -52,6 +68,7 @@ class Console {
         go: $("map-go"),
         cancel: $("map-cancel"),
         caption: $("map-caption"),
+        focus: $("map-focus"),
       },
       (id) => this.goToMarker(id),
     );
@@ -60,14 +77,33 @@ class Console {
       alerts: $("alerts"),
       mute: $("mute"),
       state: $("dialog-state"),
-    });
-    this.speech = new SpeechInput(
-      { button: $("mic"), interim: $("interim") },
-      (text, confidence) => this.sendUtterance(text, "speech", confidence),
-      (notice) => this.notice(notice),
+      voiceNote: $("voice-note"),
+      lastReply: $("last-reply"),
+    }, { serverSpeak: (text) => this.serverSpeak(text) });
+    // Speech (issue 15): server (offline) or browser recogniser, push-to-talk, hands-free.
+    this.speech = new VoiceInput(
+      {
+        button: $("mic"),
+        interim: $("interim"),
+        engine: $("recognizer"),
+        handsfree: $("handsfree"),
+        label: $("recognizer-label"),
+      },
+      {
+        token: this.token,
+        lease: () => this.api.leaseHolder,
+        onFinal: (text, confidence) => this.sendUtterance(text, "speech", confidence),
+        onNotice: (notice) => this.notice(notice),
+      },
     );
     this.controls = new Controls(document.body, {
-      action: (name) => this.act(name),
+      action: (name, source) => this.act(name, source),
+      close: () => this.closeOpen(),
+      disarmedKey: (key) =>
+        this.flash(
+          `“${key.toUpperCase()}” moves the drone only with “Keyboard flying” on (Direct control).`,
+          "info",
+        ),
       twist: (t) => this.publishTwist(t),
       focusInput: () => $("text-input").focus(),
       mic: () => this.speech.toggle(),
@@ -107,7 +143,17 @@ class Console {
       return;
     }
     await this.loadServerInfo();
+    // `uav-console replay`: a timeline bar; a seek clears the trails drawn so far.
+    this.replay = new ReplayBar(this.api, $("replay-bar"), () => this.map.clearTrails());
+    this.replay.start();
+    this.recordings = new RecordingsMenu(
+      this.api,
+      { pill: $("rec"), menu: $("recordings"), list: $("recordings-list") },
+      this.token,
+    );
+    this.recordings.start();
     this.ros.connect();
+    this.checkVoice();
     setInterval(() => this.pollDrone(), STATUS_POLL_MS);
   }
 
@@ -148,6 +194,10 @@ class Console {
       el.className = "pill pill-alert";
       this.controls.releaseAll(false);
     }
+    if (state !== STATES.OPEN && this.everOpened && !this.status.staleSince) {
+      this.beforeDrop = this.status.snapshot();
+      this.status.markStale();
+    }
     this.renderEnabled();
   }
 
@@ -168,7 +218,8 @@ class Console {
     // After a restart the world or the fleet may differ; at first load the REST calls may have
     // raced a server that was still starting.
     if (again || !this.drone || !this.map.world) await this.loadServerInfo();
-    this.pollDrone();
+    await this.pollDrone(true);
+    if (this.status.staleSince) this.reportLoss();
   }
 
   /** Estimate server clock offset with rosapi get_time (half the round trip, NTP-style). */
@@ -292,6 +343,20 @@ class Console {
     }
   }
 
+  /** After a reconnection: fresh values, and what changed while the page was away. */
+  reportLoss() {
+    const since = this.status.staleSince;
+    this.status.markFresh();
+    const lost = lostWhileAway(this.beforeDrop, this.status.snapshot());
+    this.beforeDrop = null;
+    const t = since ? since.toLocaleTimeString([], { hour12: false }) : "?";
+    const text = lost.length
+      ? `While disconnected (since ${t}): ${lost.join(" ")}`
+      : `While disconnected (since ${t}): nothing changed.`;
+    this.dialog.addSystem(text);
+    if (lost.length) this.banner(text, "warn", "reconnect");
+  }
+
   setDrones(names) {
     const list = names.length ? names : ["uav1"];
     this.drones = list;
@@ -317,12 +382,16 @@ class Console {
     for (const s of this.droneSubs) s.unsubscribe();
     this.camera.reset();
     this.map.setSelected(name);
+    this.status.setDrone(name);
     const t = (n) => droneTopic(n, name, this.fleet);
     const sub = (topic, cb, opts) => this.ros.subscribe(t(topic), TOPIC_TYPES[topic], cb, opts);
     this.droneSubs = [
       sub("/ardrone/navdata", (m) => this.telemetry.onNavdata(m), { throttle_rate: 50, queue_length: 1 }),
       sub("/ardrone/image_raw/compressed", (m) => this.camera.onImage(m), { queue_length: 1 }),
-      sub("/uav/pose", (m) => this.map.onPose(name, m), { throttle_rate: 50, queue_length: 1 }),
+      sub("/uav/pose", (m) => {
+        this.map.onPose(name, m);
+        this.telemetry.onPoseYaw(quaternionYaw(m?.pose?.orientation));
+      }, { throttle_rate: 50, queue_length: 1 }),
       sub("/uav/markers", (m) => this.map.onMarkers(m), { throttle_rate: 200, queue_length: 1 }),
       sub("/uav/task", (m) => {
         this.telemetry.onTask(m);
@@ -333,7 +402,10 @@ class Console {
   }
 
   subscribeGlobal() {
-    this.ros.subscribe("/console/reply", TOPIC_TYPES["/console/reply"], (m) => this.dialog.onReply(m));
+    this.ros.subscribe("/console/reply", TOPIC_TYPES["/console/reply"], (m) => {
+      this.dialog.onReply(m);
+      this.onAlarm(m);
+    });
     this.ros.subscribe("/console/state", TOPIC_TYPES["/console/state"], (m) => {
       if (!m.drone || !this.fleet || m.drone === this.drone) this.dialog.onState(m);
     });
@@ -342,26 +414,50 @@ class Console {
     });
   }
 
+  /** ANS alarms (Reply.alarm) raise the banner that waits for an acknowledgement. */
+  onAlarm(m) {
+    const alarm = m.alarm || "";
+    if (!alarm || (this.fleet && m.drone && m.drone !== this.drone && m.level !== "alert")) return;
+    const who = this.fleet && m.drone ? `${m.drone}: ` : "";
+    if (alarm === "link") this.alertBanner.drop(`${m.drone}:link-rest`); // one banner per event
+    if (m.level === "alert" || m.level === "warn") this.alertBanner.raise(`${m.drone}:${alarm}`, `${who}${m.text}`);
+    else this.alertBanner.clear(`${m.drone}:${alarm}`, `${who}${m.text}`);
+  }
+
   onFleet(msg) {
     this.map.onFleet(msg);
     const ul = $("fleet-list");
     const items = (msg.drones || []).map((d) => {
       const li = document.createElement("li");
       const bat = Number.isFinite(d.battery) ? `${Math.round(d.battery)} %` : "–";
-      li.textContent = `${d.name} · ${d.role || d.state || "?"} · ${bat}${d.link === false ? " · link lost" : ""}`;
+      // One flight-state label everywhere; the patrol role only while it means something.
+      const flight = d.name === this.drone && this.status.view.flight ? this.status.view.flight : flightLabel(d.state);
+      const role = ["patrolling", "relieving", "returning"].includes(d.role) ? ` · ${d.role}` : "";
+      li.textContent = `${d.name} · ${flight}${role} · ${bat}`;
       return li;
     });
     ul.replaceChildren(...items);
   }
 
-  async pollDrone() {
+  async pollDrone(force = false) {
     // While the socket is down the server is too: no REST polling (and no console noise).
-    if (!this.drone || document.hidden || this.ros.state !== STATES.OPEN) return;
+    if (!this.drone || (document.hidden && !force) || this.ros.state !== STATES.OPEN) return;
     try {
       const status = await this.api.drone(this.drone);
+      // A drone in its own vehicle process has a safety port: stops that no web traffic delays.
+      (this.safetyUrls ||= {})[this.drone] = status.vehicle ? status.vehicle.safety_url : null;
       this.telemetry.onDroneStatus(status);
       this.map.onSnapshot(this.drone, status);
       this.map.setLocalised(this.drone, status.localised);
+      this.status.setTask(status.task || null);
+      if (Number.isFinite(status.battery_pct)) this.status.setBattery(status.battery_pct);
+      // The dialog's link alarm says it first; this covers a server without one (a replay).
+      const ansSaidIt = this.alertBanner.active.some((x) => x.key === `${this.drone}:link`);
+      if (status.link_ok === false && !ansSaidIt) {
+        this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`);
+      } else if (status.link_ok === true) {
+        this.alertBanner.clear(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is back.`);
+      }
     } catch {
       /* the connection pill already tells the operator */
     }
@@ -389,15 +485,23 @@ class Console {
   }
 
   /** Direct actions through REST (land/emergency jump every queue on the server, DESIGN §5). */
-  async act(action) {
+  async act(action, source = "button") {
     if (!this.drone) return;
     if (action === "emergency") {
-      this.dialog.addSystem("EMERGENCY STOP");
+      this.dialog.addSystem(`EMERGENCY STOP (${source === "keyboard" ? "Shift+Esc" : "button"})`);
       document.body.dataset.emergency = String(Date.now());
     }
+    const safety = (this.safetyUrls || {})[this.drone];
+    if (safety && (action === "emergency" || action === "land")) {
+      // Straight to the vehicle process as well, past the web server (issue 14).
+      const headers = this.api.token ? { Authorization: `Bearer ${this.api.token}` } : {};
+      fetch(`${safety}/${action}`, { method: "POST", headers }).catch(() => {});
+    }
     try {
-      const res = await this.api.action(this.drone, action);
-      if (res && res.accepted === false) this.flash(`${action}: ${res.detail || "refused"}`, "warn");
+      const res = await this.api.action(this.drone, action, source);
+      // A refusal is shown where the operator looks (the banner) with its reason and the way
+      // out; the server also says it in the dialog (and aloud).
+      if (res && res.accepted === false) this.flash(res.detail || `${action} refused`, "warn", "refusal");
     } catch (err) {
       // REST unreachable or failing: land still has a second road, ardrone_autonomy's topic.
       // (There is no topic for emergency: /ardrone/reset only leaves the emergency state here.)
@@ -436,6 +540,76 @@ class Console {
     }
   }
 
+  /** Esc: close what is open (popover, passing banner, shortcuts list); true if something was. */
+  closeOpen() {
+    if (!$("map-popover").hidden) {
+      this.map.hidePopover();
+      $("map").focus();
+      return true;
+    }
+    const b = $("banner");
+    if (!b.hidden && b.dataset.source !== "rest" && b.dataset.source !== "lease") {
+      this.banner(null);
+      return true;
+    }
+    const details = document.querySelector(".shortcuts[open]");
+    if (details) {
+      details.open = false;
+      return true;
+    }
+    return false;
+  }
+
+  /** Which voice speaks replies: the browser's, the server's (espeak-ng), or none (said so). */
+  async checkVoice() {
+    const voices = await checkVoices(window.speechSynthesis);
+    if (voices > 0) {
+      this.dialog.setVoice("browser");
+      return;
+    }
+    try {
+      const r = await fetch("/api/v1/tts?text=ok", {
+        headers: { Authorization: `Bearer ${this.token}` },
+        cache: "no-store",
+      });
+      this.dialog.setVoice(r.ok ? "server" : "none");
+    } catch {
+      this.dialog.setVoice("none");
+    }
+  }
+
+  /** Play ``text`` spoken by the server (GET /api/v1/tts), one reply after another. */
+  serverSpeak(text) {
+    this.speechQueue = (this.speechQueue || Promise.resolve()).then(async () => {
+      try {
+        const r = await fetch(`/api/v1/tts?text=${encodeURIComponent(text.slice(0, 400))}`, {
+          headers: { Authorization: `Bearer ${this.token}` },
+          cache: "no-store",
+        });
+        if (!r.ok) return;
+        // Web Audio, not an <audio> element with a blob: URL: nothing a Content-Security-Policy
+        // must allow beyond fetching from this origin.
+        const Ctx = window.AudioContext || window.webkitAudioContext;
+        if (!Ctx) return;
+        this.audioCtx = this.audioCtx || new Ctx();
+        if (this.audioCtx.state === "suspended") await this.audioCtx.resume().catch(() => {});
+        const buffer = await this.audioCtx.decodeAudioData(await r.arrayBuffer());
+        const src = this.audioCtx.createBufferSource();
+        src.buffer = buffer;
+        src.connect(this.audioCtx.destination);
+        this.spokenByServer = (this.spokenByServer || 0) + 1;
+        await new Promise((resolve) => {
+          src.onended = resolve;
+          src.start();
+          // A suspended context (no user gesture yet) never ends: do not hold the queue.
+          setTimeout(resolve, (buffer.duration + 1) * 1000);
+        });
+      } catch {
+        /* speech is a convenience: the reply is on screen */
+      }
+    });
+  }
+
   // ---- feedback ------------------------------------------------------------------------------
   notice(text) {
     this.dialog.addSystem(text);
@@ -456,17 +630,18 @@ class Console {
     b.hidden = false;
   }
 
-  flash(text, level) {
+  flash(text, level, source = "flash") {
     // A standing alert about the token outranks passing messages.
     if ($("banner").dataset.source === "rest" && !$("banner").hidden) {
       this.dialog.addSystem(text);
       return;
     }
-    this.banner(text, level, "flash");
+    this.banner(text, level, source);
     clearTimeout(this.flashTimer);
+    // A refusal stays long enough to be read under pressure; Esc closes it sooner.
     this.flashTimer = setTimeout(() => {
-      if ($("banner").dataset.source === "flash") this.banner(null);
-    }, 5000);
+      if ($("banner").dataset.source === source) this.banner(null);
+    }, source === "refusal" ? 12000 : 5000);
   }
 
   /** Phones: keep the fixed dock's height in --dock-h so the last panel is not hidden under it. */

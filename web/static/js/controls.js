@@ -35,6 +35,17 @@ export const KEYMAP = Object.freeze({
   e: "yaw_right",
 });
 
+// Keys that move the drone: they work only while keyboard flying is armed (issue 18: a letter
+// typed outside the command box must never launch the drone). Stops (Shift+Esc, Space = hover,
+// L = land) always work.
+export const MOVING_KEYS = Object.freeze(new Set(["t", ...Object.keys(KEYMAP)]));
+
+/** What a keydown means: "emergency" (Shift+Esc), "close" (Esc) or null. */
+export function escapeMeaning(ev) {
+  if (ev.key !== "Escape") return null;
+  return ev.shiftKey ? "emergency" : "close";
+}
+
 export function zeroTwist() {
   return { linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } };
 }
@@ -54,8 +65,9 @@ export function twistFor(held, s) {
 export class Controls {
   /**
    * @param {HTMLElement} root
-   * @param {{action: (name: string) => void, twist: (t: object) => void, focusInput: () => void,
-   *          mic: () => void, describe?: () => void}} hooks
+   * @param {{action: (name: string, source?: string) => void, twist: (t: object) => void,
+   *          focusInput: () => void, mic: () => void, describe?: () => void,
+   *          close?: () => boolean, disarmedKey?: (key: string) => void}} hooks
    */
   constructor(root, hooks) {
     this.root = root;
@@ -65,13 +77,17 @@ export class Controls {
     this.keyHeld = new Map(); // key -> direction
     this.timer = null;
     this.enabled = true;
+    this.armed = false; // keyboard flying: off at every page load
+    this.armButton = root.querySelector("#arm-keys");
+    this.armButton?.addEventListener("click", () => this.setArmed(!this.armed));
     this.speedInput = root.querySelector("#jog-speed");
     this.speedOut = root.querySelector("#jog-speed-out");
     this.speedInput.addEventListener("input", () => this.renderSpeed());
     this.renderSpeed();
+    this.setArmed(false);
 
     const bind = (id, action) =>
-      root.querySelector(id).addEventListener("click", () => this.enabled && hooks.action(action));
+      root.querySelector(id).addEventListener("click", () => this.enabled && hooks.action(action, "button"));
     bind("#btn-takeoff", "takeoff");
     bind("#btn-land", "land");
     bind("#btn-hover", "hover");
@@ -84,7 +100,7 @@ export class Controls {
       if (now - emAt < 300) return; // pointerdown + click of one press
       emAt = now;
       this.releaseAll(false);
-      hooks.action("emergency");
+      hooks.action("emergency", "button");
     };
     em.addEventListener("pointerdown", (ev) => {
       if (ev.button === 0) fire();
@@ -152,15 +168,36 @@ export class Controls {
     if (!on) this.releaseAll(false);
   }
 
+  /** Arm or disarm the keys that move the drone (disarming also stops a keyboard jog). */
+  setArmed(on) {
+    this.armed = !!on;
+    if (!this.armed) {
+      for (const [k] of this.keyHeld) if (!k.startsWith("btn:")) this.keyHeld.delete(k);
+      this.update();
+    }
+    if (this.armButton) {
+      this.armButton.setAttribute("aria-pressed", String(this.armed));
+      this.armButton.textContent = this.armed ? "Keyboard flying: ON (T, WASD…)" : "Keyboard flying: off";
+    }
+    this.root.dataset.keysArmed = String(this.armed);
+  }
+
   onKeyDown(ev) {
-    if (ev.ctrlKey || ev.metaKey || ev.altKey) return;
-    const key = ev.key.toLowerCase();
-    if (key === "escape") {
+    const escape = escapeMeaning(ev);
+    if (escape === "emergency") {
+      // Shift+Esc: a deliberate chord, never a reflex; works everywhere, even while typing.
       ev.preventDefault();
       this.releaseAll(false);
-      this.hooks.action("emergency");
+      this.hooks.action("emergency", "keyboard");
       return;
     }
+    if (escape === "close") {
+      // Esc only closes what is open (a popover, a banner, the shortcuts list).
+      if (this.hooks.close?.()) ev.preventDefault();
+      return;
+    }
+    if (ev.ctrlKey || ev.metaKey || ev.altKey) return;
+    const key = ev.key.toLowerCase();
     const t = ev.target;
     const typing =
       t instanceof HTMLInputElement && t.type !== "range"
@@ -170,7 +207,7 @@ export class Controls {
     if (key === " " || key === "spacebar") {
       if (t instanceof HTMLButtonElement || t instanceof HTMLElement && t.tagName === "SUMMARY") return;
       ev.preventDefault();
-      if (!ev.repeat) this.hooks.action("hover");
+      if (!ev.repeat) this.hooks.action("hover", "keyboard");
       return;
     }
     if (key === "/") {
@@ -186,12 +223,16 @@ export class Controls {
       this.hooks.describe?.();
       return;
     }
+    if (MOVING_KEYS.has(key) && !this.armed) {
+      if (!ev.repeat) this.hooks.disarmedKey?.(key);
+      return;
+    }
     if (key === "t" && !ev.repeat) {
-      this.hooks.action("takeoff");
+      this.hooks.action("takeoff", "keyboard");
       return;
     }
     if (key === "l" && !ev.repeat) {
-      this.hooks.action("land");
+      this.hooks.action("land", "keyboard");
       return;
     }
     const dir = KEYMAP[key];

@@ -30,15 +30,37 @@ function parseCommands(raw) {
 
 export class DialogPanel {
   /**
-   * @param {{log: HTMLOListElement, alerts: HTMLElement, mute: HTMLButtonElement, state: HTMLElement}} els
-   * @param {{speechSynthesis?: SpeechSynthesis, storage?: Storage}} env
+   * @param {{log: HTMLElement, alerts: HTMLElement, mute: HTMLButtonElement, state: HTMLElement,
+   *          voiceNote?: HTMLElement}} els
+   * @param {{speechSynthesis?: SpeechSynthesis, storage?: Storage,
+   *          serverSpeak?: (text: string) => Promise<boolean>}} env
    */
   constructor(els, env = {}) {
     this.els = els;
     this.synth = env.speechSynthesis ?? window.speechSynthesis ?? null;
     this.storage = env.storage ?? window.localStorage;
+    this.serverSpeak = env.serverSpeak ?? null;
     this.muted = this.storage?.getItem("uavc.muted") === "1";
+    // "browser" (speechSynthesis has voices), "server" (replies spoken by the server's
+    // espeak-ng), "none" (shown, not spoken), or "unknown" until checked.
+    this.voice = "unknown";
     els.mute.addEventListener("click", () => this.setMuted(!this.muted));
+    this.renderMute();
+  }
+
+  /** Where spoken replies come from (see ``voice``); says so on the page. */
+  setVoice(voice) {
+    this.voice = voice;
+    const note = this.els.voiceNote;
+    if (note) {
+      note.hidden = voice === "browser" || voice === "unknown";
+      note.textContent =
+        voice === "server"
+          ? "This browser has no voices: replies are spoken by the server."
+          : voice === "none"
+            ? "This browser has no voices and the server has no speech engine: replies are shown, not spoken."
+            : "";
+    }
     this.renderMute();
   }
 
@@ -56,12 +78,27 @@ export class DialogPanel {
   renderMute() {
     const b = this.els.mute;
     b.setAttribute("aria-pressed", String(this.muted));
-    b.querySelector(".label").textContent = this.muted ? "Muted" : "Voice on";
-    b.title = this.muted ? "Spoken replies are muted" : "Mute spoken replies";
+    const label = this.muted
+      ? "Muted"
+      : this.voice === "none"
+        ? "No voice"
+        : this.voice === "server"
+          ? "Server voice on"
+          : this.voice === "unknown"
+            ? "Voice…"
+            : "Voice on";
+    b.querySelector(".label").textContent = label;
+    b.title = this.muted
+      ? "Spoken replies are muted"
+      : this.voice === "none"
+        ? "No voice available: replies are shown only"
+        : "Mute spoken replies";
+    b.dataset.voice = this.voice;
   }
 
   add(kind, text, extra = {}) {
-    const li = document.createElement("li");
+    // div entries in a div role=log: a log is not a list (axe: listitem outside a list).
+    const li = document.createElement("div");
     li.className = `msg msg-${kind}`;
     const body = document.createElement("span");
     body.className = "text";
@@ -107,6 +144,10 @@ export class DialogPanel {
     if (msg.utterance) this.annotate(msg.utterance, commands);
     const li = this.add("bot", msg.text || "", { level });
     li.dataset.level = level;
+    if (this.els.lastReply) {
+      this.els.lastReply.textContent = msg.text || "";
+      this.els.lastReply.dataset.level = level;
+    }
     if (level === "alert" || level === "warn") {
       this.els.alerts.textContent = "";
       // A fresh text node makes screen readers announce repeated alerts too.
@@ -118,7 +159,7 @@ export class DialogPanel {
 
   /** Attach "understood as …" to the newest pending entry with this text (or add one). */
   annotate(utterance, commands) {
-    const pending = [...this.els.log.querySelectorAll("li.msg-user[data-pending='1']")];
+    const pending = [...this.els.log.querySelectorAll(".msg-user[data-pending='1']")];
     let li = pending.reverse().find((el) => el.dataset.utterance === utterance);
     if (!li) {
       li = this.add("user", utterance, { meta: "from another console" });
@@ -131,7 +172,12 @@ export class DialogPanel {
   }
 
   speak(text, level) {
-    if (this.muted || !this.synth || typeof SpeechSynthesisUtterance === "undefined") return;
+    if (this.muted) return;
+    if (this.voice === "server" && this.serverSpeak) {
+      this.serverSpeak(text, level);
+      return;
+    }
+    if (this.voice === "none" || !this.synth || typeof SpeechSynthesisUtterance === "undefined") return;
     const u = new SpeechSynthesisUtterance(text);
     u.lang = "en-US";
     if (level === "alert") {

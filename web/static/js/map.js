@@ -3,6 +3,7 @@
 // Map frame per docs/CONVENTIONS.md: x east / along the room, y north / across it, metres; the
 // canvas draws +y upwards.
 
+import { flightLabel } from "./status.js";
 import { quaternionYaw } from "./util.js";
 
 const TRAIL_LEN = 400;
@@ -30,6 +31,10 @@ export class MapPanel {
     this.popoverMarker = null;
     this.dirty = true;
     canvas.addEventListener("click", (ev) => this.onClick(ev));
+    // Keyboard: arrows pick a marker (the popover follows), Enter/Space fly there via the
+    // popover's button, Esc (handled by the page) closes it.
+    this.keyIndex = -1;
+    canvas.addEventListener("keydown", (ev) => this.onKey(ev));
     els.go.addEventListener("click", () => {
       if (this.popoverMarker !== null) this.onGo(this.popoverMarker);
       this.hidePopover();
@@ -53,6 +58,12 @@ export class MapPanel {
     const b = world.bounds || {};
     const size = `${fmtM(b.x_max - b.x_min)} × ${fmtM(b.y_max - b.y_min)} m`;
     this.els.caption.textContent = `${world.name || kind} · ${size}`;
+    this.dirty = true;
+  }
+
+  /** Forget every drone's trail (a replay jumped in time). */
+  clearTrails() {
+    for (const d of this.drones.values()) d.trail = [];
     this.dirty = true;
   }
 
@@ -112,11 +123,23 @@ export class MapPanel {
     }
   }
 
+  /** The selected drone's flight state, as the status bar says it (labels agree). */
+  setFlightLabel(name, label) {
+    if (!name) return;
+    const d = this.drone(name);
+    if (d.flight !== label) {
+      d.flight = label;
+      d.flightLive = true;
+      this.dirty = true;
+    }
+  }
+
   /** uav_console/FleetStatus: every drone with its role. */
   onFleet(msg) {
     for (const s of msg?.drones || []) {
       const d = this.drone(s.name);
       d.role = s.role || "";
+      if (!(s.name === this.selected && d.flightLive)) d.flight = flightLabel(s.state);
       d.battery = s.battery;
       d.link = s.link;
       // The fleet status is coarse; the selected drone's pose topic is fresher.
@@ -353,7 +376,10 @@ export class MapPanel {
       ctx.restore();
       ctx.fillStyle = colour;
       ctx.font = "11px system-ui";
-      let label = d.role ? `${name} · ${d.role}` : name;
+      // The flight state (same words as the status bar), and the patrol role only while it
+      // means something: "idle" in flight or "lost" after a stop would contradict the bar.
+      let label = d.flight ? `${name} · ${d.flight}` : name;
+      if (["patrolling", "relieving", "returning"].includes(d.role)) label += ` · ${d.role}`;
       if (lost) label += " · not localised";
       ctx.fillText(label, x + 10, y + 16);
     }
@@ -394,6 +420,31 @@ export class MapPanel {
     pop.style.top = `${Math.min(Math.max(4, cy + 8), rect.height - pop.offsetHeight - 4)}px`;
     this.els.go.focus();
     this.dirty = true;
+  }
+
+  onKey(ev) {
+    const markers = [...(this.world?.markers || [])].sort((a, b) => a.id - b.id);
+    if (!markers.length) return;
+    if (["ArrowRight", "ArrowDown", "ArrowLeft", "ArrowUp", "Home", "End"].includes(ev.key)) {
+      ev.preventDefault();
+      ev.stopPropagation(); // arrows here pick markers; they never jog the drone
+      const n = markers.length;
+      if (ev.key === "Home") this.keyIndex = 0;
+      else if (ev.key === "End") this.keyIndex = n - 1;
+      else {
+        const step = ev.key === "ArrowRight" || ev.key === "ArrowDown" ? 1 : -1;
+        this.keyIndex = this.keyIndex < 0 ? (step > 0 ? 0 : n - 1) : (this.keyIndex + step + n) % n;
+      }
+      const m = markers[this.keyIndex];
+      this.popoverMarker = m.id;
+      this.els.focus && (this.els.focus.textContent = `Marker ${m.id} of ${n}. Enter offers to fly there.`);
+      this.dirty = true;
+    } else if ((ev.key === "Enter" || ev.key === " ") && this.popoverMarker !== null) {
+      ev.preventDefault();
+      ev.stopPropagation();
+      const p = this.markerPixel(this.popoverMarker);
+      if (p) this.showPopover(this.popoverMarker, p.x, p.y);
+    }
   }
 
   hidePopover() {

@@ -2,10 +2,11 @@
 // loop health and the running task, with warnings in colour.
 //
 // Sources: /ardrone/navdata (ardrone_autonomy/Navdata: batteryPercent %, altd mm, vx/vy mm/s,
-// rotZ deg, state), /uav/task (uav_console/TaskStatus), and GET /api/v1/drones/{id} for the
+// rotZ deg, state, pressure Pa, temp 0.1 °C), /uav/task (uav_console/TaskStatus), and GET /api/v1/drones/{id} for the
 // server's view of the link and the 100 Hz controller's timing.
 
-import { ctrlStateName, fmt, setLevel, setText, wrap360 } from "./util.js";
+import { flightLabel, flightLevel } from "./status.js";
+import { fmt, setLevel, setText, wrap360 } from "./util.js";
 
 // DESIGN §5 / server Settings defaults: battery_low_pct 25, battery_critical_pct 12,
 // link_timeout_s 0.5; demo navdata arrives at ~15 Hz (AR.Drone SDK 2.0 §7.1).
@@ -26,6 +27,11 @@ export class TelemetryPanel {
     this.lastNav = null;
     this.serverLink = null;
     this.emergency = false;
+    this.poseAt = null; // when the map-frame heading last came from /uav/pose
+    /** Called with (label, battery %) whenever they change: the status bar follows. */
+    this.onFlight = () => {};
+    /** Called with (text, level, lost) on every link render. */
+    this.onLink = () => {};
     this.timer = setInterval(() => this.renderLink(), 250);
     this.renderLink();
   }
@@ -49,15 +55,40 @@ export class TelemetryPanel {
     setText(this.$("altitude"), `${fmt(altM, 2)} m`);
     const speed = Math.hypot(Number(msg.vx) || 0, Number(msg.vy) || 0) / 1000;
     setText(this.$("speed"), `${fmt(speed, 2)} m/s`);
-    // rotZ is REP 103 yaw in degrees (counter-clockwise positive); show it as such.
+    // rotZ is REP 103 yaw in degrees (counter-clockwise positive) in the drone's own frame;
+    // the EKF's map-frame heading (/uav/pose) is preferred when it flows.
     const yaw = Number(msg.rotZ);
-    setText(this.$("heading"), Number.isFinite(yaw) ? `${Math.round(yaw)}°` : "–");
-    this.$("heading").title = Number.isFinite(yaw) ? `compass-style ${Math.round(wrap360(-yaw))}°` : "";
+    if (Number.isFinite(yaw) && (this.poseAt === null || t - this.poseAt > 1.5)) {
+      this.showHeading(compassBearing(yaw));
+    }
+    // Barometer (navdata option 21, as ardrone_autonomy fills them): pressure in Pa, temp in
+    // 0.1 °C; 0 when the drone sends no barometer option.
+    const pa = Number(msg.pressure);
+    const baro = Number.isFinite(pa) && pa > 0;
+    setText(this.$("pressure"), baro ? `${fmt(pa / 100, 1)} hPa` : "–");
+    setText(this.$("temperature"), baro ? `${fmt(Number(msg.temp) / 10, 1)} °C` : "–");
     const state = Number(msg.state);
-    setText(this.$("ctrl-state"), this.emergency ? "Emergency" : ctrlStateName(state));
-    const level = this.emergency || state === 0 ? "alert" : state === 8 || state === 6 ? "warn" : "ok";
-    setLevel(this.$("m-state"), level);
+    this.showFlight(flightLabel(state, { emergency: this.emergency }));
     this.$("ctrl-state").dataset.state = String(state);
+    this.onFlight(this.flight, Number.isFinite(battery) ? battery : null);
+  }
+
+  /** Map-frame yaw (rad, REP 103) from /uav/pose: the heading as a compass bearing. */
+  onPoseYaw(yawRad) {
+    if (!Number.isFinite(yawRad)) return;
+    this.poseAt = this.now();
+    this.showHeading(compassBearing((yawRad * 180) / Math.PI));
+  }
+
+  showHeading(bearing) {
+    setText(this.$("heading"), Number.isFinite(bearing) ? `${bearing}°` : "–");
+    this.$("heading").title = "Compass bearing: 0° = north (map +y), 90° = east (map +x)";
+  }
+
+  showFlight(label) {
+    this.flight = label;
+    setText(this.$("ctrl-state"), label);
+    setLevel(this.$("m-state"), flightLevel(label));
   }
 
   onTask(msg) {
@@ -78,6 +109,10 @@ export class TelemetryPanel {
     this.serverLink = linkFlag(status);
     // The emergency flag (navdata state bit 31) is not in ardrone_autonomy's Navdata message.
     this.emergency = status.emergency === true;
+    if (this.emergency && this.flight !== "Emergency") {
+      this.showFlight("Emergency");
+      this.onFlight(this.flight, num(status.battery_pct));
+    }
     document.body.dataset.droneEmergency = this.emergency ? "1" : "";
     // Navdata over rosbridge is the live source; the 1 Hz REST snapshot fills in without it.
     if (this.lastNav === null || this.now() - this.lastNav > 1.5) this.fromSnapshot(status);
@@ -120,12 +155,10 @@ export class TelemetryPanel {
     const vy = num(st.vy);
     if (vx !== null && vy !== null) setText(this.$("speed"), `${fmt(Math.hypot(vx, vy), 2)} m/s`);
     const yaw = num(st.yaw_rad);
-    if (yaw !== null) setText(this.$("heading"), `${Math.round((yaw * 180) / Math.PI)}°`);
+    if (yaw !== null) this.showHeading(compassBearing((yaw * 180) / Math.PI));
     if (typeof st.ctrl_state === "string" && st.ctrl_state) {
-      const name = st.ctrl_state.toLowerCase().replace(/_/g, " ");
-      setText(this.$("ctrl-state"), name.charAt(0).toUpperCase() + name.slice(1));
-      if (st.emergency) setText(this.$("ctrl-state"), "Emergency");
-      setLevel(this.$("m-state"), st.emergency ? "alert" : "ok");
+      this.showFlight(flightLabel(st.ctrl_state, { emergency: st.emergency === true }));
+      this.onFlight(this.flight, battery);
     }
   }
 
@@ -134,6 +167,7 @@ export class TelemetryPanel {
     if (this.lastNav === null) {
       setText(el, this.serverLink === false ? "lost" : "waiting");
       setLevel(this.$("m-link"), this.serverLink === false ? "alert" : "unknown");
+      this.onLink(el.textContent, this.$("m-link").dataset.level, this.serverLink === false);
       return;
     }
     const age = this.now() - this.lastNav;
@@ -142,14 +176,21 @@ export class TelemetryPanel {
     // Rate from the intervals between packets (right from the first two, not a window count).
     const rate =
       recent.length < 2 ? 0 : (recent.length - 1) / Math.max(1e-3, recent[recent.length - 1] - recent[0]);
-    if (age > LINK_TIMEOUT_S || this.serverLink === false) {
+    const lost = age > LINK_TIMEOUT_S || this.serverLink === false;
+    if (lost) {
       setText(el, `lost (${fmt(age, 1)} s)`);
       setLevel(this.$("m-link"), "alert");
     } else {
       setText(el, `${Math.round(rate)} Hz`);
       setLevel(this.$("m-link"), rate >= NAVDATA_OK_HZ ? "ok" : "warn");
     }
+    this.onLink(el.textContent, this.$("m-link").dataset.level, lost);
   }
+}
+
+/** Compass bearing 0–359° (0 = north = map +y, clockwise) of a REP 103 yaw in degrees. */
+export function compassBearing(yawDeg) {
+  return Math.round(wrap360(90 - yawDeg)) % 360;
 }
 
 function num(v) {

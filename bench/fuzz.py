@@ -1,0 +1,378 @@
+"""Fuzz campaign over every parser of untrusted input (issue 14); a benchmark, not a test.
+
+    .venv/bin/python bench/fuzz.py               # 100 000 inputs per parser (the issue's bar)
+    .venv/bin/python bench/fuzz.py --n 5000      # a quick pass
+    .venv/bin/python bench/fuzz.py --only navdata --seed 7
+
+Each target gets seeded, deterministic inputs: mutations of valid examples (bit flips, byte
+and token replacement with "interesting" values, truncation, duplication, splicing of two
+examples) and, for one input in eight, plain random bytes. An input **crashes** a parser when
+it raises anything but the parser's documented errors, or (for the rosbridge protocol, which
+never raises) when it reaches the defensive "frame could not be handled" branch, which exists
+to catch bugs. The table gives per parser: inputs, accepted, rejected (documented error),
+crashes, the median time per input and the slowest input (its time, the best of five re-runs
+of it — a slow input that re-runs fast was the machine's load, not the input — and a ``repr``).
+Every crash is written to ``--crash-dir`` (default ``$TMPDIR/uavc-fuzz-crashes/``) and becomes
+a test.
+
+Adding a parser (the MAVLink and WAV parsers are being written elsewhere): define a
+:class:`Target` — a name, a few valid ``seeds`` (bytes), ``run(data)`` that parses one input,
+and ``errors`` (the exception types its docstring documents) — and append it in
+:func:`targets`. Nothing else changes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import contextlib
+import json
+import random
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import cbor2
+from pydantic import BaseModel, ValidationError
+
+INTERESTING = [
+    b"",
+    b"\x00",
+    b"\xff",
+    b"\xff\xff\xff\xff",
+    b"\x7f\xff\xff\xff",
+    b"\x80\x00\x00\x00",
+    b"-1",
+    b"0",
+    b"1e308",
+    b"-1e308",
+    b"NaN",
+    b"Infinity",
+    b"9223372036854775808",
+    b"\\ud800",
+    b'"',
+    b"{",
+    b"}",
+    b"[",
+    b"]",
+    b",",
+    b":",
+    b"null",
+    b"true",
+    b"<",
+    b">",
+    b"&",
+    b"<!DOCTYPE x [<!ENTITY a 'b'>]>",
+    b"\r",
+    b"\n",
+    b"AT*REF=",
+    b"PaVE",
+    b"\x88\x77\x66\x55",
+    b"(" * 50,
+    b"*" * 20,
+]
+
+
+@dataclass
+class Target:
+    """One parser under fuzz: valid ``seeds``, ``run`` parses one input, ``errors`` are the
+    exceptions it documents (anything else is a crash). ``crashed`` may flag a crash the
+    parser swallowed (e.g. a defensive catch-all)."""
+
+    name: str
+    seeds: list[bytes]
+    run: Callable[[bytes], object]
+    errors: tuple[type[BaseException], ...] = ()
+    crashed: Callable[[object], str | None] = lambda _result: None
+
+
+@dataclass
+class Result:
+    name: str
+    inputs: int = 0
+    accepted: int = 0
+    rejected: int = 0
+    crashes: list[tuple[bytes, str]] = field(default_factory=list)
+    times_us: list[float] = field(default_factory=list)
+    slowest: tuple[float, bytes] = (0.0, b"")
+    slowest_rerun_us: float = 0.0  # the slowest input timed again (best of 5): load or input?
+
+
+def mutate(rng: random.Random, seeds: list[bytes]) -> bytes:
+    """One fuzz input from ``seeds`` (see the module docstring)."""
+    if rng.random() < 0.125:
+        return rng.randbytes(rng.randrange(0, 256))
+    data = bytearray(rng.choice(seeds))
+    for _ in range(rng.choice((1, 1, 2, 3, 5, 8))):
+        kind = rng.randrange(7)
+        pos = rng.randrange(len(data) + 1)
+        if kind == 0 and data:  # flip bits
+            i = min(pos, len(data) - 1)
+            data[i] ^= 1 << rng.randrange(8)
+        elif kind == 1 and data:  # random byte
+            data[min(pos, len(data) - 1)] = rng.randrange(256)
+        elif kind == 2:  # insert an interesting token
+            data[pos:pos] = rng.choice(INTERESTING)
+        elif kind == 3 and data:  # delete a run
+            del data[pos : pos + rng.randrange(1, 16)]
+        elif kind == 4:  # truncate
+            del data[pos:]
+        elif kind == 5 and data:  # duplicate a run
+            end = min(len(data), pos + rng.randrange(1, 64))
+            data[pos:pos] = data[pos:end] * rng.randrange(1, 4)
+        else:  # splice with another seed
+            other = rng.choice(seeds)
+            cut = rng.randrange(len(other) + 1)
+            data = data[:pos] + bytearray(other[cut:])
+    return bytes(data)
+
+
+def fuzz(target: Target, n: int, seed: int) -> Result:
+    rng = random.Random(f"{seed}:{target.name}")
+    res = Result(target.name)
+    for data in _inputs(rng, target, n):
+        t0 = time.perf_counter()
+        try:
+            out = target.run(data)
+        except target.errors:
+            res.rejected += 1
+        except Exception as exc:  # a crash: anything undocumented
+            res.crashes.append((data, f"{type(exc).__name__}: {exc}"[:200]))
+        else:
+            why = target.crashed(out)
+            if why is not None:
+                res.crashes.append((data, why[:200]))
+            else:
+                res.accepted += 1
+        dt = (time.perf_counter() - t0) * 1e6
+        res.inputs += 1
+        res.times_us.append(dt)
+        if dt > res.slowest[0]:
+            res.slowest = (dt, data)
+    res.slowest_rerun_us = min(_time_once(target, res.slowest[1]) for _ in range(5))
+    return res
+
+
+def _time_once(target: Target, data: bytes) -> float:
+    t0 = time.perf_counter()
+    with contextlib.suppress(Exception):
+        target.run(data)
+    return (time.perf_counter() - t0) * 1e6
+
+
+def _inputs(rng: random.Random, target: Target, n: int) -> Iterator[bytes]:
+    yield from target.seeds  # the valid examples themselves first
+    for _ in range(n - len(target.seeds)):
+        yield mutate(rng, target.seeds)
+
+
+# -- targets -------------------------------------------------------------------------------
+def _rosbridge_targets() -> list[Target]:
+    from server.rosbridge.encode import png_frame
+    from server.rosbridge.protocol import BridgeProtocol
+
+    frames = [
+        {"op": "auth", "token": "abc"},
+        {"op": "subscribe", "id": "s1", "topic": "/ardrone/navdata", "throttle_rate": 100},
+        {"op": "subscribe", "topic": "/a", "type": "std_msgs/String", "queue_length": 2},
+        {"op": "publish", "topic": "/cmd_vel", "msg": {"linear": {"x": 0.1}, "angular": {}}},
+        {"op": "advertise", "topic": "/t", "type": "geometry_msgs/Twist", "latch": True},
+        {"op": "call_service", "id": "c", "service": "/rosapi/topics", "args": {}, "timeout": 2},
+        {"op": "service_response", "id": "service_request:/x:1", "values": {}, "result": True},
+        {"op": "fragment", "id": "f", "data": '{"op":', "num": 0, "total": 2},
+        {"op": "set_level", "level": "warning"},
+        {"op": "unsubscribe", "topic": "/a", "id": "s1"},
+    ]
+    texts = [json.dumps(f).encode() for f in frames]
+    texts.append(png_frame(json.dumps(frames[1])).encode())
+
+    def crashed(out: object) -> str | None:
+        proto = out
+        assert isinstance(proto, BridgeProtocol)
+        for frame in proto.frames_to_send():
+            if isinstance(frame, str) and "could not be handled" in frame:
+                return str(json.loads(frame)["msg"])
+        return None
+
+    def run_text(data: bytes) -> BridgeProtocol:
+        proto = BridgeProtocol(max_frame_bytes=1 << 20)
+        proto.receive_text(data.decode("utf-8", "surrogateescape"), 0.0)
+        return proto
+
+    def run_cbor(data: bytes) -> BridgeProtocol:
+        proto = BridgeProtocol(max_frame_bytes=1 << 20)
+        proto.receive_bytes(data, 0.0)
+        return proto
+
+    return [
+        Target("rosbridge JSON", texts, run_text, crashed=crashed),
+        Target("rosbridge CBOR", [cbor2.dumps(f) for f in frames], run_cbor, crashed=crashed),
+    ]
+
+
+def _png_target() -> Target:
+    from server.rosbridge.encode import png_decode, png_encode
+
+    seeds = [
+        png_encode('{"op":"publish","topic":"/a","msg":{"data":"' + "x" * k + '"}}')
+        for k in (1, 50, 900)
+    ]
+    return Target("rosbridge PNG", seeds, lambda d: png_decode(d, 1 << 20), (ValueError,))
+
+
+def _ardrone_targets() -> list[Target]:
+    from drone.ardrone.at import Config, Ctrl, Pcmd, Ref, encode_command, parse_at
+    from drone.ardrone.errors import ATParseError, NavdataError, VideoError
+    from drone.ardrone.navdata import Demo, DroneState, Navdata, decode_navdata, encode_navdata
+    from drone.ardrone.video import PaVEParser, encode_pave
+
+    at_seeds = [
+        encode_command(Ref.takeoff(), 1),
+        encode_command(Pcmd(1, 0.1, -0.2, 0.3, 0.0), 7) + encode_command(Ref.land(), 8),
+        encode_command(Config("general:navdata_demo", "TRUE"), 3),
+        encode_command(Ctrl(5, 0), 4),
+    ]
+    nav_seeds = [
+        encode_navdata(Navdata(state=DroneState(0x800), sequence=1)),
+        encode_navdata(
+            Navdata(state=DroneState(1), sequence=99, demo=Demo(ctrl_state=3 << 16, battery_pct=80))
+        ),
+    ]
+    pave_seeds = [
+        encode_pave(b"\x00\x00\x00\x01\x67" + b"\x11" * 40, frame_number=1, timestamp_ms=5),
+        encode_pave(b"\x00\x00\x00\x01\x41" + b"\x22" * 200, frame_number=2, timestamp_ms=9),
+    ]
+
+    def run_pave(data: bytes) -> object:
+        parser = PaVEParser(max_payload=1 << 20)
+        half = len(data) // 2  # in two reads, as TCP may deliver it
+        return parser.feed(data[:half]) + parser.feed(data[half:])
+
+    return [
+        Target("AT commands", at_seeds, parse_at, (ATParseError,)),
+        Target("navdata", nav_seeds, decode_navdata, (NavdataError,)),
+        Target("PaVE video", pave_seeds, run_pave, (VideoError,)),
+    ]
+
+
+def _grammar_target(workdir: Path) -> Target:
+    from server.language.errors import GrammarError
+    from server.language.grammar import load_grammar
+
+    rules = (
+        '<?xml version="1.0"?><rules><grammar name="g">'
+        '<rule id="up" action="move" priority="5"><const name="direction" value="up"/>'
+        "<pattern><![CDATA[go {DIRECTION} (?P<distance>\\d+) meters?]]></pattern></rule>"
+        '<rule id="l" action="land"><pattern>land|come down</pattern></rule>'
+        "</grammar></rules>"
+    )
+    states = '<states><state name="LANDED" refuse="No."><grammar ref="g"/></state></states>'
+    mappings = (
+        '<mappings><set name="DIRECTION"><item label="up">up, roof</item>'
+        '<item label="down">down</item></set></mappings>'
+    )
+    files = {"rules.xml": rules, "states.xml": states, "mappings.xml": mappings}
+    for name, text in files.items():
+        (workdir / name).write_text(text)
+    order = list(files)
+    seeds = [f"{i}".encode() + text.encode() for i, text in enumerate(files.values())]
+
+    def run(data: bytes) -> object:
+        # The first byte picks the file this input replaces; the others stay valid.
+        which = order[data[0] % 3] if data else order[0]
+        for name, text in files.items():
+            (workdir / name).write_bytes(data[1:] if name == which else text.encode())
+        return load_grammar(workdir)
+
+    return Target("XML grammars", seeds, run, (GrammarError,))
+
+
+def _rest_targets() -> list[Target]:
+    from server.api.models import CommandRequest, FaultRequest, InterpretRequest
+    from server.fleet.messages import MissionRequest
+
+    bodies: list[tuple[type[BaseModel], list[bytes]]] = [
+        (CommandRequest, [b'{"text": "take off and fly to marker 3", "confidence": 0.9}']),
+        (InterpretRequest, [b'{"text": "go up two meters", "state": "FLYING"}']),
+        (
+            FaultRequest,
+            [b'{"kind": "wind", "wind_mps": [1.5, -2]}', b'{"kind": "battery", "battery_pct": 20}'],
+        ),
+        (
+            MissionRequest,
+            [
+                b'{"markers": [1, 4, 7], "altitude_m": 1.4, "name": "loop-1"}',
+                b'{"waypoints": [{"lat": 47.1, "lon": 8.5}], "loop": false}',
+            ],
+        ),
+    ]
+    seeds = [bytes([i]) + b for i, (_, bs) in enumerate(bodies) for b in bs]
+
+    def run(data: bytes) -> object:
+        # What FastAPI does with a JSON body: json.loads (which accepts NaN), then the model.
+        model = bodies[data[0] % len(bodies)][0] if data else CommandRequest
+        obj = json.loads(data[1:].decode("utf-8"))
+        validated = model.model_validate(obj)
+        validated.model_dump_json()  # the response/audit must be able to carry it
+        return validated
+
+    return [Target("REST bodies", seeds, run, (ValidationError, ValueError))]
+
+
+def targets(workdir: Path) -> list[Target]:
+    """Every fuzz target. Append new parsers here (see the module docstring)."""
+    return [
+        *_rosbridge_targets(),
+        _png_target(),
+        *_ardrone_targets(),
+        _grammar_target(workdir),
+        *_rest_targets(),
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=100_000, help="inputs per parser")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--only", help="run the targets whose name contains this")
+    ap.add_argument("--quick", action="store_true", help="5000 inputs per parser")
+    ap.add_argument(
+        "--crash-dir", type=Path, default=Path(tempfile.gettempdir()) / "uavc-fuzz-crashes"
+    )
+    args = ap.parse_args(argv)
+    n = 5000 if args.quick else args.n
+    print(f"fuzz: {n} inputs per parser, seed {args.seed}")
+    print(
+        f"{'parser':<16} {'inputs':>8} {'accepted':>9} {'rejected':>9} {'crashes':>8} "
+        f"{'median µs':>10} {'slowest µs':>11} {'re-run µs':>10}  slowest input"
+    )
+    total_crashes = 0
+    with tempfile.TemporaryDirectory(prefix="uavc-fuzz-") as tmp:
+        for target in targets(Path(tmp)):
+            if args.only and args.only.lower() not in target.name.lower():
+                continue
+            res = fuzz(target, n, args.seed)
+            total_crashes += len(res.crashes)
+            shown = repr(res.slowest[1][:40]) + ("…" if len(res.slowest[1]) > 40 else "")
+            print(
+                f"{res.name:<16} {res.inputs:>8} {res.accepted:>9} {res.rejected:>9} "
+                f"{len(res.crashes):>8} {statistics.median(res.times_us):>10.1f} "
+                f"{res.slowest[0]:>11.0f} {res.slowest_rerun_us:>10.0f}  {shown}",
+                flush=True,
+            )
+            for i, (data, why) in enumerate(res.crashes[:20]):
+                args.crash_dir.mkdir(parents=True, exist_ok=True)
+                slug = res.name.replace(" ", "_")
+                (args.crash_dir / f"{slug}-{i}.bin").write_bytes(data)
+                print(f"  crash {i}: {why}  input (base64) {base64.b64encode(data[:200]).decode()}")
+    return 1 if total_crashes else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

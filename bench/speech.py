@@ -1,0 +1,313 @@
+"""Offline speech: spoken-command exact match, latency and real-time factor, with and without
+grammar guidance, and what decoding costs the 100 Hz control loop.
+
+1. Accuracy and latency. Utterances drawn (seeded, stratified by action) from the hand-labelled
+   NLU set ``tests/data/nlu_labelled.jsonl`` are synthesised with espeak-ng in 6+ voices and
+   accents at 3 speeds (130/160/190 words per minute), clean and with white noise at 20 dB and
+   10 dB SNR (seeded): 36 utterances x 9 conditions = 324 clips (``--quick``: 12 x 9 = 108).
+   Each clip is recognised by the shipped tiny.en (int8, CPU) twice: grammar-guided (vocabulary
+   prompt + snapping to the grammars, the product) and unguided (the same recogniser, no prompt,
+   the raw transcript to the NLU: the baseline).
+   * exact = the commands that would be executed (confidence >= 0.5, else "please repeat")
+     equal the labelled ones; for a labelled non-command, nothing executed;
+   * wrong = something executed that differs from the label (the dangerous outcome);
+   * latency = end of speech (the whole clip handed over) -> commands: VAD + decode + snap + NLU;
+   * RTF = that time / clip duration.
+   Targets (issue 15): >= 90 % exact clean, >= 80 % at 10 dB, p50 <= 400 ms.
+2. The 100 Hz control loop (drone/control/loop.py, sleep+spin as flown) alone, then while 3
+   streams keep decoding through the server's bounded pool (one decoder per core less one),
+   then through an unbounded one (3 decoders at once): period error p99, overruns.
+
+    .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import random
+import sys
+import tempfile
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from drone.control.loop import ControlLoop, LoopStats  # noqa: E402
+from drone.control.pid import PaperPID, Setpoint  # noqa: E402
+from server.language.nlu import default_nlu  # noqa: E402
+from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
+from server.speech.model import default_workers, load_whisper, resolve  # noqa: E402
+from server.speech.pool import DecoderPool  # noqa: E402
+from server.speech.recognizer import Recognizer  # noqa: E402
+from tests.speech.conftest import synthesise  # noqa: E402
+
+VOICES = ["en-us", "en-gb", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us+f3", "en-us-nyc"]
+SPEEDS = [130, 160, 190]
+NOISE: list[float | None] = [None, 20.0, 10.0]
+THRESHOLD = 0.5  # Settings.confidence_threshold
+
+
+def pick_utterances(n: int, seed: int = 15) -> list[dict[str, Any]]:
+    rows = [json.loads(line) for line in (ROOT / "tests/data/nlu_labelled.jsonl").open()]
+    by_action: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for row in rows:
+        by_action[row["commands"][0]["action"] if row["commands"] else "none"].append(row)
+    rng = random.Random(seed)
+    for group in by_action.values():
+        rng.shuffle(group)
+    out: list[dict[str, Any]] = []
+    while len(out) < n:  # round-robin over actions: every kind of command is spoken
+        for action in sorted(by_action):
+            if by_action[action] and len(out) < n:
+                out.append(by_action[action].pop())
+    return out
+
+
+def canon(commands: list[dict[str, Any]]) -> str:
+    def norm(v: Any) -> Any:
+        return round(v, 3) if isinstance(v, float) else v
+
+    return json.dumps([{k: norm(v) for k, v in c.items()} for c in commands], sort_keys=True)
+
+
+def pct(xs: list[float], q: float) -> float:
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, int(q * (len(xs) - 1) + 0.5))] if xs else float("nan")
+
+
+def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    """Print the tables for per-clip results (also for a partial run: ``--report``)."""
+    print("\n## Spoken commands: exact match (executed commands == label)")
+    print(
+        "| recogniser | clean | 20 dB | 10 dB | all | understood (any conf.) | wrong executed "
+        "| latency p50 ms | p95 ms | RTF p50 |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    summary: dict[str, Any] = {}
+    for name, rows in results.items():
+
+        def rate(key: str, pred: Any = lambda r: True, rows: list[dict[str, Any]] = rows) -> float:
+            sel = [r for r in rows if pred(r)]
+            return 100.0 * sum(r[key] for r in sel) / max(1, len(sel))
+
+        s = {
+            "clean": rate("exact", lambda r: r["snr"] is None),
+            "20dB": rate("exact", lambda r: r["snr"] == 20.0),
+            "10dB": rate("exact", lambda r: r["snr"] == 10.0),
+            "all": rate("exact"),
+            "understood": rate("understood"),
+            "wrong": rate("wrong"),
+            "p50_ms": pct([r["ms"] for r in rows], 0.5),
+            "p95_ms": pct([r["ms"] for r in rows], 0.95),
+            "rtf_p50": pct([r["rtf"] for r in rows], 0.5),
+        }
+        summary[name] = s
+        print(
+            f"| {name} | {s['clean']:.1f} % | {s['20dB']:.1f} % | {s['10dB']:.1f} % | "
+            f"{s['all']:.1f} % | {s['understood']:.1f} % | {s['wrong']:.1f} % | "
+            f"{s['p50_ms']:.0f} | {s['p95_ms']:.0f} | {s['rtf_p50']:.2f} |"
+        )
+    g, b = summary["guided"], summary["unguided (baseline)"]
+    ratio = f"{g['all'] / b['all']:.2f}x" if b["all"] else "n/a (baseline 0 %)"
+    print(
+        f"\nguided / baseline exact: {ratio}; wrong executed {g['wrong']:.1f} % vs "
+        f"{b['wrong']:.1f} %; latency p50 ratio {g['p50_ms'] / b['p50_ms']:.2f}"
+    )
+    print("\n### guided, by voice and by speed (exact %)")
+    by: dict[str, list[bool]] = defaultdict(list)
+    for r in results["guided"]:
+        by[f"voice {r['voice']}"].append(r["exact"])
+        by[f"speed {r['speed']} wpm"].append(r["exact"])
+    print(" · ".join(f"{k}: {100 * sum(v) / len(v):.0f}" for k, v in sorted(by.items())))
+    misses = [r for r in results["guided"] if not r["exact"]][:12]
+    if misses:
+        print("\n### some guided misses (label -> heard, confidence)")
+        for r in misses:
+            snr = "clean" if r["snr"] is None else f"{r['snr']:.0f} dB"
+            print(
+                f"- {r['text']!r} [{r['voice']}, {r['speed']} wpm, {snr}] -> "
+                f"{r['heard']!r} ({r['confidence']:.2f})"
+            )
+    return summary
+
+
+def bench_accuracy(recognizer: Recognizer, quick: bool) -> dict[str, Any]:
+    utterances = pick_utterances(12 if quick else 36)
+    conditions = [(s, n) for n in NOISE for s in SPEEDS]
+    work = Path(tempfile.mkdtemp(prefix="uavc-speech-bench-"))
+    clips: list[tuple[Path, dict[str, Any], str, int, float | None]] = []
+    t0 = time.perf_counter()
+    for i, row in enumerate(utterances):
+        for j, (speed, snr) in enumerate(conditions):
+            voice = VOICES[(i + j) % len(VOICES)]
+            path = work / f"u{i}_{j}.wav"
+            synthesise(path, row["text"], voice=voice, speed=speed, snr_db=snr, seed=i * 31 + j)
+            clips.append((path, row, voice, speed, snr))
+    print(
+        f"{len(clips)} clips: {len(utterances)} utterances x {len(conditions)} conditions, "
+        f"{len({c[2] for c in clips})} voices, synthesised in {time.perf_counter() - t0:.0f} s"
+    )
+    results: dict[str, list[dict[str, Any]]] = {"guided": [], "unguided (baseline)": []}
+    # Seeded shuffle: any prefix of the run (an interrupted one too) is a fair sample of all
+    # utterances, voices, speeds and noise levels.
+    random.Random(1).shuffle(clips)
+    recognizer.recognize(read_wav(clips[0][0].read_bytes()))  # warm-up, not counted
+    progress = Path(tempfile.gettempdir()) / "uavc-speech-bench-progress.jsonl"
+    progress.write_text("")
+    for k, (path, row, voice, speed, snr) in enumerate(clips):
+        if k and k % 20 == 0:
+            print(f"  {k}/{len(clips)} clips", file=sys.stderr, flush=True)
+        samples = read_wav(path.read_bytes())
+        dur = len(samples) / SAMPLE_RATE
+        for name, guided in (("guided", True), ("unguided (baseline)", False)):
+            t = time.perf_counter()
+            rec = recognizer.recognize(samples, guided=guided)
+            ms = (time.perf_counter() - t) * 1000
+            executed = rec.commands if rec.confidence >= THRESHOLD else []
+            want = canon(row["commands"])
+            results[name].append(
+                {
+                    "text": row["text"],
+                    "heard": rec.heard,
+                    "voice": voice,
+                    "speed": speed,
+                    "snr": snr,
+                    "exact": canon(executed) == want,
+                    "understood": canon(rec.commands) == want,
+                    "wrong": bool(executed) and canon(executed) != want,
+                    "ms": ms,
+                    "rtf": ms / 1000 / dur,
+                    "confidence": rec.confidence,
+                }
+            )
+            with progress.open("a") as f:  # partial results survive an interrupted run
+                f.write(json.dumps({"recogniser": name, **results[name][-1]}) + "\n")
+    summary = report(results)
+    return {"summary": summary, "clips": len(clips)}
+
+
+# ---------------------------------------------------------------------------------------------
+class _State:
+    x = y = 0.0
+    z = 1.0
+    yaw_rad = vx = vy = vz = 0.0
+
+
+def _loop_while(seconds: float, busy: Any | None) -> LoopStats:
+    pid, sp, st = PaperPID(), Setpoint(1.0, 0.5, 1.2, 0.3), _State()
+    loop = ControlLoop(lambda now, dt: pid.step(st, sp, 0.01), period_s=0.01, spin_s=0.002)
+    stop = threading.Event()
+    worker = threading.Thread(target=busy, args=(stop,)) if busy else None
+    if worker:
+        worker.start()
+        time.sleep(0.5)  # decoding under way before the loop is measured
+    loop.start()
+    time.sleep(seconds)
+    loop.stop()
+    stop.set()
+    if worker:
+        worker.join()
+    return loop.stats()
+
+
+def bench_loop(recognizer: Recognizer, model_dir: Path | None, seconds: float) -> dict[str, Any]:
+    clip = read_wav(
+        synthesise(
+            Path(tempfile.mkdtemp()) / "c.wav", "take off and fly to marker three", seed=5
+        ).read_bytes()
+    )
+
+    def streams(workers: int, rec: Recognizer) -> Any:
+        def run(stop: threading.Event) -> None:
+            async def main() -> int:
+                pool = DecoderPool(workers, queue=8)
+                done = 0
+
+                async def stream() -> None:
+                    nonlocal done
+                    while not stop.is_set():
+                        await pool.run(rec.recognize, clip)
+                        done += 1
+
+                await asyncio.gather(*(stream() for _ in range(3)))
+                pool.close()
+                return done
+
+            counts.append(asyncio.run(main()))
+
+        return run
+
+    bounded = default_workers()
+    wide = Recognizer(load_whisper(resolve(model_dir), workers=3), recognizer.nlu)
+    rows = [
+        ("idle (baseline)", None),
+        (f"3 streams, bounded pool ({bounded} decoder)", streams(bounded, recognizer)),
+        ("3 streams, unbounded (3 decoders)", streams(3, wide)),
+    ]
+    print(f"\n## 100 Hz control loop while decoding ({seconds:g} s per row)")
+    print("| condition | rate Hz | period err p50 µs | p99 µs | max µs | overruns | decodes |")
+    print("|---|---|---|---|---|---|---|")
+    out: dict[str, Any] = {}
+    for name, busy in rows:
+        counts: list[int] = []
+        s = _loop_while(seconds, busy)
+        decodes = counts[0] if counts else 0
+        out[name] = s.as_dict() | {"decodes": decodes}
+        print(
+            f"| {name} | {s.rate_hz:.2f} | {s.period_error_p50_s * 1e6:.0f} | "
+            f"{s.period_error_p99_s * 1e6:.0f} | {s.period_error_max_s * 1e6:.0f} | "
+            f"{s.overruns} | {decodes} |"
+        )
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="108 clips, 5 s loop rows")
+    ap.add_argument("--asr-model", type=Path, default=None)
+    ap.add_argument("--json", type=Path)
+    ap.add_argument("--skip-loop", action="store_true")
+    ap.add_argument("--skip-accuracy", action="store_true")
+    ap.add_argument(
+        "--report", type=Path, help="only print the tables of a (partial) progress file"
+    )
+    args = ap.parse_args(argv)
+    if args.report:
+        results: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        for line in args.report.read_text().splitlines():
+            row = json.loads(line)
+            results[row.pop("recogniser")].append(row)
+        pairs = min(len(v) for v in results.values())
+        print(f"{pairs} clips with both recognisers (from {args.report})")
+        report({k: v[:pairs] for k, v in results.items()})
+        return 0
+    import os
+    import shutil
+
+    if not (shutil.which("espeak-ng") and shutil.which("sox")):
+        print("bench/speech.py needs espeak-ng and sox (apt-get install espeak-ng sox)")
+        return 1
+    load = os.getloadavg()
+    cores = os.cpu_count()
+    print(f"load average at start: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {cores} cores")
+    rec = Recognizer(load_whisper(resolve(args.asr_model), workers=1), default_nlu())
+    out: dict[str, Any] = {}
+    if not args.skip_accuracy:
+        out["accuracy"] = bench_accuracy(rec, args.quick)
+    if not args.skip_loop:
+        out["loop"] = bench_loop(rec, args.asr_model, 5.0 if args.quick else 20.0)
+    load = os.getloadavg()
+    print(f"\nload average at end: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=2, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

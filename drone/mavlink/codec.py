@@ -1,0 +1,103 @@
+"""Sans-I/O MAVLink 2 framing on pymavlink: bytes in → typed messages, messages → bytes.
+
+One :class:`Codec` per link end (per TCP connection, per UDP peer). It owns pymavlink's parser
+and its outgoing sequence counter, no socket and no clock. Frames that are not acceptable are
+counted by reason in ``rejected`` and never raise:
+
+* ``garbage`` — bytes that are no frame at all (pymavlink's ``MAVLink_bad_data``), including
+  frames whose CRC does not match (``bad_crc``, told apart by pymavlink's reason text);
+* ``mavlink1`` — a MAVLink 1 frame (magic 0xFE): this console speaks MAVLink 2 only, as PX4
+  and ArduPilot do on any link after the first MAVLink 2 frame (MAVLink docs "MAVLink 2 —
+  Version handshaking");
+* ``bad_signature`` — a signed link (``signing_key``) got a frame with a wrong or missing
+  signature (MAVLink docs "Message Signing"; pymavlink checks the SHA-256 signature and the
+  timestamp).
+
+The dialect is ArduPilot's ``ardupilotmega`` (a superset of ``common``), so an ArduPilot
+vehicle's own messages decode too.
+"""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Callable
+from typing import Any, TypeAlias
+
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+__all__ = ["MAGIC_V2", "Codec", "Message", "mav"]
+
+# pymavlink ships no type information: a decoded message is typed Any here.
+Message: TypeAlias = Any
+MAGIC_V2 = 0xFD  # MAVLink 2 start-of-frame (mavlink.io "Packet Serialization")
+
+
+class Codec:
+    """See the module docstring.
+
+    Args:
+        system_id: our own system id (a GCS uses 255, the sim autopilot 1).
+        component_id: our component (MAV_COMP_ID_MISSIONPLANNER 190 for a GCS, 1 for an autopilot).
+        signing_key: 32-byte secret: sign everything we send and accept only signed frames.
+        link_id: the signing link id (one per link end).
+        accept_unsigned: with a key, still accept unsigned frames for which this returns True
+            (by message id); default: none.
+    """
+
+    def __init__(
+        self,
+        system_id: int,
+        component_id: int,
+        *,
+        signing_key: bytes | None = None,
+        link_id: int = 0,
+        accept_unsigned: Callable[[int], bool] | None = None,
+        initial_timestamp: int | None = None,
+    ) -> None:
+        self.mav = mav.MAVLink(None, system_id, component_id)
+        self.mav.robust_parsing = True
+        self.rejected: collections.Counter[str] = collections.Counter()
+        self.accepted = 0
+        self.bytes_in = 0
+        self.signed = signing_key is not None
+        if signing_key is not None:
+            if len(signing_key) != 32:
+                raise ValueError("a MAVLink 2 signing key is 32 bytes")
+            self.mav.signing.secret_key = signing_key
+            self.mav.signing.link_id = link_id
+            self.mav.signing.sign_outgoing = True
+            if initial_timestamp is not None:
+                self.mav.signing.timestamp = initial_timestamp
+            allow = accept_unsigned
+
+            def _allow(_mav: Any, msg_id: int) -> bool:
+                return bool(allow(msg_id)) if allow is not None else False
+
+            self.mav.signing.allow_unsigned_callback = _allow
+
+    def feed(self, data: bytes) -> list[Message]:
+        """Parse ``data`` (any split of the stream); returns the accepted MAVLink 2 messages."""
+        self.bytes_in += len(data)
+        out: list[Message] = []
+        for msg in self.mav.parse_buffer(data) or ():
+            kind = msg.get_type()
+            if kind == "BAD_DATA":
+                reason = str(getattr(msg, "reason", ""))
+                if "signature" in reason.lower():
+                    self.rejected["bad_signature"] += 1
+                elif "crc" in reason.lower():
+                    self.rejected["bad_crc"] += 1
+                else:
+                    self.rejected["garbage"] += 1
+                continue
+            buf = msg.get_msgbuf()
+            if not buf or buf[0] != MAGIC_V2:
+                self.rejected["mavlink1"] += 1
+                continue
+            self.accepted += 1
+            out.append(msg)
+        return out
+
+    def encode(self, msg: Message) -> bytes:
+        """Frame ``msg`` as MAVLink 2 (signed when the link has a key); advances the sequence."""
+        return bytes(msg.pack(self.mav))

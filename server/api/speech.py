@@ -1,0 +1,340 @@
+"""``POST /api/v1/speech`` (a WAV file -> like ``POST /command``) and the browser's microphone
+stream ``WS /api/v1/speech/stream`` (16 kHz PCM in, interim and final text out).
+
+The stream only recognises: the page sends the final text down the same dialog path as typed
+text (``/console/utterance`` with ``source: speech`` and the confidence), so the pilot lease,
+roles and the dialog manager's "please repeat" apply exactly as for everything else, whichever
+process runs the vehicle. The stream itself is refused to observers and to a pilot that does
+not hold the lease while another does (close code 1008 with the reason).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from typing import Annotated, Any
+
+from fastapi import APIRouter, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
+from pydantic import BaseModel, Field
+
+from server.api.deps import RoleDep, RuntimeDep, check_lease
+from server.security import Role, token_from
+from server.speech.audio import MAX_REQUEST_S, Samples
+from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
+from server.speech.recognizer import Recognition, speech_span
+from server.speech.service import SpeechService
+from server.speech.stream import MODES, Final, Interim, Problem, StreamSession
+
+log = logging.getLogger("uav_console.speech")
+router = APIRouter(tags=["speech"])
+
+WAV_TYPES = frozenset({"audio/wav", "audio/x-wav", "audio/wave", "audio/vnd.wave"})
+# 30 s of 48 kHz stereo 16-bit PCM plus headers: anything longer cannot be a valid request.
+MAX_BODY_BYTES = int(MAX_REQUEST_S * 48_000 * 2 * 2) + 64 * 1024
+MAX_FRAME_BYTES = 64 * 1024  # one stream frame: far more than the worklet's 20-100 ms chunks
+STREAM_IDLE_S = 10.0  # a push-to-talk stream that sends nothing for this long is closed
+CLOSE_POLICY = 1008  # RFC 6455 §7.4.1
+CLOSE_TRY_AGAIN = 1013  # RFC 6455 §7.4.1 (IANA registry): try again later
+
+
+class SpeechResponse(BaseModel):
+    text: str = Field(description="the sentence handed to the dialog (snapped to the grammars)")
+    confidence: float
+    commands: list[dict[str, Any]]
+    reply: str = Field(description="the dialog's answer ('' with execute=false)")
+    accepted: bool
+    heard: str = Field(description="the recogniser's own transcript")
+    decode_ms: float
+
+
+async def _read_body(request: Request) -> bytes:
+    size = request.headers.get("content-length")
+    if size is not None and size.isdigit() and int(size) > MAX_BODY_BYTES:
+        raise HTTPException(413, f"audio body over {MAX_BODY_BYTES} bytes (at most 30 s)")
+    chunks: list[bytes] = []
+    total = 0
+    async for chunk in request.stream():
+        total += len(chunk)
+        if total > MAX_BODY_BYTES:
+            raise HTTPException(413, f"audio body over {MAX_BODY_BYTES} bytes (at most 30 s)")
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def _service(runtime: Any) -> SpeechService:
+    service: SpeechService | None = getattr(runtime, "speech", None)
+    if service is None:
+        raise HTTPException(503, "speech recognition is not part of this server")
+    return service
+
+
+@router.post(
+    "/speech",
+    response_model=SpeechResponse,
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "content": {"audio/wav": {"schema": {"type": "string", "format": "binary"}}},
+        }
+    },
+)
+async def speech(
+    request: Request,
+    runtime: RuntimeDep,
+    role: RoleDep,
+    execute: Annotated[bool, Query(description="false: only transcribe")] = True,
+    drone: Annotated[str | None, Query(max_length=64)] = None,
+) -> SpeechResponse:
+    """Recognise a spoken command (16-bit PCM WAV, any rate, mono or stereo, at most 30 s) and,
+    unless ``execute=false``, run it like ``POST /command`` with its confidence.
+
+    400 not a usable WAV / no samples, 413 too long, 415 not ``audio/wav``, 403 an observer
+    asking to execute, 409 another pilot holds the lease, 503 busy (Retry-After) or no model.
+    """
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype not in WAV_TYPES:
+        raise HTTPException(415, f"Content-Type must be audio/wav, not {ctype or 'missing'!r}")
+    if execute and role != Role.PILOT:
+        raise HTTPException(403, f"role '{role}' may not command the drones (use execute=false)")
+    name = drone or runtime.default_drone
+    dialog = runtime.dialogs.get(name)
+    if execute and dialog is None:
+        raise HTTPException(404, f"no drone '{name}'")
+    service = _service(runtime)
+    body = await _read_body(request)
+    try:
+        rec = await service.recognize_wav(body)
+    except AudioTooLong as exc:
+        raise HTTPException(413, str(exc)) from exc
+    except AudioError as exc:
+        raise HTTPException(400, str(exc)) from exc
+    except Busy as exc:
+        raise HTTPException(503, str(exc), headers={"Retry-After": "1"}) from exc
+    except ModelError as exc:
+        raise HTTPException(503, f"speech recognition unavailable: {exc}") from exc
+    reply, accepted = "", False
+    if execute and dialog is not None:
+        if not rec.text:
+            reply = "I heard no speech. Please repeat."
+        else:
+            check_lease(request, runtime, {c["action"] for c in rec.commands})
+            result = await dialog.handle_utterance(
+                rec.text, confidence=rec.confidence, source="speech", role=role
+            )
+            reply, accepted = result.reply, result.accepted
+    return SpeechResponse(
+        text=rec.text,
+        confidence=round(rec.confidence, 4),
+        commands=rec.commands,
+        reply=reply,
+        accepted=accepted,
+        heard=rec.heard,
+        decode_ms=round(rec.decode_ms, 1),
+    )
+
+
+@router.get("/speech/status")
+def speech_status(runtime: RuntimeDep, _role: RoleDep) -> dict[str, Any]:
+    """Whether server recognition is ready, the model, the recogniser setting, the pool load."""
+    service = _service(runtime)
+    running, waiting = service.pool.load if service.pool else (0, 0)
+    return {
+        "status": service.status(),
+        "model": service.model_name,
+        "recognizer": getattr(runtime.settings, "recognizer", "auto"),
+        "workers": service.workers,
+        "running": running,
+        "waiting": waiting,
+        "streams": service.streams,
+    }
+
+
+@router.websocket("/speech/stream")
+async def speech_stream(websocket: WebSocket) -> None:
+    """The browser microphone: binary frames of 16 kHz mono s16le PCM; text frames
+    ``{"type": "end"}`` (push-to-talk released) and ``{"type": "cancel"}``.
+
+    Query: ``token``, ``mode`` (ptt | handsfree), ``lease`` (the holding's secret key,
+    as ``/console/lease`` tells its holder and REST callers name in ``X-Pilot-Lease``),
+    ``rate`` (must be 16000). Sends ``{"type": "ready"}``, ``{"type": "interim", "text"}``,
+    ``{"type": "final", text, confidence, commands, heard}``, ``{"type": "error", "error"}``.
+    """
+    runtime = websocket.app.state.runtime
+    security = runtime.security
+    q = websocket.query_params
+    if not security.origin_allowed(websocket.headers.get("origin"), websocket.headers.get("host")):
+        await _refuse(websocket, CLOSE_POLICY, "Origin not allowed")
+        return
+    role = security.role_for(token_from(websocket.headers, q))
+    if role is None:
+        await _refuse(websocket, CLOSE_POLICY, "a valid token is required")
+        return
+    if role != Role.PILOT:
+        await _refuse(websocket, CLOSE_POLICY, f"role '{role}' may not speak commands")
+        return
+    # The same credential REST checks (issue 14: holder ids are secret, the key is what the
+    # holder is told); a pilot without it may not speak while another holds the lease.
+    lease = security.lease
+    if lease.state.holder is not None and not lease.key_matches(q.get("lease")):
+        await _refuse(
+            websocket, CLOSE_POLICY, "another pilot holds the pilot lease; take over to speak"
+        )
+        return
+    mode = q.get("mode", "ptt")
+    if mode not in MODES or q.get("rate", "16000") != "16000":
+        await _refuse(websocket, CLOSE_POLICY, "mode must be ptt or handsfree and rate 16000")
+        return
+    service: SpeechService | None = getattr(runtime, "speech", None)
+    if service is None:
+        await _refuse(websocket, CLOSE_TRY_AGAIN, "speech recognition is not part of this server")
+        return
+    if service.streams >= service.config.max_streams:
+        await _refuse(websocket, CLOSE_TRY_AGAIN, "too many microphone streams; try again later")
+        return
+    service.streams += 1
+    try:
+        await websocket.accept()
+        await _Stream(websocket, service, mode).run()
+    finally:
+        service.streams -= 1
+
+
+async def _refuse(websocket: WebSocket, code: int, reason: str) -> None:
+    """Accept, then close with ``code`` and ``reason``: a browser sees a close reason, never
+    the body of a refused handshake, and the page shows the operator why."""
+    with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
+        await websocket.accept()
+        await websocket.close(code, reason)
+
+
+class _Stream:
+    """One accepted stream: reads frames, runs decodes, sends text (a thin asyncio shell
+    around :class:`StreamSession`)."""
+
+    def __init__(self, ws: WebSocket, service: SpeechService, mode: str) -> None:
+        self.ws = ws
+        self.service = service
+        self.mode = mode
+        self.session = StreamSession(mode, detect=self._voiced if mode == "handsfree" else None)
+        self._interim: asyncio.Task[None] | None = None
+        self._finals: asyncio.Queue[Samples | None] = asyncio.Queue(maxsize=2)
+        self._vad_lock = asyncio.Lock()
+
+    @staticmethod
+    def _voiced(samples: Samples) -> bool:
+        return speech_span(samples, min_silence_ms=100) is not None
+
+    async def run(self) -> None:
+        try:
+            await self.service.ready()
+        except ModelError as exc:
+            await self._send({"type": "error", "error": f"speech recognition unavailable: {exc}"})
+            await self.ws.close(CLOSE_TRY_AGAIN, "speech recognition unavailable")
+            return
+        await self._send({"type": "ready", "mode": self.mode, "model": self.service.model_name})
+        finals = asyncio.create_task(self._decode_finals())
+        try:
+            await self._read()
+        finally:
+            with contextlib.suppress(asyncio.QueueFull):
+                self._finals.put_nowait(None)
+            if self._interim is not None:
+                self._interim.cancel()
+            with contextlib.suppress(asyncio.TimeoutError, Exception):
+                await asyncio.wait_for(finals, 35.0)
+            finals.cancel()
+
+    async def _read(self) -> None:
+        while True:
+            try:
+                msg = await asyncio.wait_for(self.ws.receive(), STREAM_IDLE_S)
+            except TimeoutError:
+                if self.session.buffered_s > 0 and self.mode == "ptt":
+                    self.session.cancel()
+                    await self._send(
+                        {"type": "error", "error": "no audio for 10 s: utterance discarded"}
+                    )
+                continue
+            if msg["type"] == "websocket.disconnect":
+                return
+            data: bytes | None = msg.get("bytes")
+            text: str | None = msg.get("text")
+            if data is not None:
+                if len(data) > MAX_FRAME_BYTES:
+                    await self._send({"type": "error", "error": "audio frame over 64 KiB"})
+                    await self.ws.close(CLOSE_POLICY, "audio frame too large")
+                    return
+                if self.mode == "handsfree":
+                    async with self._vad_lock:
+                        events = await asyncio.to_thread(self.session.feed, data)
+                else:
+                    events = self.session.feed(data)
+            elif text is not None:
+                try:
+                    kind = json.loads(text).get("type")
+                except (ValueError, AttributeError):
+                    kind = None
+                if kind == "end":
+                    events = self.session.end()
+                    if not events:
+                        await self._send(
+                            {
+                                "type": "final",
+                                "text": "",
+                                "confidence": 0.0,
+                                "commands": [],
+                                "heard": "",
+                            }
+                        )
+                elif kind == "cancel":
+                    self.session.cancel()
+                    events = []
+                else:
+                    await self._send({"type": "error", "error": "text frames: end or cancel"})
+                    events = []
+            else:
+                events = []
+            for ev in events:
+                await self._handle(ev)
+
+    async def _handle(self, ev: Interim | Final | Problem) -> None:
+        if isinstance(ev, Problem):
+            await self._send({"type": "error", "error": ev.message})
+        elif isinstance(ev, Interim):
+            if self._interim is None or self._interim.done():
+                self._interim = asyncio.create_task(self._decode_interim(ev.samples.copy()))
+        else:
+            if self._interim is not None:
+                self._interim.cancel()
+            try:
+                self._finals.put_nowait(ev.samples)
+            except asyncio.QueueFull:
+                await self._send(
+                    {"type": "error", "error": "still decoding the previous utterances: dropped"}
+                )
+
+    async def _decode_interim(self, samples: Samples) -> None:
+        assert self.service.pool is not None and self.service.recognizer is not None
+        rec = self.service.recognizer
+        out = await self.service.pool.try_run(rec.transcribe, samples)
+        if out is not None and out[0]:
+            await self._send({"type": "interim", "text": out[0]})
+
+    async def _decode_finals(self) -> None:
+        while (samples := await self._finals.get()) is not None:
+            try:
+                rec: Recognition = await self.service.recognize(samples)
+            except Busy as exc:
+                await self._send({"type": "error", "error": str(exc)})
+                continue
+            except ModelError as exc:
+                await self._send({"type": "error", "error": str(exc)})
+                continue
+            msg: dict[str, Any] = {"type": "final", **rec.as_json()}
+            await self._send(msg)
+
+    async def _send(self, msg: dict[str, Any]) -> None:
+        with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
+            await self.ws.send_text(json.dumps(msg))

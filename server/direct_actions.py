@@ -1,0 +1,94 @@
+"""Direct actions (buttons, keyboard shortcuts, REST): checked, sent, said and audited.
+
+``POST /api/v1/drones/{id}/{action}`` comes here. A take-off the drone cannot do now (in
+emergency, battery below the low threshold, no link) is refused before anything is sent, with
+the reason and the way out (server.dialog.preflight): the caller gets ``accepted: false`` and
+the reason, the dialog says it aloud on ``/console/reply``. Every action, accepted or refused,
+is written to the audit log with where it came from (a button, a keyboard shortcut, a script),
+like a spoken command.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from server.dialog.preflight import DroneFacts, refusal
+
+# Where a direct action came from: the page says which (X-Command-Source); anything else is
+# recorded as "rest". Kept to a fixed set so the audit log holds no client-chosen text.
+SOURCES = frozenset({"button", "keyboard", "map", "rest"})
+
+
+@dataclass(frozen=True)
+class DirectOutcome:
+    accepted: bool
+    detail: str
+
+
+def command_source(header: str | None) -> str:
+    """The audit ``source`` for an ``X-Command-Source`` header value."""
+    value = (header or "").strip().lower()
+    return value if value in SOURCES else "rest"
+
+
+def drone_facts(stack: Any) -> DroneFacts:
+    """What the refusal check needs, from the vehicle in this process or, for a vehicle in
+    its own process (``server.vehicles.remote``), from its latest telemetry."""
+    snapshot = getattr(stack.vehicle, "snapshot", None)
+    if callable(snapshot):
+        snap = snapshot()
+        return DroneFacts(
+            bool(snap.emergency),
+            float(snap.battery_pct),
+            bool(snap.link_ok),
+            bool(snap.flying),
+            bool(getattr(snap, "battery_known", True)),
+        )
+    t = stack.telemetry()
+    return DroneFacts(
+        bool(t.get("emergency", False)),
+        float(t.get("battery_pct", 0.0)),
+        bool(t.get("link_ok", False)),
+        bool(t.get("flying", False)),
+        bool(t.get("battery_known", True)),
+    )
+
+
+def perform(
+    stack: Any, dialog: Any, audit: Any, action: str, *, source: str, battery_low_pct: float
+) -> DirectOutcome:
+    """Check ``action`` against the drone's state, send it if it may run, tell and audit.
+
+    Runs on the event loop (the dialog manager's thread): the command reaches the driver
+    first, then the dialog is told; the audit row is written on the log's writer thread, so
+    its fsync never delays the datagram (bench/direct_actions.py measures this).
+
+    Args:
+        stack: the drone (``server.runtime.DroneStack``).
+        dialog: its dialog manager (or None), told so its state follows and refusals are said.
+        audit: the audit log (``server.store.AuditLog``) or None.
+    """
+    why = refusal(action, drone_facts(stack), battery_low_pct)
+    if why is None:
+        detail = stack.direct(action)
+        outcome = DirectOutcome(True, detail)
+        if dialog is not None:
+            dialog.note_direct(action)
+    else:
+        outcome = DirectOutcome(False, why)
+        if dialog is not None:
+            dialog.announce(why, "warn")
+    if audit is not None:
+        # On its own thread: the fsync must not hold the loop the driver sends from.
+        audit.append_later(
+            utterance="",
+            commands=[{"action": action}],
+            action="executed" if outcome.accepted else "refused",
+            outcome=outcome.detail,
+            role="pilot",
+            source=source,
+            drone=stack.name,
+            state=str(getattr(getattr(dialog, "state", None), "value", "")),
+        )
+    return outcome

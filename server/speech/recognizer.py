@@ -1,0 +1,141 @@
+"""Audio -> text with faster-whisper, then text -> a sentence the grammars accept.
+
+Grammar guidance has two steps: the decoder is primed with the grammars' vocabulary
+(:data:`server.speech.vocabulary.PROMPT`), and its transcript is snapped to the nearest
+sentence the NLU understands (:mod:`server.speech.snap`). ``guided=False`` turns both off: the
+baseline of ``bench/speech.py``.
+
+Decoding options and why:
+  * greedy (``beam_size=1``), a single temperature (no fallback re-decodes): a command is
+    short and the time per clip must be bounded; the snap repairs what beam search would;
+  * ``without_timestamps`` and no conditioning on earlier text: one utterance per call;
+  * ``max_new_tokens=64``: a spoken command is far shorter; a hallucination loop stops there;
+  * Silero VAD (shipped with faster-whisper) first: audio without speech is not decoded, which
+    avoids Whisper's well-known hallucinations on silence ("Thank you.").
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from server.language.nlu import NLU
+from server.speech.audio import SAMPLE_RATE, Samples
+from server.speech.snap import Snapper
+from server.speech.vocabulary import Vocabulary, vocabulary
+
+Command = dict[str, Any]
+VAD_PAD_S = 0.3  # speech kept either side of what the VAD marks (its own default is 0.4 s)
+
+
+@dataclass(frozen=True)
+class Recognition:
+    """What was said, as the dialog manager gets it."""
+
+    text: str  # the sentence handed on (snapped when guided); "" when no speech was heard
+    confidence: float  # 0..1: decoder confidence x exp(-snap distance)
+    commands: list[Command] = field(default_factory=list)
+    heard: str = ""  # the decoder's own transcript
+    asr_confidence: float = 0.0
+    snap_distance: float = 0.0
+    audio_s: float = 0.0
+    decode_ms: float = 0.0
+    speech: bool = True  # False: the VAD found no speech, nothing was decoded
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "text": self.text,
+            "confidence": round(self.confidence, 4),
+            "commands": self.commands,
+            "heard": self.heard,
+            "snap_distance": round(self.snap_distance, 4),
+            "audio_s": round(self.audio_s, 3),
+            "decode_ms": round(self.decode_ms, 1),
+        }
+
+
+def speech_span(samples: Samples, *, min_silence_ms: int = 300) -> tuple[int, int] | None:
+    """(start, end) sample indices of the speech in ``samples`` per Silero VAD; None if none."""
+    from faster_whisper.vad import VadOptions, get_speech_timestamps
+
+    spans = get_speech_timestamps(
+        samples, VadOptions(min_silence_duration_ms=min_silence_ms, speech_pad_ms=0)
+    )
+    if not spans:
+        return None
+    pad = int(VAD_PAD_S * SAMPLE_RATE)
+    return max(0, spans[0]["start"] - pad), min(len(samples), spans[-1]["end"] + pad)
+
+
+class Recognizer:
+    """A loaded Whisper model plus the grammars' vocabulary; ``recognize`` is thread-safe
+    (CTranslate2 runs up to ``num_workers`` decodes in parallel; the snapper is read-only)."""
+
+    def __init__(self, model: Any, nlu: NLU, *, vocab: Vocabulary | None = None) -> None:
+        self.model = model
+        self.nlu = nlu
+        self.vocab = vocab or vocabulary(nlu.grammar)
+        self.snapper = Snapper(nlu, self.vocab)
+        self._vad_lock = threading.Lock()  # Silero's ONNX session is shared; keep calls serial
+
+    def transcribe(self, samples: Samples, *, guided: bool = True) -> tuple[str, float]:
+        """(transcript, decoder confidence in 0..1) of 16 kHz mono ``samples``."""
+        segments, _info = self.model.transcribe(
+            samples,
+            language="en",
+            beam_size=1,
+            temperature=0.0,
+            without_timestamps=True,
+            condition_on_previous_text=False,
+            initial_prompt=self.vocab.prompt if guided else None,
+            max_new_tokens=64,
+            vad_filter=False,
+        )
+        texts: list[str] = []
+        logprob_sum = 0.0
+        weight = 0.0
+        no_speech = 0.0
+        for seg in segments:
+            texts.append(seg.text)
+            n = max(1, len(seg.tokens))
+            logprob_sum += seg.avg_logprob * n
+            weight += n
+            no_speech = max(no_speech, seg.no_speech_prob)
+        text = " ".join(t.strip() for t in texts).strip()
+        if not text or weight == 0:
+            return "", 0.0
+        confidence = math.exp(logprob_sum / weight) * (1.0 - no_speech)
+        return text, min(1.0, max(0.0, confidence))
+
+    def recognize(
+        self, samples: Samples, *, guided: bool = True, state: str | None = None, vad: bool = True
+    ) -> Recognition:
+        """Decode, snap (when ``guided``) and interpret one utterance."""
+        t0 = time.perf_counter()
+        audio_s = len(samples) / SAMPLE_RATE
+        if vad:
+            with self._vad_lock:
+                span = speech_span(samples)
+            if span is None:
+                return Recognition("", 0.0, audio_s=audio_s, speech=False)
+            samples = samples[span[0] : span[1]]
+        if not np.isfinite(samples).all():
+            samples = np.nan_to_num(samples, nan=0.0, posinf=0.0, neginf=0.0)
+        heard, asr = self.transcribe(samples, guided=guided)
+        if not heard:
+            ms = (time.perf_counter() - t0) * 1000
+            return Recognition("", 0.0, audio_s=audio_s, decode_ms=ms)
+        if guided:
+            snapped = self.snapper.snap(heard, state)
+            text, distance, commands = snapped.text.strip(" ,"), snapped.distance, snapped.commands
+            confidence = asr * snapped.factor
+        else:
+            text, distance, commands = heard, 0.0, self.nlu.interpret(heard, state)
+            confidence = asr
+        ms = (time.perf_counter() - t0) * 1000
+        return Recognition(text, confidence, commands, heard, asr, distance, audio_s, ms)

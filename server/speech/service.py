@@ -1,0 +1,126 @@
+"""The speech service of one server: the model (loaded in the background at start), the
+decoder pool and the entry points the REST route, the stream route and the CLI use."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+from server.language.nlu import NLU
+from server.speech import model as model_mod
+from server.speech.audio import Samples, read_wav
+from server.speech.errors import ModelError, SpeechError
+from server.speech.pool import DecoderPool
+from server.speech.recognizer import Recognition, Recognizer
+
+log = logging.getLogger("uav_console.speech")
+
+
+@dataclass(frozen=True)
+class SpeechConfig:
+    """The speech settings (from :class:`server.settings.Settings`)."""
+
+    model_dir: Path | None = None  # None: the bundled tiny.en
+    model_sha256: str | None = None
+    workers: int = 0  # 0: model.default_workers()
+    threads_per_worker: int = 1
+    queue: int = 4  # requests that may wait for a decoder before Busy
+    max_streams: int = 8  # browser streams open at once
+
+
+class SpeechService:
+    """Loads the recogniser once and runs recognitions on a bounded pool."""
+
+    def __init__(self, config: SpeechConfig, nlu: NLU) -> None:
+        self.config = config
+        self.nlu = nlu
+        self.workers = config.workers or model_mod.default_workers()
+        self.pool: DecoderPool | None = None
+        self.recognizer: Recognizer | None = None
+        self.error: SpeechError | None = None
+        self.model_name = ""
+        self._loading: asyncio.Task[None] | None = None
+        self.streams = 0  # open browser streams
+
+    def load(self) -> Recognizer:
+        """Load synchronously (the CLI; the server calls :meth:`start`).
+
+        Raises:
+            ModelError: the model is missing, damaged or unloadable.
+        """
+        source = model_mod.resolve(self.config.model_dir, self.config.model_sha256)
+        self.model_name = source.name
+        whisper = model_mod.load_whisper(
+            source, workers=self.workers, threads_per_worker=self.config.threads_per_worker
+        )
+        self.recognizer = Recognizer(whisper, self.nlu)
+        return self.recognizer
+
+    async def start(self, *, preload: bool = True) -> None:
+        """Create the pool; with ``preload`` load the model now, in a thread (start-up is not
+        delayed by it), else on first use (an app built for a test that never speaks does
+        not pay the ~1 s of CPU a load costs)."""
+        self.pool = DecoderPool(self.workers, self.config.queue)
+        if preload:
+            self._begin_loading()
+
+    def _begin_loading(self) -> None:
+        if self._loading is None:
+            self._loading = asyncio.create_task(self._load(), name="speech-model")
+
+    async def _load(self) -> None:
+        try:
+            await asyncio.to_thread(self.load)
+            log.info("speech recognition ready (%s, %d decoders)", self.model_name, self.workers)
+        except ModelError as exc:
+            self.error = exc
+            log.warning("speech recognition unavailable: %s", exc)
+
+    async def ready(self) -> Recognizer:
+        """The recogniser, once loaded.
+
+        Raises:
+            ModelError: loading failed (the reason is in the message).
+        """
+        if self._loading is None and self.pool is not None:
+            self._begin_loading()
+        if self._loading is not None:
+            await asyncio.shield(self._loading)
+        if self.error is not None:
+            raise self.error
+        if self.recognizer is None:
+            raise ModelError("speech recognition was not started")
+        return self.recognizer
+
+    def status(self) -> str:
+        """'ready', 'loading', or why speech recognition is unavailable."""
+        if self.error is not None:
+            return f"unavailable: {self.error}"
+        if self.recognizer is None:
+            return "loading" if self._loading is not None else "loads on first use"
+        return "ready"
+
+    async def recognize(
+        self, samples: Samples, *, guided: bool = True, state: str | None = None
+    ) -> Recognition:
+        """Recognise 16 kHz samples on the pool.
+
+        Raises:
+            ModelError: no model; Busy: the pool is full.
+        """
+        recognizer = await self.ready()
+        assert self.pool is not None
+        return await self.pool.run(recognizer.recognize, samples, guided=guided, state=state)
+
+    async def recognize_wav(self, data: bytes, *, state: str | None = None) -> Recognition:
+        """Decode a WAV file (raises AudioError subclasses) and recognise it."""
+        samples = await asyncio.to_thread(read_wav, data)
+        return await self.recognize(samples, state=state)
+
+    async def stop(self) -> None:
+        if self._loading is not None and not self._loading.done():
+            self._loading.cancel()
+        if self.pool is not None:
+            self.pool.close()

@@ -1,0 +1,22 @@
+"""Errors of the vehicle link and the vehicle processes.
+
+::
+
+    VehicleError
+    ├── LinkError             the vehicle link cannot be used (bad URL, closed)
+    └── RemoteCallError       a call over the link was refused or not answered
+"""
+
+from __future__ import annotations
+
+
+class VehicleError(Exception):
+    """Base of this package's errors."""
+
+
+class LinkError(VehicleError):
+    """The vehicle link cannot be used; the message says why."""
+
+
+class RemoteCallError(VehicleError):
+    """A service call over the link was refused, failed or timed out."""

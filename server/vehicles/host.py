@@ -1,0 +1,387 @@
+"""The vehicle process: one drone's flight-critical stack, joined to a central server.
+
+``uav-console vehicle --central ws://HOST:PORT/vehicle-link --name NAME`` (``serve --vehicles
+process`` spawns one per drone) runs, on its own event loop and its own graph: the simulator
+(``--drone sim``) or the driver of a real drone, the vehicle (EKF, 100 Hz controller thread,
+perception), the task manager, the vehicle node (navdata, camera, pose, markers, task, jog,
+operator watchdog), the dialog manager with its ANS monitors, the fleet's LTM, and the safety
+port. :class:`~server.vehicles.link.GraphLink` mirrors that graph onto the central one, so the
+central server and its clients see the drone exactly as an in-process one.
+
+The drone stays safe without the central server: :class:`CentralWatch` hovers it after
+``heartbeat_timeout_s`` of silence and lands it after ``central_loss_land_s``; the link
+reconnects on its own. ``emergency`` and ``land`` also reach the drone through the safety port
+(:mod:`server.vehicles.safety`), which no web traffic can delay.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import os
+import signal
+import time
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any
+
+from server.settings import Settings
+from server.vehicles import names
+from server.vehicles.errors import RemoteCallError, VehicleError
+from server.vehicles.link import GraphLink
+from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
+from server.vehicles.safety import SafetyPort, loopback_origin
+from server.vehicles.watch import CentralWatch, LossAction
+
+log = logging.getLogger("uav_console.vehicle")
+
+TELEMETRY_PERIOD_S = 0.1
+WATCH_PERIOD_S = 0.05
+# A vehicle whose parent ``serve`` is gone waits this long on the ground for a new one to adopt
+# it before it exits (it never exits while flying).
+ORPHAN_EXIT_S = 60.0
+
+
+@dataclass(frozen=True)
+class VehicleOptions:
+    """What one vehicle process is (the rest comes from :class:`Settings`)."""
+
+    central: str
+    name: str
+    prefix: str  # "" for a single drone, "/uav2" in a fleet
+    index: int = 0  # which simulator address and station
+    safety_host: str = "127.0.0.1"
+    safety_port: int = 0  # 0: any free port (announced in /NAME/vehicle/info)
+    parent_pid: int | None = None  # the supervising serve (None: a standalone vehicle)
+
+
+def link_spec(name: str, prefix: str) -> LinkSpec:
+    """The topics and services a whole vehicle shares with the central server."""
+    from server.dialog.manager import INTERPRET, REPLY, STATE, UTTERANCE
+    from server.fleet.messages import (
+        FLEET_TOPIC,
+        FLEET_TYPE,
+        PLAN_SERVICE,
+        PLAN_SERVICE_TYPE,
+        STATUS_TOPIC,
+        STATUS_TYPE,
+    )
+    from server.vehicle_node import EMPTY, IMAGE, MARKERS, NAVDATA, POSE, TASK, TWIST
+
+    p = prefix
+    out = (
+        TopicSpec(f"{p}/ardrone/navdata", NAVDATA),
+        TopicSpec(f"{p}/ardrone/image_raw/compressed", IMAGE),
+        TopicSpec(f"{p}/uav/pose", POSE),
+        TopicSpec(f"{p}/uav/markers", MARKERS),
+        TopicSpec(f"{p}/uav/task", TASK, latch=True),
+        TopicSpec(REPLY, "uav_console/Reply"),
+        TopicSpec(f"{p}{STATE}", "uav_console/DialogState", latch=True),
+        TopicSpec(f"/{name}/{STATUS_TOPIC}", STATUS_TYPE),
+        TopicSpec(names.info_topic(name), names.STRING, latch=True),
+        TopicSpec(names.telemetry_topic(name), names.STRING),
+    )
+    inn = (
+        TopicSpec(f"{p}/cmd_vel", TWIST),
+        TopicSpec(f"{p}/ardrone/takeoff", EMPTY),
+        TopicSpec(f"{p}/ardrone/land", EMPTY),
+        TopicSpec(f"{p}/ardrone/reset", EMPTY),
+        TopicSpec(UTTERANCE, "uav_console/Utterance"),
+        TopicSpec(FLEET_TOPIC, FLEET_TYPE),
+        TopicSpec(names.HEARTBEAT, names.STRING),
+    )
+    services = (
+        (names.control_service(name), names.CONTROL_TYPE),
+        (f"/{name}/{PLAN_SERVICE}", PLAN_SERVICE_TYPE),
+        (f"{p}{INTERPRET}", "uav_console/Interpret"),
+    )
+    return LinkSpec(out, inn, services, owner=f"link:{name}")
+
+
+class VehicleHost:
+    """See the module docstring: ``await start()``, ``await run(stop)``, ``await stop()``."""
+
+    def __init__(self, settings: Settings, options: VehicleOptions, token: str) -> None:
+        self.settings = settings
+        self.options = options
+        self.token = token
+        self.name = options.name
+        self.watch = CentralWatch(
+            settings.heartbeat_timeout_s,
+            max(settings.central_loss_land_s, settings.heartbeat_timeout_s + 0.1),
+        )
+        self.loss_actions: list[str] = []
+        self._tasks: list[asyncio.Task[Any]] = []
+        self._started = time.monotonic()
+        self.stop_requested = asyncio.Event()
+
+    async def start(self) -> None:
+        from drone.ardrone.driver import ARDroneDriver, DriverConfig
+        from drone.camera import CameraModel
+        from drone.sim.server import SimServer, sim_endpoint
+        from drone.sim.world import load_world
+        from drone.vehicle import Vehicle
+        from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+        from server.dialog.manager import DialogManager
+        from server.fleet.geo import origin_of
+        from server.fleet.ltm import LocalTaskManager
+        from server.fleet.node import LtmNode
+        from server.fleet.patrol import station_positions
+        from server.graph import Graph
+        from server.language.nlu import default_nlu
+        from server.runtime import DroneStack
+        from server.store import AuditLog
+        from server.tasks.manager import TaskManager
+        from server.vehicle_node import VehicleNode
+
+        s, o = self.settings, self.options
+        self.graph = Graph()
+        self.graph.bind_loop(asyncio.get_running_loop())
+        self.world = load_world(s.world)
+        sim: SimServer | None = None
+        if s.drone == "sim":
+            addr, ports = sim_endpoint(o.index, s.sim_base_addr)
+            sim = SimServer(addr, self.world, ports=ports, speed=s.sim_speed, seed=s.seed + o.index)
+            await sim.start()
+            driver = ARDroneDriver(
+                addr,
+                at_port=ports.at,
+                navdata_port=ports.navdata,
+                video_port=ports.video,
+                config=DriverConfig(link_timeout_s=s.link_timeout_s),
+            )
+        else:
+            driver = ARDroneDriver(s.drone, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+        await driver.start()
+        vehicle = Vehicle(
+            self.name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s
+        )
+        await vehicle.start(driver)
+        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
+        node = VehicleNode(
+            self.graph,
+            vehicle,
+            tasks,
+            self.name,
+            o.prefix,
+            heartbeat_timeout_s=s.heartbeat_timeout_s,
+        )
+        self.stack = DroneStack(self.name, o.prefix, vehicle, driver, sim, tasks, node)
+        await node.start()
+        self.core = GraphLinkCore(self.graph, link_spec(self.name, o.prefix))
+        self.link = GraphLink(o.central, self.core, token=self.token, name=self.name)
+        self.audit = AuditLog(s.data_dir / "audit.db")
+        self.dialog = DialogManager(
+            self.graph,
+            s,
+            TaskManagerPort(tasks),
+            VehiclePort(vehicle, self.world),
+            CallableDescriber(self._describe),
+            self.audit,
+            vehicle.clock.now,
+            nlu=default_nlu(str(s.grammar_dir)),
+            drone=self.name,
+            prefix=o.prefix,
+        )
+        pad = station_positions(self.world, o.index + 1)[-1]
+        self.ltm = LtmNode(
+            self.graph,
+            LocalTaskManager(self.name, vehicle, tasks, pad, origin=origin_of(self.world)),
+            clock=time.monotonic,
+        )
+        self.graph.advertise_service(
+            names.control_service(self.name), names.CONTROL_TYPE, self._control
+        )
+        self.graph.advertise(names.info_topic(self.name), names.STRING, latch=True)
+        self.graph.advertise(names.telemetry_topic(self.name), names.STRING)
+        console = {f"{scheme}://{s.host}:{s.port}" for scheme in ("http", "https")}
+        allowed = console | set(s.allow_origins)
+        self.safety = SafetyPort(
+            o.safety_host,
+            o.safety_port,
+            self.token,
+            self.stack.direct,
+            name=self.name,
+            origin_allowed=lambda origin: origin in allowed or loopback_origin(origin),
+        )
+        await self.safety.start()
+        self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
+        self._tasks = [
+            asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
+            asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
+        ]
+
+    def info(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "prefix": self.options.prefix,
+            "simulated": self.stack.sim is not None,
+            "safety_url": self.safety.url,
+            "pid": os.getpid(),
+        }
+
+    async def _describe(self) -> tuple[str, float | None]:
+        try:
+            out = await self.core.call("/console/describe", {"drone": self.name}, timeout_s=10.0)
+        except RemoteCallError as exc:
+            return f"I cannot describe the scene now: {exc}.", None
+        ms = float(out.get("ms", -1.0)) if isinstance(out, dict) else -1.0
+        text = str(out.get("text", "")) if isinstance(out, dict) else str(out)
+        return text, (ms if ms >= 0 else None)
+
+    async def _control(self, args: dict[str, Any]) -> dict[str, Any]:
+        """``/NAME/vehicle/control`` (see :mod:`server.vehicles.names`)."""
+        op = args.get("op")
+        if op == "direct":
+            action = str(args.get("action", ""))
+            if action not in ("takeoff", "land", "hover", "emergency", "reset"):
+                raise VehicleError(f"unknown action {action!r}")
+            return {"detail": self.stack.direct(action)}
+        if op == "fault":
+            if self.stack.sim is None:
+                raise VehicleError(f"{self.name} is a real drone: no faults")
+            wind = args.get("wind_mps")
+            body = SimpleNamespace(
+                kind=str(args.get("kind")),
+                duration_s=args.get("duration_s"),
+                battery_pct=args.get("battery_pct"),
+                wind_mps=tuple(wind) if isinstance(wind, list | tuple) else None,
+            )
+            try:
+                self.stack.inject_fault(body)
+            except ValueError as exc:
+                raise VehicleError(str(exc)) from exc
+            return {"applied": True}
+        if op == "truth":
+            if self.stack.sim is None:
+                raise VehicleError(f"{self.name} is a real drone: no ground truth")
+            return dict(self.stack.truth())
+        if op == "utterance":
+            result = await self.dialog.handle_utterance(
+                str(args.get("text", "")),
+                confidence=float(args.get("confidence", 1.0)),
+                source=str(args.get("source", "rest")),
+                role=str(args.get("role", "pilot")),
+            )
+            return {
+                "reply": result.reply,
+                "commands": result.commands,
+                "accepted": result.accepted,
+            }
+        raise VehicleError(f"unknown op {op!r} (direct, fault, truth, utterance)")
+
+    async def _periodic(self) -> None:
+        """Telemetry at 10 Hz, the LTM at 5 Hz, the central-loss watch at 20 Hz."""
+        next_telemetry = next_ltm = 0.0
+        while True:
+            now = time.monotonic()
+            try:
+                heard = self.link.last_heard if self.link.last_heard is not None else self._started
+                action = self.watch.step(now, heard, bool(self.stack.vehicle.snapshot().flying))
+                if action is not None:
+                    self._on_loss(action, now - heard)
+                if now >= next_telemetry:
+                    next_telemetry = now + TELEMETRY_PERIOD_S
+                    self.graph.publish(
+                        names.telemetry_topic(self.name), {"data": json.dumps(self.telemetry())}
+                    )
+                if now >= next_ltm:
+                    next_ltm = now + 0.2
+                    self.ltm.step(now)
+                    self._check_orphan(now, heard)
+            except Exception:  # one bad round must not stop the watch
+                log.exception("%s: periodic step failed", self.name)
+            await asyncio.sleep(WATCH_PERIOD_S)
+
+    def telemetry(self) -> dict[str, Any]:
+        from server.runtime import to_json_ready
+
+        out = self.stack.telemetry()
+        out["central_loss"] = {"losses": self.watch.losses, "actions": self.loss_actions[-10:]}
+        if self.stack.sim is not None:
+            out["truth"] = to_json_ready(self.stack.sim.truth)
+        return out
+
+    def _check_orphan(self, now: float, heard: float) -> None:
+        """Parent ``serve`` gone (it crashed): wait on the ground for a new one to adopt us;
+        give up after ``ORPHAN_EXIT_S`` of silence, never while flying."""
+        parent = self.options.parent_pid
+        if parent is None or os.getppid() == parent:
+            return
+        flying = bool(self.stack.vehicle.snapshot().flying)
+        if not flying and now - heard > self.watch.land_after_s + ORPHAN_EXIT_S:
+            log.warning("%s: supervisor gone and nobody adopted this vehicle: exiting", self.name)
+            self.stop_requested.set()
+
+    def _on_loss(self, action: LossAction, silent_s: float) -> None:
+        self.loss_actions.append(action.value)
+        log.warning("%s: central server silent for %.1f s: %s", self.name, silent_s, action.value)
+        if self.stack.tasks is not None:
+            self.stack.tasks.preempt(action.value)
+
+    async def run(self, stop: asyncio.Event) -> None:
+        async def relay() -> None:
+            await self.stop_requested.wait()
+            stop.set()
+
+        relay_task = asyncio.create_task(relay())
+        try:
+            await self.link.run(stop)
+        finally:
+            relay_task.cancel()
+
+    async def stop(self) -> None:
+        for t in self._tasks:
+            t.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await t
+        await self.safety.stop()
+        self.ltm.close()
+        self.core.close()
+        st = self.stack
+        if st.node is not None:
+            await st.node.stop()
+        with contextlib.suppress(Exception):
+            await st.vehicle.stop(land=True)
+        with contextlib.suppress(Exception):
+            await st.driver.stop()
+        if st.sim is not None:
+            await st.sim.stop()
+        self.audit.close()
+
+
+def raise_priority(nice: int) -> None:
+    """Run the flight stack ahead of the web process on a busy CPU (``vehicle_nice``, e.g.
+    -10), where the OS permits it (root or CAP_SYS_NICE); otherwise say so and go on."""
+    if nice >= os.getpriority(os.PRIO_PROCESS, 0):
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    except OSError as exc:
+        log.info("vehicle priority unchanged (nice %d not permitted: %s)", nice, exc)
+
+
+async def run_vehicle(settings: Settings, options: VehicleOptions, token: str) -> None:
+    """Run one vehicle process until SIGTERM/SIGINT (then land and stop)."""
+    raise_priority(settings.vehicle_nice)
+    host = VehicleHost(settings, options, token)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
+    await host.start()
+    log.info("%s: vehicle up; safety port %s", options.name, host.safety.url)
+    pid_file = settings.data_dir / "vehicles" / f"{options.name}.pid"
+    with contextlib.suppress(OSError):  # lets a restarted serve find (and adopt) this vehicle
+        pid_file.parent.mkdir(parents=True, exist_ok=True)
+        pid_file.write_text(str(os.getpid()))
+    try:
+        await host.run(stop)
+    finally:
+        await host.stop()
+        with contextlib.suppress(OSError):
+            if pid_file.read_text() == str(os.getpid()):
+                pid_file.unlink()

@@ -1,0 +1,37 @@
+"""Names on the graph that a vehicle process adds to the drone's ordinary topics (DESIGN §4).
+
+A vehicle process puts its drone on the central graph through the vehicle link
+(``/vehicle-link``, rosbridge v2): the same topics and services an in-process drone has
+(``/ardrone/navdata``, ``/uav/pose``, ``/console/reply`` …, prefixed in a fleet) plus these:
+
+- ``/NAME/vehicle/info`` (std_msgs/String, latched; ``data`` = JSON ``{name, prefix,
+  simulated, safety_url, pid}``): announces the vehicle; the central registry makes a drone of it;
+- ``/NAME/vehicle/telemetry`` (std_msgs/String, 10 Hz; ``data`` = the JSON of
+  ``GET /drones/{id}``, plus ``truth`` for a simulated drone);
+- ``/NAME/vehicle/control`` (service ``uav_console/VehicleControl``; args ``{op, ...}``): ``op``
+  is ``direct`` (``action``), ``fault`` (``kind``, ``duration_s``, ``battery_pct``,
+  ``wind_mps``) or ``utterance`` (``text``, ``confidence``, ``source``, ``role``);
+- ``/vehicles/heartbeat`` (std_msgs/String, from the central server at 10 Hz): a vehicle that
+  hears nothing from the central server for ``central_timeout_s`` hovers, and lands after
+  ``central_loss_land_s``.
+"""
+
+from __future__ import annotations
+
+STRING = "std_msgs/String"
+CONTROL_TYPE = "uav_console/VehicleControl"
+HEARTBEAT = "/vehicles/heartbeat"
+HEARTBEAT_PERIOD_S = 0.1
+LINK_PATH = "/vehicle-link"
+
+
+def info_topic(name: str) -> str:
+    return f"/{name}/vehicle/info"
+
+
+def telemetry_topic(name: str) -> str:
+    return f"/{name}/vehicle/telemetry"
+
+
+def control_service(name: str) -> str:
+    return f"/{name}/vehicle/control"

@@ -1,0 +1,95 @@
+"""The Central patrol from the console (issue 13 item 9): the button starts a persistent patrol
+of both drones, the panel shows live coverage (time since each waypoint was last visited, the
+longest gap, each drone's role and battery), a typed "stop the patrol" stops it, and a typed
+"start the patrol with all drones" and the stop button do the same."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from tests.browser.conftest import OBSERVER, ServerProcess, _server, open_console
+
+pytestmark = pytest.mark.browser
+
+
+@pytest.fixture
+def central_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """Two simulated drones of this test's own (127.0.12.10 and .11)."""
+    yield from _server(tmp_path_factory, "uavc-browser-central", "127.0.12.10", "--fleet", "2")
+
+
+def _type(page: Any, text: str) -> None:
+    page.fill("#text-input", text)
+    page.press("#text-input", "Enter")
+
+
+def test_central_button_and_voice(browser: Any, central_server: ServerProcess) -> None:
+    ctx, cp = open_console(browser, central_server.url())
+    try:
+        page = cp.page
+        page.wait_for_function(  # both drones have joined the fleet and are ready
+            "document.querySelectorAll('#central-drones li[data-role=\"idle\"]').length === 2",
+            timeout=20_000,
+        )
+        assert page.text_content("#central-state") == "not running"
+        assert page.get_attribute("#central", "open") is None  # folded: the map keeps its room
+        page.click("#central-h")
+        assert page.is_enabled("#central-start") and not page.is_enabled("#central-stop")
+
+        page.click("#central-start")
+        page.wait_for_function(
+            "document.querySelector('#central-reply').textContent"
+            ".startsWith('Starting the patrol of 12 waypoints with 2 drones')",
+            timeout=5000,
+        )
+        page.wait_for_selector("#central[data-running='true']", timeout=5000)
+        assert not page.is_enabled("#central-start") and page.is_enabled("#central-stop")
+        # live coverage: a drone patrols, waypoints are visited and their age counts up
+        page.wait_for_selector("#central-drones li[data-role='patrolling']", timeout=20_000)
+        page.wait_for_selector("#central-waypoints li[data-visited='true']", timeout=45_000)
+        assert page.eval_on_selector_all("#central-waypoints li", "ls => ls.length") == 12
+        first = page.text_content("#central-waypoints li[data-visited='true']")
+        assert first is not None and first.endswith(" s ago"), first
+        gap = page.text_content("#central-gap")
+        assert gap is not None and gap.endswith(" s"), gap
+        drones = page.eval_on_selector_all("#central-drones li", "ls => ls.map(l => l.textContent)")
+        assert any("patrolling, battery" in d and d.endswith("%") for d in drones), drones
+        assert len(drones) == 2, drones
+
+        _type(page, "stop the patrol")
+        page.wait_for_function(
+            # dialog entries are div.msg in a role=log div (issue 18), no longer list items
+            "[...document.querySelectorAll('#dialog .msg-bot')].some(m => "
+            "m.textContent.includes('Stopping the patrol; the drones are flying home.'))",
+            timeout=10_000,
+        )
+        page.wait_for_selector("#central[data-running='false']", timeout=5000)
+        page.wait_for_selector("#central-drones li[data-role='returning']", timeout=5000)
+        assert central_server.api("GET", "/patrol").json()["running"] is False
+
+        _type(page, "start the patrol with all drones")
+        page.wait_for_selector("#central[data-running='true']", timeout=10_000)
+        page.click("#central-stop")
+        page.wait_for_function(
+            "document.querySelector('#central-reply').textContent"
+            ".startsWith('Stopping the patrol')",
+            timeout=5000,
+        )
+        page.wait_for_selector("#central[data-running='false']", timeout=5000)
+    finally:
+        ctx.close()
+
+    # an observer sees the panel but cannot start the patrol
+    ctx, cp = open_console(browser, central_server.url(OBSERVER))
+    try:
+        page = cp.page
+        page.wait_for_function("document.body.dataset.role === 'observer'", timeout=10_000)
+        page.wait_for_function(
+            "document.querySelectorAll('#central-drones li').length === 2", timeout=10_000
+        )
+        page.wait_for_function("document.querySelector('#central-start').disabled", timeout=5000)
+    finally:
+        ctx.close()

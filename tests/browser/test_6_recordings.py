@@ -1,0 +1,40 @@
+"""The console's recordings menu and REC pill on the live server (after the flights before)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import httpx
+import pytest
+
+from tests.browser.conftest import ConsolePage, ServerProcess
+
+pytestmark = pytest.mark.browser
+
+
+def test_recordings_menu_lists_and_downloads_flights(
+    console: ConsolePage, server: ServerProcess
+) -> None:
+    page: Any = console.page
+    flights = server.api("GET", "/flights").json()["flights"]
+    page.wait_for_selector("#recordings:not([hidden])", timeout=10_000)
+    page.click("#recordings > summary")
+    if not flights:  # this file run alone: nothing flew yet
+        page.wait_for_function(
+            "document.querySelector('#recordings-list').textContent.includes('No recordings')"
+        )
+        assert page.is_hidden("#rec")
+        return
+    page.wait_for_function(
+        f"document.querySelectorAll('#recordings-list li').length >= {len(flights)}",
+        timeout=10_000,
+    )
+    recording = any(f["ended"] is None for f in flights)
+    if recording:
+        page.wait_for_selector("#rec:not([hidden])", timeout=10_000)
+    links = page.eval_on_selector_all("#recordings-list a", "els => els.map(a => a.href)")
+    assert len(links) >= len([f for f in flights if f["ended"] is not None]) - 1
+    for href in links[:1]:
+        r = httpx.get(href, timeout=30)  # the link carries the page's token
+        assert r.status_code == 200 and r.content[:8] == b"\x89MCAP0\r\n"
+    assert console.console_errors() == []

@@ -1,0 +1,199 @@
+"""Speaking to the drone from Chromium, recognised on the console's own machine (issue 15).
+
+Chromium is launched with a fake microphone that plays a WAV synthesised at run time
+(``--use-file-for-fake-audio-capture``), so the whole path runs for real: getUserMedia, the
+AudioWorklet's 16 kHz PCM, the authenticated WebSocket, faster-whisper on the server, the final
+text down the dialog path, and the simulated drone taking off. The server listens on 0.0.0.0,
+so it serves HTTPS with its own CA; Chromium trusts exactly its key
+(``--ignore-certificate-errors-spki-list``), as a phone trusts the downloaded CA.
+"""
+
+from __future__ import annotations
+
+import base64
+import contextlib
+import hashlib
+import os
+import ssl
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from cryptography import x509
+from cryptography.hazmat.primitives import serialization
+
+from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS, OBSERVER, PILOT, ROOT, free_port
+from tests.browser.helpers import wait_until
+from tests.speech.conftest import HAVE_TTS, synthesise
+
+SIM_ADDR = "127.0.15.4"
+pytestmark = pytest.mark.skipif(not HAVE_TTS, reason="espeak-ng and sox are needed")
+
+
+@dataclass
+class TlsServer:
+    port: int
+    data: Path
+    proc: subprocess.Popen[bytes]
+    http: httpx.Client
+
+    def url(self, token: str = PILOT) -> str:
+        return f"https://127.0.0.1:{self.port}/?token={token}"
+
+    def truth(self) -> dict[str, Any]:
+        return dict(self.http.get("/api/v1/sim/uav1/truth").json())
+
+    def spki_hash(self) -> str:
+        cert = x509.load_pem_x509_certificate((self.data / "tls" / "server.pem").read_bytes())
+        spki = cert.public_key().public_bytes(
+            serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
+        )
+        return base64.b64encode(hashlib.sha256(spki).digest()).decode()
+
+
+@pytest.fixture(scope="module")
+def tls_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TlsServer]:
+    if os.environ.get("UAVC_SKIP_BROWSER") == "1":
+        pytest.skip("UAVC_SKIP_BROWSER=1")
+    data = tmp_path_factory.mktemp("speech-browser")
+    port = free_port()
+    env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, PYTHONUNBUFFERED="1")
+    cmd = [
+        sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),
+        "--token", PILOT, "--observer-token", OBSERVER, "--data-dir", str(data), "--seed", "1",
+        "--recognizer", "server",
+    ]  # fmt: skip
+    log = (data / "server.log").open("wb")
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+    log.close()
+    ca = data / "tls" / "ca.pem"
+    deadline = time.monotonic() + 60
+    while not ca.is_file():
+        assert proc.poll() is None and time.monotonic() < deadline, (
+            data / "server.log"
+        ).read_text()
+        time.sleep(0.1)
+    http = httpx.Client(
+        base_url=f"https://127.0.0.1:{port}",
+        verify=ssl.create_default_context(cafile=str(ca)),
+        headers={"Authorization": f"Bearer {PILOT}"},
+        timeout=30,
+    )
+    srv = TlsServer(port, data, proc, http)
+    try:
+        while True:
+            assert proc.poll() is None and time.monotonic() < deadline, (
+                data / "server.log"
+            ).read_text()
+            with contextlib.suppress(httpx.TransportError):
+                ready = http.get("/api/v1/speech/status").json().get("status") == "ready"
+                if ready and http.get("/api/v1/health").json()["drones"].get("uav1"):
+                    break
+            time.sleep(0.2)
+        yield srv
+    finally:
+        http.close()
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def launch(chromium: Any, srv: TlsServer, wav: Path) -> Any:
+    """A Chromium of its own (fake microphone flags), launched by the session's Playwright
+    (``browser.browser_type``): a second ``sync_playwright()`` in the same process refuses to
+    start while the session's is running (its event loop is the running one)."""
+    args = [
+        *CHROMIUM_ARGS,
+        "--use-fake-ui-for-media-stream",
+        "--use-fake-device-for-media-stream",
+        f"--use-file-for-fake-audio-capture={wav}",
+        f"--ignore-certificate-errors-spki-list={srv.spki_hash()}",
+    ]
+    return chromium.launch(executable_path=str(CHROMIUM), headless=True, args=args)
+
+
+def open_page(chromium: Any, srv: TlsServer, wav: Path, viewport: dict[str, int]) -> Any:
+    browser = launch(chromium, srv, wav)
+    # The page's CSP has no 'unsafe-eval'; Playwright's string predicates need eval
+    # (as in conftest.open_console; test_5_csp.py checks the page under its CSP).
+    ctx = browser.new_context(viewport=viewport, service_workers="block", bypass_csp=True)
+    page = ctx.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(srv.url())
+    page.wait_for_selector("#conn[data-state='open']", timeout=20_000)
+    assert page.evaluate("window.isSecureContext") is True
+    page.wait_for_function("document.body.dataset.recognizer === 'server'")
+    assert "offline" in page.inner_text("#recognizer-label")
+    assert page.is_visible("#ca-download")  # the phone can fetch the CA from the page
+    page.select_option("#recognizer", "server")
+    return browser, page, errors
+
+
+def hold_mic_and_fly(chromium: Any, srv: TlsServer, wav: Path, viewport: dict[str, int]) -> Any:
+    browser, page, errors = open_page(chromium, srv, wav, viewport)
+    # Push-to-talk: hold the microphone while the fake device plays the command.
+    mic = page.locator("#mic")
+    mic.scroll_into_view_if_needed()
+    box = mic.bounding_box()
+    assert box is not None
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.wait_for_function("document.body.dataset.listening === 'server'")  # the mic is live
+    page.wait_for_timeout(3200)
+    page.mouse.up()
+    return browser, page, errors
+
+
+def test_holding_the_microphone_in_server_mode_makes_the_drone_take_off(
+    browser: Any, tls_server: TlsServer, tmp_path: Path
+) -> None:
+    wav = synthesise(tmp_path / "takeoff.wav", "take off", voice="en-us", speed=150, pad_s=1.0)
+    subprocess.run(["sox", str(wav), str(tmp_path / "fake.wav"), "pad", "0", "4"], check=True)
+    own, page, errors = hold_mic_and_fly(
+        browser.browser_type, tls_server, tmp_path / "fake.wav", {"width": 1440, "height": 900}
+    )
+    try:
+        ok, last, _ = wait_until(tls_server.truth, lambda t: t["flying"] and t["z"] > 0.5, 30.0)
+        assert ok, (last, page.inner_text("#dialog"), errors)
+        dialog = page.inner_text("#dialog").lower()
+        assert "take off" in dialog
+        assert errors == []
+    finally:
+        own.close()
+
+
+def test_phone_over_https_has_a_working_microphone(
+    browser: Any, tls_server: TlsServer, tmp_path: Path
+) -> None:
+    wav = synthesise(tmp_path / "again.wav", "take off", voice="en-us", speed=150, pad_s=1.0)
+    subprocess.run(["sox", str(wav), str(tmp_path / "fake.wav"), "pad", "0", "4"], check=True)
+    own, page, errors = hold_mic_and_fly(
+        browser.browser_type, tls_server, tmp_path / "fake.wav", {"width": 390, "height": 844}
+    )
+    try:
+        # The phone's utterance reaches the dialog as speech, recognised on the server.
+        page.wait_for_function(
+            "[...document.querySelectorAll('#dialog .msg-user')]"
+            ".some(e => /spoken/.test(e.textContent) && /takeoff/.test(e.textContent))",
+            timeout=60_000,
+        )
+        # Hands-free can be switched on and off on the phone (its VAD path is tested over
+        # WSS in tests/speech/test_server.py).
+        page.check("#handsfree")
+        page.wait_for_function("document.body.dataset.listening === 'server'")
+        page.uncheck("#handsfree")
+        page.wait_for_function("document.body.dataset.listening === ''")
+        assert errors == []
+    finally:
+        own.close()
+        tls_server.http.post("/api/v1/drones/uav1/land")

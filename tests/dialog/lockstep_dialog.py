@@ -1,0 +1,50 @@
+"""One drone's dialog manager, task manager and vehicle in lockstep against the simulator
+(camera off), with the replies and the audit log kept for the test to read."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from drone.lockstep import LockstepRig
+from drone.sim.world import load_world
+from server.dialog.adapters import TaskManagerPort, VehiclePort
+from server.dialog.manager import DialogManager
+from server.graph import Graph
+from server.language.nlu import NLU
+from server.settings import Settings
+from server.store import AuditLog
+from server.tasks import TaskManager
+
+
+@dataclass
+class DialogRig:
+    rig: LockstepRig
+    tm: TaskManager
+    dm: DialogManager
+    audit: AuditLog
+    replies: list[dict[str, Any]] = field(default_factory=list)
+
+
+def dialog_rig(seed: int, start: tuple[float, float, float] = (4.0, 2.0, 0.0)) -> DialogRig:
+    """The indoor world with the drone landed at ``start``; every part stepped by the rig."""
+    world = load_world("indoor")
+    rig = LockstepRig(world, seed=seed, camera=False, starts=[start])
+    tm = TaskManager(rig.vehicle, world, rig.clock)
+    rig.add_stepper(lambda now, dt: tm.step(now))
+    graph = Graph()
+    replies: list[dict[str, Any]] = []
+    graph.subscribe("/console/reply", replies.append, type="uav_console/Reply")
+    audit = AuditLog(":memory:", clock=rig.clock.now)
+    dm = DialogManager(
+        graph,
+        Settings(),
+        TaskManagerPort(tm),
+        VehiclePort(rig.vehicle, world),
+        None,
+        audit,
+        rig.clock.now,
+        nlu=NLU(),
+    )
+    rig.add_stepper(lambda now, dt: dm.step(now))
+    return DialogRig(rig, tm, dm, audit, replies)

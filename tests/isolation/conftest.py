@@ -1,0 +1,133 @@
+"""A real ``uav-console serve --vehicles process`` on loopback (127.0.13.0/24), flying a
+simulated AR.Drone that the test process runs itself (``drone.sim.probe.SimThread``), so the
+test sees the drone's wire and its ground truth without asking the server under test."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+ROOT = Path(__file__).resolve().parents[2]
+PILOT = "isolation-pilot-token"
+HOST = "127.0.13.1"
+
+
+def free_port(host: str = HOST) -> int:
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for(fn: Callable[[], Any], what: str, timeout: float = 20.0, period: float = 0.1) -> Any:
+    """Poll ``fn`` until it returns something truthy (fails with ``what`` otherwise)."""
+    deadline = time.monotonic() + timeout
+    last: Any = None
+    while time.monotonic() < deadline:
+        with contextlib.suppress(httpx.HTTPError, KeyError, ValueError, TypeError):
+            last = fn()
+            if last:
+                return last
+        time.sleep(period)
+    raise AssertionError(f"timed out waiting for {what} (last: {last!r})")
+
+
+@dataclass
+class Served:
+    """A ``serve`` process and a pilot REST client to it."""
+
+    port: int
+    proc: subprocess.Popen[bytes]
+    http: httpx.Client
+    log_path: Path
+
+    @property
+    def ws(self) -> str:
+        return f"ws://{HOST}:{self.port}/rosbridge?token={PILOT}"
+
+    def drone(self, name: str = "uav1") -> dict[str, Any]:
+        r = self.http.get(f"/api/v1/drones/{name}")
+        r.raise_for_status()
+        return dict(r.json())
+
+    def vehicle(self, name: str = "uav1") -> dict[str, Any]:
+        return dict(self.drone(name)["vehicle"])
+
+    def wait_vehicle(self, name: str = "uav1", timeout: float = 30.0) -> dict[str, Any]:
+        """Wait until the vehicle process is connected and its drone link is up."""
+
+        def ready() -> dict[str, Any] | None:
+            d = self.drone(name)
+            ok = d["vehicle"]["connected"] and d["link_ok"] and d["vehicle"]["safety_url"]
+            return d["vehicle"] if ok else None
+
+        return dict(wait_for(ready, f"{name}'s vehicle process", timeout))
+
+    def command(self, text: str) -> dict[str, Any]:
+        r = self.http.post("/api/v1/command", json={"text": text})
+        r.raise_for_status()
+        return dict(r.json())
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")[-4000:]
+
+    def pause(self) -> None:
+        os.kill(self.proc.pid, signal.SIGSTOP)
+
+    def resume(self) -> None:
+        os.kill(self.proc.pid, signal.SIGCONT)
+
+
+@contextlib.contextmanager
+def serve(
+    tmp: Path,
+    drone: str,
+    *,
+    extra: tuple[str, ...] = (),
+    env: dict[str, str] | None = None,
+    port: int | None = None,
+) -> Iterator[Served]:
+    port = port or free_port()
+    log_path = tmp / f"serve-{port}.log"
+    full_env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), **(env or {})}
+    argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
+    argv += ["--drone", drone, "--token", PILOT, *extra]
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(argv, cwd=ROOT, env=full_env, stdout=log, stderr=log)
+    http = httpx.Client(
+        base_url=f"http://{HOST}:{port}", headers={"Authorization": f"Bearer {PILOT}"}, timeout=10
+    )
+    served = Served(port, proc, http, log_path)
+    try:
+        wait_for(lambda: http.get("/api/v1/health").status_code == 200, "serve to start", 30)
+        yield served
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(proc.pid, signal.SIGCONT)
+        proc.terminate()
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        http.close()
+
+
+def reply_texts(frames: list[str]) -> list[str]:
+    out = []
+    for f in frames:
+        obj = json.loads(f)
+        if obj.get("op") == "publish" and obj.get("topic") == "/console/reply":
+            out.append(str(obj["msg"]["text"]))
+    return out

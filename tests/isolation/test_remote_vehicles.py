@@ -1,0 +1,64 @@
+"""Issue 13 item 11: ``uav-console vehicle --central …/vehicle-link`` processes on their own (as
+on other computers, or the docker compose services) join a central ``serve --drone none`` and
+become whole drones of it: REST telemetry, typed commands, ground truth, the fleet status."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.isolation.conftest import HOST, PILOT, ROOT, Served, serve, wait_for
+
+pytestmark = pytest.mark.timeout(180)
+
+
+@contextlib.contextmanager
+def vehicle(srv: Served, name: str, sim_addr: str, tmp: Path) -> Iterator[subprocess.Popen[bytes]]:
+    env = {**os.environ, "UAVC_TOKEN": PILOT, "UAVC_SIM_BASE_ADDR": sim_addr}
+    env["UAVC_DATA_DIR"] = str(tmp / "data")
+    url = f"ws://{HOST}:{srv.port}/vehicle-link"
+    argv = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", name]
+    argv += ["--world", "outdoor", "--drone", "sim", "--index", "0"]
+    with open(tmp / f"{name}.log", "wb") as log:
+        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
+    try:
+        yield proc
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def test_remote_vehicles_join_a_central_server_as_whole_drones(tmp_path: Path) -> None:
+    with (
+        serve(tmp_path, "none", extra=("--world", "outdoor")) as srv,
+        vehicle(srv, "uav1", "127.0.13.50", tmp_path),
+        vehicle(srv, "uav2", "127.0.13.51", tmp_path),
+    ):
+        for name in ("uav1", "uav2"):
+            srv.wait_vehicle(name, timeout=60)
+        names = [d["name"] for d in srv.http.get("/api/v1/drones").json()]
+        assert names == ["uav1", "uav2"]
+        assert srv.drone("uav2")["vehicle"]["mode"] == "process"
+        r = srv.http.post("/api/v1/command", json={"text": "take off", "drone": "uav2"})
+        assert r.json()["accepted"], r.text
+        wait_for(
+            lambda: srv.http.get("/api/v1/sim/uav2/truth").json()["z"] > 0.5,
+            "uav2 to take off (the simulator's ground truth through its vehicle)",
+            40,
+        )
+        assert srv.http.get("/api/v1/sim/uav1/truth").json()["z"] < 0.05  # only uav2 flew
+        fleet = srv.http.get("/api/v1/fleet").json()
+        assert {d["name"] for d in fleet["drones"]} == {"uav1", "uav2"}
+        r = srv.http.post("/api/v1/drones/uav2/land")
+        assert r.status_code == 200
+        wait_for(lambda: not srv.http.get("/api/v1/sim/uav2/truth").json()["flying"], "landing", 40)

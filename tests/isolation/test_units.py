@@ -1,0 +1,251 @@
+"""Unit tests of the isolation parts: the central-loss watch, the safety port's parser and
+server, the graph link's frames, the children's environment."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from server.graph import Graph
+from server.settings import Settings, SettingsError
+from server.vehicles.central import child_env
+from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
+from server.vehicles.safety import SafetyPort, SafetyRequestError, parse_request
+from server.vehicles.watch import CentralWatch, LossAction
+
+# ------------------------------------------------------------------------------ CentralWatch
+
+
+def test_watch_hovers_then_lands_once_per_silence() -> None:
+    w = CentralWatch(hover_after_s=1.0, land_after_s=5.0)
+    assert w.step(0.5, 0.0, flying=True) is None
+    assert w.step(1.0, 0.0, flying=True) is LossAction.HOVER
+    assert w.step(2.0, 0.0, flying=True) is None  # once
+    assert w.step(5.0, 0.0, flying=True) is LossAction.LAND
+    assert w.step(9.0, 0.0, flying=True) is None
+    assert w.step(9.1, 9.0, flying=True) is None  # heard again: the silence is over
+    assert w.step(10.5, 9.0, flying=True) is LossAction.HOVER  # a new silence
+    assert w.losses == 2
+
+
+def test_watch_does_nothing_on_the_ground() -> None:
+    w = CentralWatch(hover_after_s=1.0, land_after_s=2.0)
+    assert [w.step(t, 0.0, flying=False) for t in (1.0, 2.0, 3.0)] == [None, None, None]
+
+
+def test_watch_rejects_inverted_times() -> None:
+    with pytest.raises(ValueError):
+        CentralWatch(hover_after_s=3.0, land_after_s=2.0)
+
+
+# ------------------------------------------------------------------------------ safety port
+
+HEAD = "POST /emergency HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer tok"
+
+
+def test_parse_request_reads_action_token_origin() -> None:
+    req = parse_request(HEAD.encode())
+    assert (req.method, req.action, req.token, req.origin) == ("POST", "emergency", "tok", None)
+    req = parse_request(b"POST /land?token=t2 HTTP/1.1\r\nOrigin: http://127.0.0.1:8000")
+    assert (req.action, req.token, req.origin) == ("land", "t2", "http://127.0.0.1:8000")
+    assert parse_request(b"OPTIONS /land HTTP/1.1").method == "OPTIONS"
+
+
+@pytest.mark.parametrize(
+    ("head", "status"),
+    [
+        (b"POST /takeoff HTTP/1.1", 404),
+        (b"GET /emergency HTTP/1.1", 405),
+        (b"POST /emergency HTTP/1.1\r\nContent-Length: 5", 413),
+        (b"POST /emergency HTTP/1.1\r\nTransfer-Encoding: chunked", 413),
+        (b"POST /emergency HTTP/1.1\r\nContent-Length: -1", 400),
+        (b"POST /emergency", 400),
+        (b"POST /emergency HTTP/1.1\r\nno colon", 400),
+        ("POST /emergency HTTP/1.1\r\nX: \u00e9".encode(), 400),
+        (b"POST /emergency HTTP/1.1\r\nX: " + b"a" * 5000, 431),
+    ],
+)
+def test_parse_request_refusals(head: bytes, status: int) -> None:
+    with pytest.raises(SafetyRequestError) as info:
+        parse_request(head)
+    assert info.value.status == status
+
+
+@given(st.binary(max_size=600))
+def test_parse_request_never_crashes(head: bytes) -> None:
+    try:
+        parse_request(head)
+    except SafetyRequestError as exc:
+        assert 400 <= exc.status < 500
+
+
+async def test_safety_port_over_loopback() -> None:
+    acted: list[str] = []
+
+    def act(action: str) -> str:
+        acted.append(action)
+        return f"{action} sent"
+
+    port = SafetyPort("127.0.13.2", 0, "tok", act)
+    await port.start()
+    try:
+        async with httpx.AsyncClient(base_url=port.url) as c:
+            ok = await c.post("/emergency", headers={"Authorization": "Bearer tok"})
+            assert ok.status_code == 200 and ok.json()["detail"] == "emergency sent"
+            assert (await c.post("/land")).status_code == 401
+            assert (
+                await c.post("/land", headers={"Authorization": "Bearer nope"})
+            ).status_code == 401
+            evil = {"Authorization": "Bearer tok", "Origin": "http://evil.example"}
+            assert (await c.post("/land", headers=evil)).status_code == 403
+            pre = await c.options("/land", headers={"Origin": "http://127.0.0.1:8000"})
+            assert pre.status_code == 204
+            assert pre.headers["access-control-allow-origin"] == "http://127.0.0.1:8000"
+            body = await c.post("/land", headers={"Authorization": "Bearer tok"}, content=b"x")
+            assert body.status_code == 413
+        # a client that never finishes its head is cut off, not waited for
+        reader, writer = await asyncio.open_connection("127.0.13.2", port.port)
+        writer.write(b"POST /land HTTP/1.1\r\n")
+        answer = await asyncio.wait_for(reader.read(), 10)
+        assert answer.startswith(b"HTTP/1.1 408")
+        writer.close()
+    finally:
+        await port.stop()
+    assert acted == ["emergency"]
+
+
+# ------------------------------------------------------------------------------ graph link
+
+
+def make_core() -> tuple[Graph, GraphLinkCore]:
+    g = Graph()
+    spec = LinkSpec(
+        out_topics=(TopicSpec("/uav/task", "std_msgs/String", latch=True),),
+        in_topics=(TopicSpec("/cmd_vel", "geometry_msgs/Twist"),),
+        out_services=(("/uav1/vehicle/control", "uav_console/VehicleControl"),),
+    )
+    g.advertise("/uav/task", "std_msgs/String", latch=True)
+    return g, GraphLinkCore(g, spec)
+
+
+def ops(frames: list[str]) -> list[tuple[str, str]]:
+    out = []
+    for f in frames:
+        o = json.loads(f)
+        out.append((o["op"], o.get("topic") or o.get("service") or ""))
+    return out
+
+
+def test_link_hello_declares_everything_and_resends_latched() -> None:
+    g, core = make_core()
+    g.publish("/uav/task", {"data": "idle"})
+    assert core.drain() == []  # not connected: nothing queued
+    assert ops(core.hello()) == [
+        ("advertise", "/uav/task"),
+        ("advertise_service", "/uav1/vehicle/control"),
+        ("subscribe", "/cmd_vel"),
+        ("publish", "/uav/task"),
+    ]
+    g.publish("/uav/task", {"data": "flying"})
+    [frame] = core.drain()
+    assert json.loads(frame)["msg"] == {"data": "flying"}
+
+
+def test_link_delivers_server_messages_and_counts_bad_frames() -> None:
+    g, core = make_core()
+    got: list[dict[str, Any]] = []
+    g.subscribe("/cmd_vel", got.append)
+    core.hello()
+    twist = {"linear": {"x": 0.1}}
+    core.receive(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": twist}))
+    assert got == [twist]
+    for bad in ("{", "[]", json.dumps({"op": "publish", "topic": 3, "msg": {}})):
+        core.receive(bad)
+    assert len(core.errors) == 3
+
+
+async def test_link_answers_calls_of_local_services() -> None:
+    g, core = make_core()
+
+    async def control(args: dict[str, Any]) -> dict[str, Any]:
+        if args.get("op") == "boom":
+            raise RuntimeError("no such op")
+        return {"detail": f"{args['action']} sent"}
+
+    g.advertise_service("/uav1/vehicle/control", "uav_console/VehicleControl", control)
+    core.hello()
+    call = {"op": "call_service", "service": "/uav1/vehicle/control", "id": "c1"}
+    core.receive(json.dumps({**call, "args": {"op": "direct", "action": "land"}}))
+    core.receive(json.dumps({**call, "id": "c2", "args": {"op": "boom"}}))
+    core.receive(json.dumps({**call, "id": "c3", "service": "/other"}))
+    for _ in range(5):
+        await asyncio.sleep(0)
+    replies = {o["id"]: o for o in map(json.loads, core.drain())}
+    assert replies["c1"]["result"] and replies["c1"]["values"] == {"detail": "land sent"}
+    assert not replies["c2"]["result"] and "no such op" in replies["c2"]["values"]
+    assert not replies["c3"]["result"]
+
+
+async def test_link_calls_the_server_and_fails_cleanly_on_disconnect() -> None:
+    _, core = make_core()
+    core.hello()
+    call = asyncio.create_task(core.call("/console/describe", {"drone": "uav1"}))
+    await asyncio.sleep(0)
+    [frame] = core.drain()
+    sent = json.loads(frame)
+    core.receive(json.dumps({"op": "service_response", "id": sent["id"], "values": {"text": "a"}}))
+    assert await call == {"text": "a"}
+    pending = asyncio.create_task(core.call("/console/describe", {}))
+    await asyncio.sleep(0)
+    core.disconnected()
+    with pytest.raises(Exception, match="closed"):
+        await pending
+
+
+# ------------------------------------------------------------------------------ settings
+
+
+def test_child_env_passes_settings_and_the_token_only_as_uavc_token(tmp_path: Path) -> None:
+    s = Settings(data_dir=tmp_path, token="secret", allow_origins=("a", "b"), world="outdoor")
+    env = child_env(s, "secret")
+    assert env["UAVC_TOKEN"] == "secret"
+    assert env["UAVC_WORLD"] == "outdoor" and env["UAVC_ALLOW_ORIGINS"] == "a,b"
+    assert Settings.from_env(env).world == "outdoor"
+
+
+def test_unknown_vehicles_mode_is_refused(tmp_path: Path) -> None:
+    from server.runtime import Runtime
+
+    with pytest.raises(SettingsError, match="inline or process"):
+        Runtime(Settings(data_dir=tmp_path, vehicles="threads"))
+
+
+def test_which_drones_a_vehicle_process_can_fly() -> None:
+    from server.vehicles.central import VehicleCentral
+
+    assert VehicleCentral.can_spawn("sim")
+    assert VehicleCentral.can_spawn("192.168.1.1")
+    assert VehicleCentral.can_spawn("none")  # nothing to spawn
+    assert not VehicleCentral.can_spawn("tcp:127.0.0.1:5760")  # MAVLink: inline for now
+    assert not VehicleCentral.can_spawn("sim-mavlink")
+
+
+def test_serve_refuses_an_unknown_vehicles_mode(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    from tests.isolation.conftest import ROOT
+
+    env = {**os.environ, "UAVC_VEHICLES": "threads"}
+    argv = [sys.executable, "-m", "server", "serve", "--drone", "none", "--data-dir", str(tmp_path)]
+    out = subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert "inline or process" in out.stderr

@@ -1,0 +1,138 @@
+"""The whole console on a mixed fleet: ``--drone sim,sim-mavlink --world outdoor --fleet 2``
+(uav1 the AR.Drone simulator on 127.0.16.20, uav2 a simulated PX4 on 127.0.16.21:5760, the real
+drivers over UDP and TCP), REST and the graph:
+commands in words fly the autopilot, MAVROS topics carry its state, a denial reaches the
+operator with the vehicle's reason."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from server.settings import Settings
+from tests.app_client import app_client
+
+PILOT = "pilot-token-mavlink"
+
+
+@pytest.fixture
+async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
+    settings = Settings(
+        data_dir=tmp_path,
+        token=PILOT,
+        observer_token="observer-mavlink",
+        drone="sim,sim-mavlink",
+        world="outdoor",
+        fleet=2,
+        sim_base_addr="127.0.16.20",
+        sim_speed=4.0,
+    )
+    async with app_client(settings) as client:
+        yield client
+
+
+async def _until(pred: Callable[[], Any], timeout_s: float) -> Any:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        value = pred()
+        if asyncio.iscoroutine(value):
+            value = await value
+        if value:
+            return value
+        await asyncio.sleep(0.05)
+    raise AssertionError("timed out")
+
+
+async def test_fleet_of_mavlink_drones_flies_by_words(api: httpx.AsyncClient) -> None:
+    runtime = api.app.state.runtime  # type: ignore[attr-defined]
+    graph = runtime.graph
+    seen: dict[str, list[dict[str, Any]]] = {}
+    for topic in (
+        "/uav2/mavros/state",
+        "/uav2/mavros/global_position/global",
+        "/uav2/mavros/battery",
+        "/uav2/uav/pose",
+        "/console/reply",
+        "/uav2/mavros/local_position/pose",
+    ):
+        graph.subscribe(topic, lambda m, t=topic: seen.setdefault(t, []).append(m))
+
+    async def linked() -> bool:
+        r = await api.get("/api/v1/drones/uav2")
+        body = r.json()
+        return bool(body["link_ok"] and body["extra"].get("home"))
+
+    await _until(linked, 15.0)
+    body = (await api.get("/api/v1/drones/uav2")).json()
+    assert body["extra"]["protocol"] == "mavlink" and body["extra"]["autopilot"] == "PX4"
+    assert body["x"] == pytest.approx(1.5, abs=0.05)  # standing on station home2
+    await _until(lambda: seen.get("/uav2/mavros/state", [{}])[-1].get("connected"), 5.0)
+    assert seen["/uav2/mavros/state"][-1]["mode"] == "AUTO.LOITER"
+
+    r = await api.post("/api/v1/command", json={"text": "take off", "drone": "uav2"})
+    assert r.status_code == 200 and r.json()["accepted"], r.text
+
+    async def flying() -> bool:
+        s = (await api.get("/api/v1/drones/uav2")).json()
+        return bool(s["flying"] and s["ctrl_state"] in ("HOVERING", "FLYING"))
+
+    await _until(flying, 20.0)
+    r = await api.post("/api/v1/command", json={"text": "go forward three meters", "drone": "uav2"})
+    assert r.json()["accepted"], r.text
+    # the world's start yaw is 90° (north): forward is +y in the map frame
+
+    async def moved() -> bool:
+        s = (await api.get("/api/v1/drones/uav2")).json()
+        return bool(s["y"] > 2.7 and s["task"]["state"] in ("idle", "succeeded"))
+
+    await _until(moved, 20.0)
+    truth = (await api.get("/api/v1/sim/uav2/truth")).json()
+    assert truth["y"] == pytest.approx(3.0, abs=0.3)
+    await _until(lambda: seen["/uav2/mavros/state"][-1]["armed"], 5.0)
+    fix = seen["/uav2/mavros/global_position/global"][-1]
+    assert fix["latitude"] > 36.36716 and fix["status"]["status"] == 0
+    assert 0.9 < seen["/uav2/mavros/battery"][-1]["percentage"] <= 1.0
+    assert seen["/uav2/uav/pose"][-1]["pose"]["position"]["y"] > 2.5
+    assert seen["/uav2/mavros/local_position/pose"][-1]["pose"]["position"]["y"] > 2.5
+
+    # The vehicle's own refusal reaches the operator with its reason (disarm in the air).
+    stack = runtime.drones["uav2"]
+    stack.vehicle.protocol.command(400, 0.0)
+    stack.vehicle._track(stack.vehicle.protocol._token, "disarm")
+    await _until(
+        lambda: any(
+            "Disarming denied: not landed" in m["text"] and m["level"] == "alert"
+            for m in seen.get("/console/reply", [])
+        ),
+        10.0,
+    )
+
+    r = await api.post("/api/v1/command", json={"text": "land", "drone": "uav2"})
+    assert r.json()["accepted"], r.text
+
+    async def landed() -> bool:
+        s = (await api.get("/api/v1/drones/uav2")).json()
+        return not s["flying"] and s["ctrl_state"] == "LANDED"
+
+    await _until(landed, 30.0)
+    # Link loss: the alert names what the autopilot will do on its own.
+    r = await api.post("/api/v1/sim/uav2/fault", json={"kind": "link_loss", "duration_s": 12.0})
+    assert r.status_code in (200, 204), r.text
+    want = "I lost the link to the drone. PX4's data-link-loss failsafe will return to launch"
+    await _until(
+        lambda: any(m["text"].startswith(want) for m in seen.get("/console/reply", [])), 10.0
+    )
+    await _until(
+        lambda: any("link to the drone is back" in m["text"] for m in seen["/console/reply"]),
+        10.0,
+    )
+
+    # uav1, the AR.Drone of the same fleet, is there and never moved
+    uav1 = (await api.get("/api/v1/drones/uav1")).json()
+    assert "protocol" not in uav1["extra"] and not uav1["flying"]

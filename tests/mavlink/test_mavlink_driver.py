@@ -1,0 +1,212 @@
+"""The asyncio driver over real sockets: TCP, UDP both ways, MAVLink 2 signing, and the
+``uav-console sim --protocol mavlink`` process with mavutil over TCP and UDP."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from drone.mavlink.autopilot import SimAutopilot
+from drone.mavlink.client import CommandResult, GcsProtocol
+from drone.mavlink.driver import MavlinkDriver
+from drone.mavlink.errors import ConnectionStringError
+from drone.mavlink.simserver import MavlinkSimServer
+from drone.sim.world import load_world
+
+ROOT = Path(__file__).resolve().parents[2]
+KEY = bytes(range(100, 132))
+
+
+@pytest.fixture(scope="module")
+def world() -> Any:
+    return load_world("outdoor")
+
+
+async def _until(pred: Any, timeout_s: float) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if pred():
+            return True
+        await asyncio.sleep(0.02)
+    return bool(pred())
+
+
+async def test_driver_over_tcp_arms_and_takes_off(world: Any) -> None:
+    events: list[Any] = []
+    async with MavlinkSimServer("127.0.16.11", SimAutopilot(world), speed=4.0) as sim:
+        d = MavlinkDriver("tcp:127.0.16.11:5760", on_event=events.append)
+        await d.start()
+        try:
+            assert await _until(lambda: d.protocol.telemetry.home is not None, 10.0)
+            d.protocol.arm_and_takeoff(3.0)
+            d.flush()
+            assert await _until(lambda: d.protocol.telemetry.rel_alt_m > 2.8, 15.0)
+            flight = ("COMPONENT_ARM_DISARM", "NAV_TAKEOFF")
+            done = [
+                e.command
+                for e in events
+                if isinstance(e, CommandResult) and e.ok and e.command in flight
+            ]
+            assert done == list(flight)
+            assert sim.autopilot.commands_executed.count(400) == 1
+        finally:
+            await d.stop()
+
+
+async def test_driver_udpin_hears_a_vehicle_that_pushes(world: Any) -> None:
+    # PX4 SITL pushes to the ground station's 14550; here the driver listens on 127.0.16.12.
+    d = MavlinkDriver("udpin:127.0.16.12:14550")
+    await d.start()
+    try:
+        sim = MavlinkSimServer(
+            "127.0.16.13",
+            SimAutopilot(world),
+            tcp_port=None,
+            udp_port=14580,
+            udp_out=("127.0.16.12", 14550),
+            speed=4.0,
+        )
+        async with sim:
+            assert await _until(lambda: d.protocol.connected, 10.0)
+            # replies go back to where the datagrams came from: commands work
+            d.protocol.intent("hold")
+            d.flush()
+            assert await _until(lambda: d.protocol.pending_commands() == 0, 10.0)
+    finally:
+        await d.stop()
+
+
+async def test_signed_link_and_a_wrong_key(world: Any) -> None:
+    async with MavlinkSimServer(
+        "127.0.16.14", SimAutopilot(world, signing_key=KEY), udp_port=None, speed=4.0
+    ) as sim:
+        good = MavlinkDriver("tcp:127.0.16.14:5760", GcsProtocol(signing_key=KEY))
+        bad = MavlinkDriver("tcp:127.0.16.14:5760", GcsProtocol(signing_key=bytes(32)))
+        plain = MavlinkDriver("tcp:127.0.16.14:5760")
+        for d in (good, bad, plain):
+            await d.start()
+        try:
+            assert await _until(lambda: good.protocol.telemetry.home is not None, 10.0)
+            good.protocol.command(400, 1.0)
+            good.flush()
+            assert await _until(lambda: good.protocol.telemetry.armed, 5.0)
+            bad.protocol.command(400, 0.0)
+            plain.protocol.command(400, 0.0)
+            bad.flush()
+            plain.flush()
+            await asyncio.sleep(1.0)
+            assert not bad.protocol.connected
+            assert bad.protocol.codec.rejected["bad_signature"] > 0
+            # MAVLink 2 lets a system without the key read signed frames (mavlink.io "Message
+            # Signing"), so an unsigned console watches, but nothing it sends is obeyed:
+            assert plain.protocol.connected
+            assert sim.autopilot.rejected()["bad_signature"] > 0  # their commands: refused
+            assert sim.autopilot.armed  # the unsigned disarm did nothing
+        finally:
+            for d in (good, bad, plain):
+                await d.stop()
+
+
+async def test_serial_radio_link_over_a_pty(world: Any) -> None:
+    """``--drone /dev/pts/N,57600``: a pseudo-terminal stands in for the radio; the simulated
+    autopilot sits on its other end (what a SiK radio pair carries, byte for byte)."""
+    import os
+
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    ap = SimAutopilot(world)
+    d = MavlinkDriver(f"{os.ttyname(slave)},57600")
+    await d.start()
+    try:
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not d.protocol.telemetry.home:
+            with contextlib.suppress(BlockingIOError):  # nothing written by the driver yet
+                ap.receive("radio", os.read(master, 4096))
+            for _ in range(5):
+                ap.step(0.01)
+            out = ap.drain("radio")
+            if out:
+                os.write(master, out)
+            await asyncio.sleep(0.01)
+        assert d.protocol.connected and d.protocol.telemetry.autopilot == "PX4"
+        assert d.protocol.telemetry.home is not None
+    finally:
+        await d.stop()
+        os.close(master)
+        os.close(slave)
+
+
+async def test_missing_serial_device_is_a_clear_error() -> None:
+    d = MavlinkDriver("/dev/ttyUSB99,57600")
+    with pytest.raises(ConnectionStringError, match="cannot open /dev/ttyUSB99,57600"):
+        await d.start()
+
+
+def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp() -> None:
+    from pymavlink import mavutil
+
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "server",
+            "sim",
+            "--protocol",
+            "mavlink",
+            "--addr",
+            "127.0.16.15",
+            "--world",
+            "outdoor",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
+    try:
+        deadline = time.monotonic() + 30
+        tcp = None
+        while tcp is None and time.monotonic() < deadline:
+            try:
+                tcp = mavutil.mavlink_connection("tcp:127.0.16.15:5760", autoreconnect=False)
+            except OSError:
+                time.sleep(0.2)
+        assert tcp is not None, "simulator did not come up"
+        hb = tcp.wait_heartbeat(timeout=10)
+        assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4
+        assert hb.type == mavutil.mavlink.MAV_TYPE_QUADROTOR
+        udp = mavutil.mavlink_connection("udpout:127.0.16.15:14580")
+        udp.mav.heartbeat_send(6, 8, 0, 0, 0)  # a datagram makes us a peer
+        assert udp.wait_heartbeat(timeout=10) is not None
+        gps = udp.recv_match(type="GPS_RAW_INT", blocking=True, timeout=5)
+        assert gps.fix_type == 3 and math.isclose(gps.lat / 1e7, 36.367164, abs_tol=1e-5)
+        tcp.close()
+        udp.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+
+def test_drone_flag_and_signing_key_errors_are_clear() -> None:
+    from server.mavlink_stack import drone_kind, is_mavlink, signing_key
+    from server.settings import SettingsError
+
+    assert drone_kind("sim,sim-mavlink", 0) == "sim"
+    assert drone_kind("sim,sim-mavlink", 5) == "sim-mavlink"  # the last kind repeats
+    assert is_mavlink("sim-mavlink") and is_mavlink("udpin:0.0.0.0:14550")
+    assert not is_mavlink("192.168.1.1") and not is_mavlink("sim")
+    with pytest.raises(SettingsError, match="tcp:HOST:PORT"):
+        is_mavlink("tcp:10.0.0.5")
+    assert signing_key(None) is None and signing_key("ab" * 32) == bytes([0xAB]) * 32
+    for bad in ("abc", "zz" * 32, "ab" * 31):
+        with pytest.raises(SettingsError, match="64 hex digits"):
+            signing_key(bad)

@@ -1,0 +1,133 @@
+"""``uav-console vehicle --drone tcp:ADDR:5760``: a MAVLink drone's stack in its own process joins a
+central server over the rosbridge WebSocket, as an AR.Drone's does (tests/fleet/test_remote.py).
+The vehicle is the simulated PX4 on 127.0.16.50:5760, served from this test process."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import uvicorn
+from fastapi import FastAPI
+
+from drone.mavlink.autopilot import SimAutopilot
+from drone.mavlink.simserver import MavlinkSimServer
+from drone.sim.world import load_world
+from server.fleet.ctm import CentralTaskManager
+from server.fleet.geo import Enu, origin_of
+from server.fleet.node import CtmNode
+from server.graph import Graph
+from server.rosbridge.context import BridgeContext
+from server.rosbridge.endpoint import make_router
+from server.security import Security, TokenStore
+from server.settings import ROOT, Settings
+
+pytestmark = pytest.mark.timeout(90)
+WORLD = load_world("outdoor")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.16.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextlib.contextmanager
+def _central(tmp: Path) -> Iterator[tuple[str, CentralTaskManager, str]]:
+    port = _free_port()
+    settings = Settings(host="127.0.16.1", port=port, data_dir=tmp, world="outdoor")
+    graph = Graph()
+    tokens = TokenStore(tmp)
+    ctx = BridgeContext(graph=graph, security=Security(settings, tokens), settings=settings)
+    ctm = CentralTaskManager(origin=origin_of(WORLD), world=WORLD, lost_after_s=1.5)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        graph.bind_loop(asyncio.get_running_loop())
+        node = CtmNode(graph, ctm, period_s=0.1, publish_period_s=0.2)
+        await node.start()
+        yield
+        await node.stop()
+
+    app = FastAPI(lifespan=lifespan)
+    app.include_router(make_router(ctx))
+    server = uvicorn.Server(
+        uvicorn.Config(app, host="127.0.16.1", port=port, log_level="error", ws_ping_interval=None)
+    )
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 20
+    while not server.started:
+        assert time.monotonic() < deadline and thread.is_alive(), "server did not start"
+        time.sleep(0.01)
+    try:
+        yield f"ws://127.0.16.1:{port}/rosbridge", ctm, tokens.pilot_token
+    finally:
+        server.should_exit = True
+        thread.join(10)
+
+
+async def _until(pred: Any, timeout_s: float) -> None:
+    end = time.monotonic() + timeout_s
+    while not pred():
+        assert time.monotonic() < end, "condition not reached in time"
+        await asyncio.sleep(0.05)
+
+
+async def test_mavlink_vehicle_process_joins_the_central(tmp_path: Path) -> None:
+    ap = SimAutopilot(WORLD, start=(1.5, 0.0, WORLD.start.yaw_rad))
+    async with MavlinkSimServer("127.0.16.50", ap, udp_port=None):
+        with _central(tmp_path) as (ws, ctm, token):
+            cmd = [
+                sys.executable,
+                "-m",
+                "server",
+                "vehicle",
+                "--central",
+                ws,
+                "--name",
+                "uav2",
+                "--drone",
+                "tcp:127.0.16.50:5760",
+                "--world",
+                "outdoor",
+                f"--token={token}",
+            ]
+            env = dict(os.environ, PYTHONPATH=str(ROOT))
+            proc = subprocess.Popen(
+                cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+            )
+            try:
+                await _until(lambda: "uav2" in ctm.drones or proc.poll() is not None, 40.0)
+                assert proc.poll() is None, proc.stdout.read().decode()[-2000:]  # type: ignore[union-attr]
+                await _until(
+                    lambda: (
+                        (st := ctm.drones["uav2"].status) is not None
+                        and st.link_ok
+                        and st.battery_pct > 90
+                    ),
+                    20.0,
+                )
+                st = ctm.drones["uav2"].status
+                assert st is not None and st.station == Enu(1.5, 0.0, 0.0)
+                assert st.lat == pytest.approx(36.367164, abs=1e-4)
+                assert len(ap.links) == 1  # the vehicle process is the simulator's client
+            finally:
+                proc.terminate()
+                try:
+                    proc.wait(10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+                if proc.stdout is not None:
+                    proc.stdout.close()

@@ -1,0 +1,100 @@
+"""Real recognition of synthesised speech: voices, accents, speeds and noise (few decodes)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from server.speech.audio import read_wav
+from server.speech.recognizer import Recognizer
+from tests.speech.conftest import Synth
+
+ROOT = Path(__file__).resolve().parents[2]
+
+CASES = [
+    # text, voice, words per minute, SNR dB, expected commands
+    ("take off", "en-us", 160, None, [{"action": "takeoff"}]),
+    ("fly to marker three", "en-gb-scotland", 140, 20.0, [{"action": "goto", "marker": 3}]),
+    (
+        "turn left ninety degrees",
+        "en-gb-x-rp",
+        190,
+        None,
+        [{"action": "turn", "direction": "left", "angle": 90}],
+    ),
+    (
+        "climb two meters",
+        "en-us+f3",
+        160,
+        10.0,
+        [{"action": "move", "direction": "up", "distance": 2}],
+    ),
+]
+
+
+@pytest.mark.parametrize(("text", "voice", "wpm", "snr", "commands"), CASES)
+def test_spoken_commands_are_understood(
+    recognizer: Recognizer,
+    synth: Synth,
+    text: str,
+    voice: str,
+    wpm: int,
+    snr: float | None,
+    commands: list[dict[str, object]],
+) -> None:
+    clip = synth(text, voice=voice, speed=wpm, snr_db=snr)
+    rec = recognizer.recognize(read_wav(clip.read_bytes()))
+    assert rec.commands == commands, rec
+    assert rec.confidence >= 0.5, rec  # above the dialog's threshold: it will be executed
+
+
+def test_silence_and_noise_are_not_decoded_and_mean_nothing(recognizer: Recognizer) -> None:
+    rng = np.random.default_rng(7)
+    for samples in (np.zeros(32000, np.float32), rng.uniform(-1, 1, 32000).astype(np.float32)):
+        rec = recognizer.recognize(samples)
+        assert rec.text == "" and rec.commands == [] and rec.confidence == 0.0
+
+
+def test_interpret_audio_cli_good_and_bad_files(synth: Synth, tmp_path: Path) -> None:
+    good = synth("land", voice="en-us", speed=150, rate=44100, channels=2)
+    notwav = tmp_path / "notes.wav"
+    notwav.write_text("this is text, not audio\n")
+    empty = tmp_path / "empty.wav"
+    empty.write_bytes(b"")
+    files = [str(notwav), str(good), str(tmp_path / "missing.wav"), str(empty)]
+    out = subprocess.run(
+        [sys.executable, "-m", "server", "interpret", "--audio", *files],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 1, out.stderr
+    lines = [json.loads(line) for line in out.stdout.splitlines()]
+    assert [line["file"] for line in lines] == files  # one line per file, in order
+    assert "not a WAV" in lines[0]["error"]
+    assert lines[1]["commands"] == [{"action": "land"}]
+    assert set(lines[1]) >= {"file", "text", "confidence", "commands"}
+    assert lines[2]["error"] == "no such file"
+    assert "error" in lines[3]
+
+
+def test_interpret_audio_cli_with_a_damaged_model_says_so(tmp_path: Path, synth: Synth) -> None:
+    d = tmp_path / "model"
+    d.mkdir()
+    (d / "model.bin").write_bytes(b"x")
+    out = subprocess.run(
+        [sys.executable, "-m", "server", "interpret", "--audio", str(synth("hover"))],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={"UAVC_ASR_MODEL": str(d), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)},
+    )
+    assert out.returncode == 2
+    assert "config.json" in out.stderr and out.stdout == ""

@@ -1,0 +1,139 @@
+// The Central patrol (issue 13 item 9, CTANS): start, watch and stop a persistent patrol of
+// the whole fleet from the console, with live coverage.
+//
+// Self-contained: it needs only the #central block of the page and the REST API
+// (GET/POST/DELETE /api/v1/patrol, server/fleet/central.py). Voice does the same through the
+// dialog ("start the patrol with all drones", "stop the patrol").
+
+import { Api, ApiError } from "./api.js";
+import { pageToken } from "./session.js";
+
+const POLL_MS = 1000;
+
+/** Seconds as "42 s" or "3 min 05 s". */
+export function ago(s) {
+  if (s === null || s === undefined || !Number.isFinite(s)) return "–";
+  if (s < 90) return `${Math.round(s)} s`;
+  const m = Math.floor(s / 60);
+  return `${m} min ${String(Math.round(s - 60 * m)).padStart(2, "0")} s`;
+}
+
+export class CentralPanel {
+  /**
+   * @param {HTMLElement} root the #central block; @param {Api} api
+   * @param {() => (string|null)} lease the pilot lease key this page holds, if any
+   */
+  constructor(root, api, lease = () => null) {
+    this.root = root;
+    this.api = api;
+    this.lease = lease;
+    this.$ = (id) => root.querySelector(`#${id}`);
+    this.busy = false;
+    this.$("central-start").addEventListener("click", () => this.act("POST", "Starting…"));
+    this.$("central-stop").addEventListener("click", () => this.act("DELETE", "Stopping…"));
+    this.timer = null;
+    this.last = null;
+    // the page's role arrives over rosbridge (app.js marks it on <body>): re-apply the buttons
+    new MutationObserver(() => this.last && this.render(this.last)).observe(document.body, {
+      attributes: true,
+      attributeFilter: ["data-role"],
+    });
+  }
+
+  start() {
+    this.poll();
+    this.timer = setInterval(() => this.poll(), POLL_MS);
+  }
+
+  say(text, level = "info") {
+    const el = this.$("central-reply");
+    el.textContent = text;
+    el.dataset.level = level;
+  }
+
+  async act(method, pending) {
+    if (this.busy) return;
+    this.busy = true;
+    this.say(pending);
+    try {
+      // Starting a patrol needs the pilot lease (issue 14): the page's rosbridge session holds
+      // it, and REST names the holding's key in X-Pilot-Lease, as app.js's own requests do.
+      const key = this.lease();
+      const headers = key ? { "X-Pilot-Lease": key } : {};
+      const body = method === "POST" ? {} : undefined;
+      const out = await this.api.request(method, "/patrol", body, { headers });
+      this.say(out.reply);
+      this.render(out);
+    } catch (err) {
+      this.say(err instanceof ApiError ? err.message : String(err), "warn");
+    } finally {
+      this.busy = false;
+    }
+  }
+
+  async poll() {
+    try {
+      this.render(await this.api.get("/patrol", { timeoutMs: 3000 }));
+    } catch (err) {
+      if (!(err instanceof ApiError) || err.status !== 0) this.say(err.message, "warn");
+    }
+  }
+
+  /** GET /patrol: {running, mission: {id, state, active, relief, handoffs, coverage}, drones} */
+  render(status) {
+    this.last = status;
+    const m = status.mission;
+    const running = Boolean(status.running && m);
+    // a patrol started elsewhere (voice, REST, another console) opens the panel once
+    if (running && this.root.dataset.running !== "true") this.root.open = true;
+    this.root.dataset.running = String(running);
+    // observers watch (app.js marks the page's role on <body>); the server checks anyway
+    const observer = document.body.dataset.role === "observer";
+    this.$("central-start").disabled = running || observer;
+    this.$("central-stop").disabled = !running || observer;
+    this.$("central-state").textContent = running
+      ? `${m.id}: ${m.state}, ${m.handoffs} handoff${m.handoffs === 1 ? "" : "s"}`
+      : "not running";
+    const cov = running ? m.coverage : null;
+    this.$("central-gap").textContent = cov ? ago(cov.longest_gap_s) : "–";
+    this.$("central-lap").textContent = cov && cov.lap_s !== null ? ago(cov.lap_s) : "–";
+    const wps = this.$("central-waypoints");
+    wps.replaceChildren(
+      ...(cov ? cov.waypoints : []).map((w) => {
+        const li = document.createElement("li");
+        li.dataset.index = String(w.index);
+        li.dataset.visited = String(w.visited);
+        li.textContent = w.visited
+          ? `WP ${w.index + 1}: ${ago(w.since_last_s)} ago`
+          : `WP ${w.index + 1}: not yet`;
+        return li;
+      }),
+    );
+    const drones = this.$("central-drones");
+    drones.replaceChildren(
+      ...status.drones.map((d) => {
+        const li = document.createElement("li");
+        li.dataset.drone = d.name;
+        li.dataset.role = d.role;
+        const bat = d.battery === null ? "–" : `${Math.round(d.battery)} %`;
+        li.textContent = `${d.name}: ${d.role}, battery ${bat}`;
+        return li;
+      }),
+    );
+  }
+}
+
+function boot() {
+  const root = document.getElementById("central");
+  if (!root) return;
+  const token = pageToken();
+  if (!token) return; // the console says why; nothing works without one
+  // The lease is taken by the console (app.js, window.uavConsole) once its rosbridge is up.
+  const lease = () => window.uavConsole?.api?.leaseHolder ?? null;
+  const panel = new CentralPanel(root, new Api("/api/v1", token), lease);
+  window.uavCentral = panel;
+  panel.start();
+}
+
+if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", boot);
+else boot();

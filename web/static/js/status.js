@@ -1,0 +1,144 @@
+// The always-visible status bar (as QGroundControl and Foxglove keep one): selected drone,
+// flight state, battery, link, task with its next step, and the connection. One function names
+// flight states for every panel (status bar, telemetry, map, fleet list), so labels agree.
+//
+// When the connection drops the bar greys out and says since when; after a reconnect the
+// console compares what it knew before with what the server says now and tells the operator
+// what was lost (a task or patrol that no longer runs, a drone that landed or stopped).
+
+import { setLevel, setText } from "./util.js";
+
+// DESIGN §5 / Settings defaults (battery_low_pct 25, battery_critical_pct 12).
+const BATTERY_LOW_PCT = 25;
+const BATTERY_CRITICAL_PCT = 12;
+
+/** ctrl_state names (VehicleSnapshot / ardrone navdata major states) -> operator words. */
+const FLIGHT_WORDS = Object.freeze({
+  DEFAULT: "Unknown",
+  INIT: "Starting",
+  INITED: "Starting",
+  LANDED: "Landed",
+  FLYING: "Flying",
+  HOVERING: "Hovering",
+  TEST: "Test",
+  TAKEOFF: "Taking off",
+  GOTOFIX: "Flying",
+  LANDING: "Landing",
+  LOOPING: "Flying",
+});
+const NAVDATA_STATES = ["DEFAULT", "INIT", "LANDED", "FLYING", "HOVERING", "TEST", "TAKEOFF", "GOTOFIX", "LANDING", "LOOPING"];
+
+/**
+ * The one flight-state label of the console.
+ * @param {string|number|null} ctrl ctrl_state name (REST) or navdata state number
+ * @param {{emergency?: boolean, link?: boolean|null}} flags
+ */
+export function flightLabel(ctrl, { emergency = false, link = null } = {}) {
+  if (emergency) return "Emergency";
+  if (link === false) return "Link lost";
+  const name = typeof ctrl === "number" ? NAVDATA_STATES[ctrl] : String(ctrl || "").toUpperCase();
+  return FLIGHT_WORDS[name] ?? (name ? name.charAt(0) + name.slice(1).toLowerCase() : "–");
+}
+
+export function flightLevel(label) {
+  if (label === "Emergency" || label === "Link lost") return "alert";
+  if (label === "Taking off" || label === "Landing" || label === "Unknown") return "warn";
+  return label === "–" ? "unknown" : "ok";
+}
+
+/** Task text with its next step: "goto · running 40 % — marker 3 · then 2 more". */
+export function taskText(task) {
+  if (!task || !task.name || task.state === "idle") {
+    const queued = Number(task?.queued) || 0;
+    return queued ? `idle · ${queued} queued` : "idle";
+  }
+  let text = `${task.name} · ${task.state || "?"}`;
+  if (Number.isFinite(task.progress) && task.progress > 0 && task.progress < 1) {
+    text += ` ${Math.round(task.progress * 100)} %`;
+  }
+  if (task.detail) text += ` — next: ${task.detail}`;
+  const queued = Number(task.queued) || 0;
+  if (queued) text += ` · then ${queued} more`;
+  return text;
+}
+
+/** What the operator lost while disconnected (sentences; empty when nothing changed). */
+export function lostWhileAway(before, after) {
+  const out = [];
+  if (!before || !after) return out;
+  const was = before.task && before.task.name && before.task.state !== "idle" ? before.task.name : "";
+  const now = after.task && after.task.name && after.task.state !== "idle" ? after.task.name : "";
+  if (was && was !== now) {
+    out.push(`The ${was === "patrol" ? "patrol" : `“${was}” task`} no longer runs${now ? ` (now: ${now})` : ""}.`);
+  }
+  if (before.flight !== after.flight && before.flight && after.flight) {
+    out.push(`The drone went from ${before.flight.toLowerCase()} to ${after.flight.toLowerCase()}.`);
+  }
+  if (before.drone && after.drone && before.drone !== after.drone) {
+    out.push(`Drone ${before.drone} is no longer on this server; now commanding ${after.drone}.`);
+  }
+  return out;
+}
+
+export class StatusBar {
+  constructor(root, now = () => new Date()) {
+    this.$ = (id) => root.querySelector(`#${id}`);
+    this.now = now;
+    this.view = { drone: "", flight: "", battery: null, task: null, link: null };
+    this.staleSince = null;
+  }
+
+  setDrone(name) {
+    this.view.drone = name;
+    setText(this.$("sb-drone-v"), name || "–");
+  }
+
+  setFlight(label) {
+    this.view.flight = label;
+    setText(this.$("sb-flight-v"), label);
+    setLevel(this.$("sb-flight"), flightLevel(label));
+  }
+
+  setBattery(pct) {
+    if (!Number.isFinite(pct)) return;
+    this.view.battery = pct;
+    setText(this.$("sb-battery-v"), `${Math.round(pct)} %`);
+    const level = pct <= BATTERY_CRITICAL_PCT ? "alert" : pct <= BATTERY_LOW_PCT ? "warn" : "ok";
+    setLevel(this.$("sb-battery"), level);
+  }
+
+  setLink(text, level) {
+    this.view.link = text;
+    setText(this.$("sb-link-v"), text);
+    setLevel(this.$("sb-link"), level);
+  }
+
+  setTask(task) {
+    this.view.task = task;
+    setText(this.$("sb-task-v"), taskText(task));
+  }
+
+  /** A copy of what the bar shows (to compare across a reconnection). */
+  snapshot() {
+    return JSON.parse(JSON.stringify(this.view));
+  }
+
+  /** Connection lost: grey everything and say since when. */
+  markStale() {
+    if (this.staleSince) return;
+    this.staleSince = this.now();
+    const bar = this.$("statusbar");
+    bar.dataset.stale = "true";
+    const el = this.$("sb-stale");
+    const t = this.staleSince.toLocaleTimeString([], { hour12: false });
+    el.textContent = `Connection lost since ${t}: values may be out of date`;
+    el.hidden = false;
+  }
+
+  markFresh() {
+    this.staleSince = null;
+    this.$("statusbar").dataset.stale = "false";
+    this.$("sb-stale").hidden = true;
+  }
+}
+

@@ -1,0 +1,304 @@
+// Speaking to the drone from any browser: the recogniser setting (server | browser | auto),
+// push-to-talk (hold the mic button or the M key) or tap-to-toggle, and a hands-free mode.
+//
+// `server`: the microphone (getUserMedia + an AudioWorklet, 16 kHz PCM) is streamed over an
+// authenticated WebSocket to /api/v1/speech/stream, recognised offline on the console's machine
+// (faster-whisper); interim text while speaking; the final text goes down the same dialog path
+// as typed text (onFinal -> /console/utterance with source "speech" and its confidence).
+// `browser`: the Web Speech API (speech.js). `auto`: the browser's recogniser where it exists
+// and the browser is online (it is a cloud service), else the server's.
+
+import { SpeechInput, recognitionClass } from "./speech.js";
+
+export const ENGINES = ["auto", "server", "browser"];
+const HOLD_MS = 350; // a press held longer than this is push-to-talk; shorter toggles
+const STORE_KEY = "uavc.recognizer";
+
+export function chooseEngine(setting, win = window) {
+  if (setting === "server" || setting === "browser") return setting;
+  return recognitionClass(win) && win.navigator.onLine !== false ? "browser" : "server";
+}
+
+export function streamUrl(loc, token, mode, lease) {
+  const proto = loc.protocol === "https:" ? "wss:" : "ws:";
+  const q = new URLSearchParams({ token: token || "", mode, rate: "16000" });
+  if (lease) q.set("lease", lease);
+  return `${proto}//${loc.host}/api/v1/speech/stream?${q}`;
+}
+
+/** The server recogniser: one microphone capture + one WebSocket per listening period. */
+class ServerRecognizer {
+  constructor(opts) {
+    this.opts = opts; // {token, lease(), onInterim, onFinal, onNotice, onState}
+    this.ws = null;
+    this.ctx = null;
+    this.stream = null;
+    this.node = null;
+    this.active = false;
+  }
+
+  async start(mode) {
+    const win = window;
+    if (!win.isSecureContext || !navigator.mediaDevices?.getUserMedia) {
+      this.opts.onNotice(
+        "The microphone needs a secure page: open the console's https:// address (see the URL printed by `uav-console serve`).",
+      );
+      return false;
+    }
+    this.active = true;
+    try {
+      this.stream = await navigator.mediaDevices.getUserMedia({
+        // Whisper copes with noise itself; the browser's echo cancellation, noise suppression
+        // and gain control distort speech (clipping, gating) and cost it accuracy.
+        audio: { channelCount: 1, echoCancellation: false, noiseSuppression: false, autoGainControl: false },
+      });
+      // One AudioContext with the worklet loaded, kept (suspended) between utterances, so a
+      // second press is live at once and its first syllable is not lost.
+      if (!this.ctx || this.ctx.state === "closed") {
+        this.ctx = new AudioContext();
+        await this.ctx.audioWorklet.addModule("/static/js/pcm-worklet.js");
+      }
+      await this.ctx.resume();
+      this.src = this.ctx.createMediaStreamSource(this.stream);
+      if (!this.active) throw new DOMException("stopped before the microphone was live", "AbortError");
+      this.node = new AudioWorkletNode(this.ctx, "pcm-downsampler");
+      this.src.connect(this.node);
+    } catch (err) {
+      this.release();
+      this.active = false;
+      if (err && err.name === "AbortError") return false;
+      const why = err && err.name === "NotAllowedError" ? "permission was refused" : err.message || err;
+      this.opts.onNotice(`The microphone could not start (${why}). Type your command instead.`);
+      return false;
+    }
+    const ws = new WebSocket(streamUrl(window.location, this.opts.token, mode, this.opts.lease()));
+    ws.binaryType = "arraybuffer";
+    this.ws = ws;
+    const pending = [];
+    this.node.port.onmessage = (ev) => {
+      if (ws.readyState === WebSocket.OPEN) ws.send(ev.data);
+      else if (ws.readyState === WebSocket.CONNECTING) pending.push(ev.data);
+    };
+    ws.onopen = () => {
+      for (const buf of pending.splice(0)) ws.send(buf);
+    };
+    ws.onmessage = (ev) => this.onMessage(ev.data);
+    ws.onclose = (ev) => {
+      if (ev.code !== 1000 && ev.code !== 1005 && ev.reason) this.opts.onNotice(`Speech: ${ev.reason}`);
+      if (this.ws === ws) this.ws = null;
+      this.release();
+      this.active = false;
+      this.opts.onState(false);
+    };
+    this.opts.onState(true);
+    return true;
+  }
+
+  onMessage(data) {
+    let msg;
+    try {
+      msg = JSON.parse(data);
+    } catch {
+      return;
+    }
+    if (msg.type === "interim") this.opts.onInterim(msg.text);
+    else if (msg.type === "final") {
+      this.opts.onInterim("");
+      if (msg.text) this.opts.onFinal(msg.text, Number(msg.confidence) || 0);
+      else this.opts.onNotice("I heard no command. Hold the microphone (or M) while you speak.");
+      if (this.mode !== "handsfree" && !this.active && this.ws) this.ws.close(1000, "done");
+    } else if (msg.type === "error") this.opts.onNotice(`Speech: ${msg.error}`);
+  }
+
+  /** Stop capturing; the server decodes what it has and answers with the final text. */
+  stop() {
+    this.active = false;
+    this.release();
+    if (this.ws && this.ws.readyState === WebSocket.OPEN) this.ws.send(JSON.stringify({ type: "end" }));
+    else if (this.ws) this.ws.close(1000, "stopped");
+    this.opts.onState(false);
+  }
+
+  release() {
+    if (this.node) {
+      this.node.port.onmessage = null;
+      this.node.disconnect();
+    }
+    if (this.src) this.src.disconnect();
+    if (this.stream) for (const t of this.stream.getTracks()) t.stop();
+    if (this.ctx && this.ctx.state === "running") this.ctx.suspend().catch(() => {});
+    this.node = this.stream = this.src = null;
+  }
+}
+
+export class VoiceInput {
+  /**
+   * @param {{button: HTMLButtonElement, interim: HTMLElement, engine?: HTMLSelectElement,
+   *          handsfree?: HTMLInputElement, label?: HTMLElement}} els
+   * @param {{token: string, lease: () => (string|null), onFinal: (text: string, c: number) => void,
+   *          onNotice: (text: string) => void}} opts
+   */
+  constructor(els, opts, win = window) {
+    this.els = els;
+    this.opts = opts;
+    this.win = win;
+    // The operator's choice on this device, else the server's setting (serve --recognizer).
+    const stored = win.localStorage?.getItem(STORE_KEY);
+    const served = document.querySelector('meta[name="uavc-recognizer"]')?.content;
+    this.setting = ENGINES.includes(stored) ? stored : ENGINES.includes(served) ? served : "auto";
+    this.browserFailed = false;
+    this.pressedAt = 0;
+    this.listening = false;
+    this.browser = new SpeechInput(
+      { button: document.createElement("button"), interim: els.interim },
+      opts.onFinal,
+      (notice) => {
+        // Chromium builds without Google's service (Debian's) have the API but no backend:
+        // in auto mode, fall back to the server for good.
+        if (this.setting === "auto" && /\(network\)|\(service-not-allowed\)/.test(notice)) {
+          this.browserFailed = true;
+          this.showEngine();
+          opts.onNotice("The browser's speech service is unreachable; using this console's offline recogniser.");
+          return;
+        }
+        opts.onNotice(notice);
+      },
+      win,
+    );
+    const browserState = this.browser.setListening.bind(this.browser);
+    this.browser.setListening = (on) => {
+      browserState(on);
+      if (!on && this.engine === "browser") this.setListening(false, "browser");
+    };
+    this.server = new ServerRecognizer({
+      token: opts.token,
+      lease: opts.lease,
+      onInterim: (t) => {
+        els.interim.textContent = t ? `“${t}…”` : "";
+      },
+      onFinal: opts.onFinal,
+      onNotice: opts.onNotice,
+      onState: (on) => this.setListening(on),
+    });
+    const btn = els.button;
+    btn.addEventListener("pointerdown", (ev) => {
+      if (ev.button === 0) this.press();
+    });
+    btn.addEventListener("pointerup", () => this.release());
+    btn.addEventListener("pointerleave", () => {
+      if (this.pressedAt) this.release();
+    });
+    btn.addEventListener("keydown", (ev) => {
+      if ((ev.key === "Enter" || ev.key === " ") && !ev.repeat) {
+        ev.preventDefault();
+        this.press();
+      }
+    });
+    btn.addEventListener("keyup", (ev) => {
+      if (ev.key === "Enter" || ev.key === " ") this.release();
+    });
+    // The M shortcut (controls.js) calls press(); its release comes here.
+    win.addEventListener("keyup", (ev) => {
+      if (ev.key && ev.key.toLowerCase() === "m") this.release();
+    });
+    if (els.engine) {
+      els.engine.value = this.setting;
+      els.engine.addEventListener("change", () => this.setSetting(els.engine.value));
+    }
+    if (els.handsfree) els.handsfree.addEventListener("change", () => this.onHandsfree());
+    win.addEventListener("online", () => this.showEngine());
+    win.addEventListener("offline", () => this.showEngine());
+    this.showEngine();
+  }
+
+  get engine() {
+    if (this.setting === "auto" && this.browserFailed) return "server";
+    return chooseEngine(this.setting, this.win);
+  }
+
+  setSetting(value) {
+    if (!ENGINES.includes(value)) return;
+    if (this.listening) this.stop();
+    this.setting = value;
+    this.win.localStorage?.setItem(STORE_KEY, value);
+    this.showEngine();
+  }
+
+  /** The page says which recogniser is listening (or would listen). */
+  showEngine() {
+    const engine = this.engine;
+    document.body.dataset.recognizer = engine;
+    if (this.els.label) {
+      this.els.label.textContent =
+        engine === "server" ? "Speech: this console (offline)" : "Speech: the browser's (online)";
+    }
+    if (this.els.handsfree) this.els.handsfree.disabled = engine !== "server";
+    // Over HTTPS with the console's own CA, offer its certificate so a phone can trust it once.
+    const ca = document.getElementById("ca-download");
+    if (ca) ca.hidden = this.win.location.protocol !== "https:";
+  }
+
+  /** Button down or M down: start; a long hold is push-to-talk, a tap toggles. */
+  press() {
+    if (this.listening) {
+      this.pressedAt = 0;
+      this.stop();
+      return;
+    }
+    this.pressedAt = Date.now();
+    this.start("ptt");
+  }
+
+  release() {
+    if (!this.pressedAt) return;
+    const held = Date.now() - this.pressedAt;
+    this.pressedAt = 0;
+    if (held >= HOLD_MS && this.listening) this.stop();
+  }
+
+  toggle() {
+    this.press();
+  }
+
+  start(mode) {
+    if (this.engine === "browser") {
+      this.browser.start();
+      this.setListening(true, "browser");
+      return;
+    }
+    this.server.mode = mode;
+    this.listening = true; // starting: a second press stops; the indicator waits for the mic
+    this.els.interim.textContent = "Starting the microphone…";
+    this.server.start(mode).then((ok) => {
+      if (!ok) this.setListening(false);
+    });
+  }
+
+  stop() {
+    if (this.engine === "browser") this.browser.stop();
+    else this.server.stop();
+    if (this.els.handsfree) this.els.handsfree.checked = false;
+    this.setListening(false);
+  }
+
+  onHandsfree() {
+    if (this.listening) this.stop();
+    if (this.els.handsfree.checked) {
+      this.pressedAt = 0;
+      this.start("handsfree");
+      if (this.els.handsfree) this.els.handsfree.checked = true;
+    }
+  }
+
+  setListening(on, engine = this.engine) {
+    this.listening = on;
+    const b = this.els.button;
+    b.setAttribute("aria-pressed", String(on));
+    b.setAttribute("aria-label", on ? "Stop listening (M)" : "Speak a command: hold, or tap (M)");
+    document.body.dataset.listening = on ? engine : "";
+    if (on && (!this.els.interim.textContent || this.els.interim.textContent.startsWith("Starting"))) {
+      this.els.interim.textContent = engine === "server" ? "Listening (this console)…" : "Listening…";
+    }
+    if (!on && /^(Listening|Starting)/.test(this.els.interim.textContent)) this.els.interim.textContent = "";
+  }
+}
