@@ -1,4 +1,7 @@
-"""Suite-wide ordering: the browser tests run last.
+"""Suite-wide settings: Hypothesis is derandomized, and the browser tests run last.
+
+Hypothesis draws from a fixed seed per test (``derandomize``), so a run that passes passes
+again; a failure it finds is kept as an ``@example`` in the test.
 
 Playwright's sync API keeps its own event loop running in the main thread for as long as its
 session-scoped fixture lives, so no asyncio test (pytest-asyncio) can run after the first
@@ -8,6 +11,10 @@ browser test; running the browser tests last keeps both kinds in one ``pytest`` 
 from __future__ import annotations
 
 import pytest
+from hypothesis import settings
+
+settings.register_profile("uav-console", derandomize=True, print_blob=True)
+settings.load_profile("uav-console")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -21,7 +21,7 @@ from pydantic import BaseModel, Field
 
 from server.api.deps import RoleDep, RuntimeDep, check_lease
 from server.security import Role, token_from
-from server.speech.audio import MAX_REQUEST_S, Samples
+from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
 from server.speech.recognizer import Recognition, speech_span
 from server.speech.service import SpeechService
@@ -333,6 +333,11 @@ class _Stream:
                 await self._send({"type": "error", "error": str(exc)})
                 continue
             msg: dict[str, Any] = {"type": "final", **rec.as_json()}
+            log.info(
+                "speech final %r (heard %r, confidence %.2f) from %.1f s of audio",
+                msg.get("text"), msg.get("heard"), float(msg.get("confidence") or 0.0),
+                len(samples) / SAMPLE_RATE,
+            )  # fmt: skip
             await self._send(msg)
 
     async def _send(self, msg: dict[str, Any]) -> None:

@@ -38,6 +38,9 @@ from server.recorder.errors import CorruptRecording
 from server.ros1 import Ros1Error
 
 MAGIC = b"\x89MCAP0\r\n"  # MCAP spec, "Magic"
+# The writer cuts chunks at 1 MiB (a camera frame larger than that gets a chunk of its own);
+# a chunk that claims more than this uncompressed is damage, not data.
+MAX_CHUNK_BYTES = 256 << 20
 PROFILE = ""  # ros1 channels plus JSON ones for types without a definition: no single profile
 LIBRARY = f"uav-console {__version__} (mcap)"
 
@@ -284,6 +287,7 @@ def _parse(path: Path, data: mmap.mmap, size: int) -> Recording:
             struct.error,
             ValueError,
             KeyError,
+            OverflowError,
         ) as exc:
             raise CorruptRecording(
                 name, pos, f"{_opcode_name(opcode)} record does not parse ({exc})"
@@ -317,6 +321,12 @@ def _record(
         Header.read(stream)
     elif opcode == Opcode.CHUNK:
         chunk = Chunk.read(stream)
+        if chunk.uncompressed_size > MAX_CHUNK_BYTES:
+            # A flipped length would have zstd allocate it (or overflow a C size) first.
+            raise ValueError(
+                f"chunk claims {chunk.uncompressed_size} bytes uncompressed "
+                f"(over the {MAX_CHUNK_BYTES >> 20} MiB this reader accepts)"
+            )
         for inner in breakup_chunk(chunk, validate_crc=True):
             _inner(rec, schemas, inner)
     elif opcode == Opcode.MESSAGE:

@@ -278,6 +278,12 @@ class VehicleCentral:
         stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
         rt.drones[name] = stack
         rt.dialogs[name] = RemoteDialog(stack)
+        # Listings (REST, fleet status, the console's selector) follow the names, not the
+        # order in which the vehicles joined.
+        for table in (rt.drones, rt.dialogs):
+            ordered = sorted(table.items(), key=lambda kv: names.drone_order(kv[0]))
+            table.clear()
+            table.update(ordered)
         log.info("vehicle %s registered (prefix %r)", name, prefix)
 
     def discover(self) -> None:

@@ -35,3 +35,11 @@ def telemetry_topic(name: str) -> str:
 
 def control_service(name: str) -> str:
     return f"/{name}/vehicle/control"
+
+
+def drone_order(name: str) -> tuple[str, int, str]:
+    """Sort key that lists drones as people count them: uav2 before uav10, whatever order
+    their vehicle processes happened to join in."""
+    stem = name.rstrip("0123456789")
+    digits = name[len(stem) :]
+    return (stem, int(digits) if digits else -1, name)

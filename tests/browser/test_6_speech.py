@@ -49,6 +49,13 @@ class TlsServer:
     def truth(self) -> dict[str, Any]:
         return dict(self.http.get("/api/v1/sim/uav1/truth").json())
 
+    def why(self, page: Any) -> str:
+        """What a failure needs to be understood: the page's dialog and notice line, and the
+        server's last log lines."""
+        log = (self.data / "server.log").read_text(errors="replace").splitlines()[-40:]
+        dialog, interim = page.inner_text("#dialog"), page.inner_text("#interim")
+        return "\n".join([f"dialog: {dialog!r}", f"interim: {interim!r}", *log])
+
     def spki_hash(self) -> str:
         cert = x509.load_pem_x509_certificate((self.data / "tls" / "server.pem").read_bytes())
         spki = cert.public_key().public_bytes(
@@ -164,7 +171,7 @@ def test_holding_the_microphone_in_server_mode_makes_the_drone_take_off(
     )
     try:
         ok, last, _ = wait_until(tls_server.truth, lambda t: t["flying"] and t["z"] > 0.5, 30.0)
-        assert ok, (last, page.inner_text("#dialog"), errors)
+        assert ok, (last, errors, tls_server.why(page))
         dialog = page.inner_text("#dialog").lower()
         assert "take off" in dialog
         assert errors == []
@@ -182,11 +189,14 @@ def test_phone_over_https_has_a_working_microphone(
     )
     try:
         # The phone's utterance reaches the dialog as speech, recognised on the server.
-        page.wait_for_function(
-            "[...document.querySelectorAll('#dialog .msg-user')]"
-            ".some(e => /spoken/.test(e.textContent) && /takeoff/.test(e.textContent))",
-            timeout=60_000,
-        )
+        try:
+            page.wait_for_function(
+                "[...document.querySelectorAll('#dialog .msg-user')]"
+                ".some(e => /spoken/.test(e.textContent) && /takeoff/.test(e.textContent))",
+                timeout=60_000,
+            )
+        except Exception as exc:
+            raise AssertionError(tls_server.why(page)) from exc
         # Hands-free can be switched on and off on the phone (its VAD path is tested over
         # WSS in tests/speech/test_server.py).
         page.check("#handsfree")

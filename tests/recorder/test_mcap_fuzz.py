@@ -57,3 +57,22 @@ def test_cut_and_flipped_recordings(
             at = data.draw(st.integers(0, len(blob) - 1))
             blob[at] ^= data.draw(st.integers(1, 255))
     _read(tmp_path, bytes(blob), strict)
+
+
+def test_a_chunk_claiming_an_absurd_size_is_corrupt_not_a_crash(
+    tmp_path: Path, valid: bytes
+) -> None:
+    """Found by Hypothesis: a flipped byte in a chunk's uncompressed size (≥ 2^63) made
+    zstandard raise OverflowError out of the reader."""
+    at = 8  # walk the records (opcode u8, length u64, body) to the first chunk (0x06)
+    while valid[at] != 0x06:
+        at += 9 + int.from_bytes(valid[at + 1 : at + 9], "little")
+    size_at = at + 1 + 8 + 16  # message start and end times (u64 each), then uncompressed size
+    for claimed in (2**63 + 444, 300 << 20):
+        blob = bytearray(valid)
+        blob[size_at : size_at + 8] = claimed.to_bytes(8, "little")
+        path = tmp_path / "big.mcap"
+        path.write_bytes(bytes(blob))
+        with pytest.raises(CorruptRecording, match="uncompressed") as info:
+            read_recording(path, strict=False)
+        assert info.value.offset == at

@@ -13,6 +13,9 @@ import { SpeechInput, recognitionClass } from "./speech.js";
 export const ENGINES = ["auto", "server", "browser"];
 const HOLD_MS = 350; // a press held longer than this is push-to-talk; shorter toggles
 const STORE_KEY = "uavc.recognizer";
+// After "end" the server answers within its decode time (~1 s here, seconds on a busy
+// laptop); past this the operator is told to repeat instead of waiting on silence.
+const ANSWER_TIMEOUT_MS = 20000;
 
 export function chooseEngine(setting, win = window) {
   if (setting === "server" || setting === "browser") return setting;
@@ -71,6 +74,7 @@ class ServerRecognizer {
       this.opts.onNotice(`The microphone could not start (${why}). Type your command instead.`);
       return false;
     }
+    this.awaiting = this.endOnOpen = false;
     const ws = new WebSocket(streamUrl(window.location, this.opts.token, mode, this.opts.lease()));
     ws.binaryType = "arraybuffer";
     this.ws = ws;
@@ -81,10 +85,18 @@ class ServerRecognizer {
     };
     ws.onopen = () => {
       for (const buf of pending.splice(0)) ws.send(buf);
+      // Released while the socket was still connecting (a slow TLS handshake, a busy
+      // server): the captured audio went out above; now ask for its final text.
+      if (this.endOnOpen) this.finish(ws);
     };
     ws.onmessage = (ev) => this.onMessage(ev.data);
     ws.onclose = (ev) => {
+      clearTimeout(this.answerTimer);
       if (ev.code !== 1000 && ev.code !== 1005 && ev.reason) this.opts.onNotice(`Speech: ${ev.reason}`);
+      else if (this.awaiting && this.ws === ws) {
+        this.opts.onNotice("The speech connection closed before an answer. Please repeat, or type the command.");
+      }
+      this.awaiting = this.endOnOpen = false;
       if (this.ws === ws) this.ws = null;
       this.release();
       this.active = false;
@@ -103,6 +115,8 @@ class ServerRecognizer {
     }
     if (msg.type === "interim") this.opts.onInterim(msg.text);
     else if (msg.type === "final") {
+      clearTimeout(this.answerTimer);
+      this.awaiting = false;
       this.opts.onInterim("");
       if (msg.text) this.opts.onFinal(msg.text, Number(msg.confidence) || 0);
       else this.opts.onNotice("I heard no command. Hold the microphone (or M) while you speak.");
@@ -114,9 +128,25 @@ class ServerRecognizer {
   stop() {
     this.active = false;
     this.release();
-    if (this.ws && this.ws.readyState === WebSocket.OPEN) this.ws.send(JSON.stringify({ type: "end" }));
-    else if (this.ws) this.ws.close(1000, "stopped");
+    const ws = this.ws;
+    if (ws && ws.readyState === WebSocket.OPEN) this.finish(ws);
+    else if (ws && ws.readyState === WebSocket.CONNECTING) this.endOnOpen = true;
+    else if (ws) ws.close(1000, "stopped");
     this.opts.onState(false);
+  }
+
+  /** Ask for the final text of what was sent, and say so if none comes. */
+  finish(ws) {
+    this.endOnOpen = false;
+    this.awaiting = true;
+    ws.send(JSON.stringify({ type: "end" }));
+    clearTimeout(this.answerTimer);
+    this.answerTimer = setTimeout(() => {
+      if (this.ws !== ws || !this.awaiting) return;
+      this.awaiting = false;
+      this.opts.onNotice("Speech recognition did not answer in time. Please repeat, or type the command.");
+      ws.close(1000, "no answer");
+    }, ANSWER_TIMEOUT_MS);
   }
 
   release() {
