@@ -73,6 +73,12 @@ NO_SPEECH = """
 """
 
 
+def type_command(page: Any, text: str) -> None:
+    """Type a command into the console's text box and send it."""
+    page.fill("#text-input", text)
+    page.press("#text-input", "Enter")
+
+
 def position(truth: dict[str, Any]) -> tuple[float, float, float]:
     """(x, y, z) in metres from a /sim/{id}/truth body (flat or nested under ``position``)."""
     src = truth.get("position", truth)

@@ -25,7 +25,7 @@ from tests.browser.conftest import (
     _server,
     open_console,
 )
-from tests.browser.helpers import is_flying, position, wait_until
+from tests.browser.helpers import is_flying, position, type_command, wait_until
 
 pytestmark = pytest.mark.browser
 
@@ -84,11 +84,6 @@ def audit_rows(srv: ServerProcess) -> list[Any]:
         return list(log.recent(200, drone="uav1"))
     finally:
         log.close()
-
-
-def type_command(page: Any, text: str) -> None:
-    page.fill("#text-input", text)
-    page.press("#text-input", "Enter")
 
 
 # ---- 1, 3: Esc closes, Shift+Esc stops; shortcuts disarmed by default and audited ----------
@@ -244,50 +239,57 @@ def test_help_and_did_you_mean(pilot: ConsolePage) -> None:
 
 
 # ---- 2, 9: the stop in one place at every size; the phone layout -----------------------------
-@pytest.mark.parametrize("name", list(SIZES))
-def test_stop_stays_put_and_visible_at_every_size(
-    browser: Any, srv: ServerProcess, name: str
-) -> None:
-    w, h = SIZES[name]
+def test_stop_stays_put_and_visible_at_every_size(browser: Any, srv: ServerProcess) -> None:
+    """One page resized through every size (the layout is CSS media queries on the viewport,
+    as when a tablet or phone is turned), checked at each."""
+    w, h = SIZES["desktop"]
     ctx, cp = open_console(browser, srv.url(), viewport={"width": w, "height": h})
     try:
         page = cp.page
         page.wait_for_timeout(1500)  # telemetry, map and voice check settle
-        rect = """(() => { const r = document.getElementById('btn-emergency')
-            .getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; })()"""
-        before = page.evaluate(rect)
-        x, y, bw, bh = before
-        assert x >= 0 and y >= 0 and x + bw <= w and y + bh <= h, before
-        assert bw >= 44 and bh >= 44
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(SCREENSHOTS / f"size-{name}.png"))
-        # The dialog grows; the page scrolls to its end: the stop does not move.
-        page.evaluate(
-            """() => { for (let i = 0; i < 40; i++)
-                uavConsole.dialog.onReply({text: `Reply ${i}`, level: 'info', speak: false}); }"""
-        )
-        page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
-        page.wait_for_timeout(200)
-        assert page.evaluate(rect) == before
-        # The command box and the state are on screen too (a phone held landscape hid them).
-        for sel in ("#text-input", "#sb-flight"):
-            box = page.locator(sel).bounding_box()
-            assert box is not None and box["y"] >= 0 and box["y"] + box["height"] <= h, (sel, box)
-        # No state label is cut at any size.
-        cut = page.evaluate(
-            """[...document.querySelectorAll('.sb-value, .metric-value')]
-                .filter(e => e.offsetParent && e.scrollWidth > e.clientWidth + 1).map(e => e.id)"""
-        )
-        assert cut == []
-        # The stop is the topmost element at its centre (nothing covers it).
-        top = page.evaluate(
-            f"""document.elementFromPoint({x + bw / 2}, {y + bh / 2})
-                ?.closest('#btn-emergency') !== null"""
-        )
-        assert top
+        for name, (w, h) in SIZES.items():
+            page.set_viewport_size({"width": w, "height": h})
+            page.evaluate("window.scrollTo(0, 0)")
+            page.wait_for_timeout(300)
+            _check_the_stop_at(page, name, w, h)
         assert cp.console_errors() == []
     finally:
         ctx.close()
+
+
+def _check_the_stop_at(page: Any, name: str, w: int, h: int) -> None:
+    rect = """(() => { const r = document.getElementById('btn-emergency')
+        .getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; })()"""
+    before = page.evaluate(rect)
+    x, y, bw, bh = before
+    assert x >= 0 and y >= 0 and x + bw <= w and y + bh <= h, (name, before)
+    assert bw >= 44 and bh >= 44, (name, before)
+    page.screenshot(path=str(SCREENSHOTS / f"size-{name}.png"))
+    # The dialog grows; the page scrolls to its end: the stop does not move.
+    page.evaluate(
+        """() => { for (let i = 0; i < 40; i++)
+            uavConsole.dialog.onReply({text: `Reply ${i}`, level: 'info', speak: false}); }"""
+    )
+    page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
+    page.wait_for_timeout(200)
+    assert page.evaluate(rect) == before, name
+    # The command box and the state are on screen too (a phone held landscape hid them).
+    for sel in ("#text-input", "#sb-flight"):
+        box = page.locator(sel).bounding_box()
+        assert box is not None and box["y"] >= 0 and box["y"] + box["height"] <= h, (name, sel, box)
+    # No state label is cut at any size.
+    cut = page.evaluate(
+        """[...document.querySelectorAll('.sb-value, .metric-value')]
+            .filter(e => e.offsetParent && e.scrollWidth > e.clientWidth + 1).map(e => e.id)"""
+    )
+    assert cut == [], name
+    # The stop is the topmost element at its centre (nothing covers it).
+    top = page.evaluate(
+        f"""document.elementFromPoint({x + bw / 2}, {y + bh / 2})
+            ?.closest('#btn-emergency') !== null"""
+    )
+    assert top, name
 
 
 def test_phone_upright_layout(browser: Any, srv: ServerProcess) -> None:
@@ -334,18 +336,12 @@ def test_phone_upright_layout(browser: Any, srv: ServerProcess) -> None:
 
 
 # ---- 10: accessibility --------------------------------------------------------------------------
-@pytest.mark.parametrize(
-    ("scheme", "size"), [("light", "desktop"), ("dark", "desktop"), ("light", "phone")]
-)
-def test_axe_finds_no_serious_or_critical_violation(
-    browser: Any, srv: ServerProcess, scheme: str, size: str
-) -> None:
+def test_axe_finds_no_serious_or_critical_violation(browser: Any, srv: ServerProcess) -> None:
+    """axe-core on one page in light and dark at desktop size, then light on a phone."""
     if not AXE.exists():
         pytest.fail(f"{AXE} is missing: make node-deps (npm ci in tests/node)")
-    w, h = SIZES[size]
-    ctx, cp = open_console(
-        browser, srv.url(), viewport={"width": w, "height": h}, color_scheme=scheme
-    )
+    w, h = SIZES["desktop"]
+    ctx, cp = open_console(browser, srv.url(), viewport={"width": w, "height": h})
     try:
         page = cp.page
         page.wait_for_timeout(1500)
@@ -357,13 +353,18 @@ def test_axe_finds_no_serious_or_critical_violation(
         # Evaluated over the DevTools protocol, not as an inline <script>: a page whose CSP
         # forbids inline scripts is checked as it is served.
         page.evaluate(AXE.read_text() + "\n;undefined")
-        result = page.evaluate("axe.run(document, {resultTypes: ['violations']})")
-        bad = [
-            f"{v['id']} ({v['impact']}): {[n['target'] for n in v['nodes']][:4]}"
-            for v in result["violations"]
-            if v["impact"] in ("serious", "critical")
-        ]
-        assert bad == []
+        for scheme, size in (("light", "desktop"), ("dark", "desktop"), ("light", "phone")):
+            w, h = SIZES[size]
+            page.set_viewport_size({"width": w, "height": h})
+            page.emulate_media(color_scheme=scheme)
+            page.wait_for_timeout(300)  # transitions of the theme's colours end
+            result = page.evaluate("axe.run(document, {resultTypes: ['violations']})")
+            bad = [
+                f"{v['id']} ({v['impact']}): {[n['target'] for n in v['nodes']][:4]}"
+                for v in result["violations"]
+                if v["impact"] in ("serious", "critical")
+            ]
+            assert bad == [], (scheme, size)
     finally:
         ctx.close()
 
@@ -407,47 +408,6 @@ def test_status_bar_and_labels_agree(pilot: ConsolePage, srv: ServerProcess) -> 
 
 
 # ---- 5: stale data greys out; after a reconnect the console says what was lost ------------------
-@pytest.fixture
-def restartable(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    yield from _server(tmp_path_factory, "uavc-pressure-restart", "127.0.18.30")
-
-
-def test_stale_status_and_what_was_lost_after_a_reconnect(
-    browser: Any, restartable: ServerProcess
-) -> None:
-    srv = restartable
-    ctx, cp = open_console(browser, srv.url())
-    try:
-        page = cp.page
-        page.wait_for_function("uavConsole.haveLease === true", timeout=10_000)
-        page.click("#btn-takeoff")
-        ok, truth, _ = wait_until(srv.truth, lambda t: position(t)[2] > 0.5, timeout_s=20)
-        assert ok, truth
-        type_command(page, "patrol markers 0 and 1")
-        page.wait_for_function(
-            "document.getElementById('sb-task-v').textContent.startsWith('patrol')",
-            timeout=10_000,
-        )
-        srv.stop()
-        page.wait_for_selector("#statusbar[data-stale='true']", timeout=10_000)
-        assert "since" in (page.text_content("#sb-stale") or "")
-        srv.start()  # a fresh server: the drone is on the ground, no patrol
-        page.wait_for_selector("#statusbar[data-stale='false']", timeout=30_000)
-        page.wait_for_function(
-            """[...document.querySelectorAll('#dialog .msg-system')]
-                .some(e => e.textContent.includes('While disconnected'))""",
-            timeout=10_000,
-        )
-        said = page.evaluate(
-            """[...document.querySelectorAll('#dialog .msg-system')]
-                .map(e => e.textContent).filter(t => t.includes('While disconnected')).pop()"""
-        )
-        assert "patrol no longer runs" in said, said
-        assert page.is_hidden("#sb-stale")
-    finally:
-        ctx.close()
-
-
 def test_page_logic_of_the_status_bar(pilot: ConsolePage) -> None:
     """One label per flight state; the task with its next step; what a reconnection lost."""
     out = pilot.page.evaluate(
