@@ -478,10 +478,11 @@ def _mavlink_target() -> Target:
 
 
 def _wav_target() -> Target:
-    """Speech input (``server.speech.audio``): the first byte picks a WAV body for REST
-    ``POST /api/v1/speech`` (``read_wav``, documented errors: ``AudioError``) or PCM frames of
-    the browser stream (``pcm16_to_float`` through a push-to-talk ``StreamSession``: never
-    raises)."""
+    """Speech input (``server.speech``): the first byte picks a WAV body for REST
+    ``POST /api/v1/speech`` (``audio.read_wav``, documented errors: ``AudioError``), PCM
+    frames of the browser stream (``audio.pcm16_to_float`` through a push-to-talk
+    ``StreamSession``: never raises) or one of the stream's text frames
+    (``stream.control_kind``: never raises)."""
     import io
     import wave
 
@@ -489,7 +490,7 @@ def _wav_target() -> Target:
 
     from server.speech.audio import read_wav, to_wav
     from server.speech.errors import AudioError
-    from server.speech.stream import StreamSession
+    from server.speech.stream import StreamSession, control_kind
 
     t = np.arange(160) / 16_000
     tone = (0.5 * np.sin(2 * np.pi * 440.0 * t)).astype(np.float32)
@@ -502,15 +503,18 @@ def _wav_target() -> Target:
     wavs = [to_wav(tone), to_wav(tone[:80], 8000), to_wav(tone, 48_000), buf.getvalue()]
     pcm = (tone * 20000).astype("<i2").tobytes()
     seeds = [b"\x00" + w for w in wavs] + [b"\x01" + pcm, b"\x01" + pcm[:33]]
+    seeds += [b'\x02{"type": "end"}', b'\x02{"type":"cancel"}']
 
     def run(data: bytes) -> object:
-        if not data or data[0] % 2 == 0:
+        if not data or data[0] % 3 == 0:
             return read_wav(data[1:])
+        if data[0] % 3 == 2:
+            return control_kind(data[1:].decode("utf-8", "replace"))
         session = StreamSession("ptt", interim_step_s=0.004)
         half = len(data) // 2
         return session.feed(data[1:half]) + session.feed(data[half:]) + session.end()
 
-    return Target("WAV / PCM", seeds, run, (AudioError,))
+    return Target("WAV / PCM / text", seeds, run, (AudioError,))
 
 
 def _mcap_target(workdir: Path) -> Target:
