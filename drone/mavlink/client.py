@@ -23,6 +23,11 @@ What it does (mavlink.io "Microservices"):
 * **Link watchdog**: no heartbeat from the vehicle for ``link_timeout_s`` (1.5 s) →
   :class:`LinkLost` naming the autopilot's own failsafe (PX4: NAV_DLL_ACT after COM_DL_LOSS_T;
   ArduPilot: FS_GCS_ENABLE), read from the vehicle's parameters when it answered.
+* **Plausibility**: a frame that decodes is still the vehicle's word only: a position,
+  attitude, home or parameter value that is NaN or infinite, or a latitude/longitude off the
+  globe, is dropped whole and counted (``codec.rejected["implausible"]``), so telemetry and
+  the snapshot the fleet reads hold finite numbers; an unknown enum value (a MISSION_ACK
+  result this dialect does not name) is reported by its number.
 
 Use: ``receive(data, now)``; ``tick(now)`` every 10–50 ms; ``data_to_send()``; ``events()``.
 """
@@ -64,6 +69,39 @@ _LANDED = {
     mav.MAV_LANDED_STATE_LANDING: "LANDING",
 }
 AUTOPILOTS = {mav.MAV_AUTOPILOT_PX4: "PX4", mav.MAV_AUTOPILOT_ARDUPILOTMEGA: "ArduPilot"}
+_MISSION_RESULTS = {
+    k: v.name.removeprefix("MAV_MISSION_") for k, v in mav.enums["MAV_MISSION_RESULT"].items()
+}
+# The float fields the telemetry (or the failsafe text) takes from each message. None of them
+# has a "NaN means unknown" meaning in the MAVLink definitions, so a non-finite value is damage
+# or forgery, and the message is dropped (see "Plausibility" in the module docstring).
+_FLOAT_FIELDS = {
+    "LOCAL_POSITION_NED": ("x", "y", "z", "vx", "vy", "vz"),
+    "ATTITUDE": ("roll", "pitch", "yaw"),
+    "HOME_POSITION": ("x", "y", "z"),
+    "PARAM_VALUE": ("param_value",),
+}
+# The degE7 latitude/longitude fields of each message: on the globe or dropped.
+_LAT_LON_FIELDS = {
+    "GLOBAL_POSITION_INT": ("lat", "lon"),
+    "HOME_POSITION": ("latitude", "longitude"),
+}
+
+
+def implausible(msg: Message) -> str | None:
+    """Why a decoded message cannot be telemetry (a non-finite value, a point off the globe),
+    or None when it can."""
+    kind = msg.get_type()
+    for name in _FLOAT_FIELDS.get(kind, ()):
+        value = getattr(msg, name)
+        if not math.isfinite(value):
+            return f"{kind}.{name} is {value}"
+    lat_lon = _LAT_LON_FIELDS.get(kind)
+    if lat_lon is not None:
+        lat, lon = (getattr(msg, name) for name in lat_lon)
+        if not (-90e7 <= lat <= 90e7 and -180e7 <= lon <= 180e7):
+            return f"{kind} at {lat / 1e7}°, {lon / 1e7}° is off the globe"
+    return None
 
 
 def command_name(command: int) -> str:
@@ -296,6 +334,9 @@ class GcsProtocol:
                     self._events.append(LinkRestored())
             return
         if t.system_id == 0 or src != t.system_id:
+            return
+        if implausible(msg) is not None:
+            self.codec.rejected["implausible"] += 1
             return
         t = replace(t, last_message_t=now)
         if kind == "GLOBAL_POSITION_INT":
@@ -810,7 +851,7 @@ class GcsProtocol:
         if up is None:
             return
         self._upload = None
-        name = mav.enums["MAV_MISSION_RESULT"][msg.type].name.removeprefix("MAV_MISSION_")
+        name = _MISSION_RESULTS.get(msg.type, f"result {msg.type}")
         ok = msg.type == mav.MAV_MISSION_ACCEPTED
         recent = [st.text for t, st in self._texts if self._now - t <= 1.0]
         detail = name if ok or not recent else f"{name}: {recent[-1]}"

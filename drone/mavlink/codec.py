@@ -10,8 +10,12 @@ counted by reason in ``rejected`` and never raise:
   and ArduPilot do on any link after the first MAVLink 2 frame (MAVLink docs "MAVLink 2 —
   Version handshaking");
 * ``bad_signature`` — a signed link (``signing_key``) got a frame with a wrong or missing
-  signature (MAVLink docs "Message Signing"; pymavlink checks the SHA-256 signature and the
-  timestamp).
+  signature, or a replayed one (MAVLink docs "Message Signing": the SHA-256 signature, then
+  the timestamp against the last one of its (link id, system, component) stream). The
+  signature is checked *first*, as the MAVLink C library's ``mavlink_signature_check`` does:
+  pymavlink 2.4.50 stores a frame's timestamp before it looks at the signature, so one forged
+  frame with a far-future timestamp made every genuine frame after it "old" and silenced a
+  signed link for good (:func:`_check_signature` replaces its check).
 
 The dialect is ArduPilot's ``ardupilotmega`` (a superset of ``common``), so an ArduPilot
 vehicle's own messages decode too.
@@ -20,6 +24,9 @@ vehicle's own messages decode too.
 from __future__ import annotations
 
 import collections
+import hashlib
+import hmac
+import struct
 from collections.abc import Callable
 from typing import Any, TypeAlias
 
@@ -30,6 +37,28 @@ __all__ = ["MAGIC_V2", "Codec", "Message", "mav"]
 # pymavlink ships no type information: a decoded message is typed Any here.
 Message: TypeAlias = Any
 MAGIC_V2 = 0xFD  # MAVLink 2 start-of-frame (mavlink.io "Packet Serialization")
+NEW_STREAM_WINDOW = 6_000_000  # 60 s in 10 µs units: how far behind a new stream may start
+_TIMESTAMP = struct.Struct("<IH")  # the signature block's 48-bit timestamp
+
+
+def _check_signature(signing: Any, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+    """Whether a signed frame is genuine and new: the signature first, then the timestamp,
+    and only a genuine frame moves its stream's timestamp (MAVLink C library,
+    ``mavlink_signature_check``; see the module docstring)."""
+    digest = hashlib.sha256(signing.secret_key + bytes(msgbuf[:-6])).digest()[:6]
+    if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
+        return False
+    low, high = _TIMESTAMP.unpack(bytes(msgbuf[-12:-6]))
+    timestamp = low + (high << 32)
+    stream = (msgbuf[-13], src_system, src_component)  # (link id, system, component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None and timestamp <= last:
+        return False  # a replay, or older than what this stream already sent
+    if last is None and timestamp + NEW_STREAM_WINDOW < signing.timestamp:
+        return False  # a new stream starting more than a minute in the past
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True
 
 
 class Codec:
@@ -74,6 +103,12 @@ class Codec:
                 return bool(allow(msg_id)) if allow is not None else False
 
             self.mav.signing.allow_unsigned_callback = _allow
+            signing = self.mav.signing
+
+            def _check(msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+                return _check_signature(signing, msgbuf, src_system, src_component)
+
+            self.mav.check_signature = _check
 
     def feed(self, data: bytes) -> list[Message]:
         """Parse ``data`` (any split of the stream); returns the accepted MAVLink 2 messages."""

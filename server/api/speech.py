@@ -25,7 +25,7 @@ from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
 from server.speech.recognizer import Recognition, speech_span
 from server.speech.service import SpeechService
-from server.speech.stream import MODES, Final, Interim, Problem, StreamSession
+from server.speech.stream import MODES, Final, Interim, Problem, StreamSession, control_kind
 
 log = logging.getLogger("uav_console.speech")
 router = APIRouter(tags=["speech"])
@@ -272,10 +272,7 @@ class _Stream:
                 else:
                     events = self.session.feed(data)
             elif text is not None:
-                try:
-                    kind = json.loads(text).get("type")
-                except (ValueError, AttributeError):
-                    kind = None
+                kind = control_kind(text)
                 if kind == "end":
                     events = self.session.end()
                     if not events:

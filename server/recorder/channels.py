@@ -43,7 +43,11 @@ def _json_encode(msg: dict[str, Any]) -> bytes:
 
 
 def _json_decode(data: bytes) -> dict[str, Any]:
-    value = json.loads(data)
+    """One JSON message read back from a file (raises ``ValueError`` for anything else)."""
+    try:
+        value = json.loads(data)
+    except RecursionError as exc:  # [[[[… deeper than the interpreter's stack
+        raise ValueError("a JSON message nested too deeply") from exc
     if not isinstance(value, dict):
         raise ValueError("a JSON message must be an object")
     return value

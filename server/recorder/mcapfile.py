@@ -15,6 +15,7 @@ offset. Chunks are decompressed and their CRC checked (``mcap.stream_reader.brea
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import mmap
 import os
@@ -204,14 +205,25 @@ class Recording:
         """(channel, log time ns, graph message) of every message, in file order.
 
         Raises:
-            CorruptRecording: a message does not decode (its record's offset is not kept, so
-                the error names the message's index instead).
+            CorruptRecording: a message does not decode, or its channel has an encoding or a
+                ROS 1 definition this version cannot read (the record's offset is not kept,
+                so the error names the message's index instead).
         """
-        decoders = self.decoders()
+        # A channel's decoder is made at its first message: a channel nothing was recorded on
+        # does not stop a replay, whatever its schema says.
+        decoders: dict[int, Callable[[bytes], dict[str, Any]]] = {}
         for n, m in enumerate(self.messages):
             channel = self.channels[m.channel]
             try:
-                msg = decoders[m.channel](m.data)
+                decode = decoders.get(m.channel)
+                if decode is None:
+                    decode = decoders[m.channel] = decoder_for(
+                        channel.type,
+                        channel.schema_encoding,
+                        channel.schema_data,
+                        channel.message_encoding,
+                    )
+                msg = decode(m.data)
             except (Ros1Error, ValueError) as exc:
                 raise CorruptRecording(
                     str(self.path), self.good_until, f"message {n} on {channel.topic}: {exc}"
@@ -320,14 +332,7 @@ def _record(
     if opcode == Opcode.HEADER:
         Header.read(stream)
     elif opcode == Opcode.CHUNK:
-        chunk = Chunk.read(stream)
-        if chunk.uncompressed_size > MAX_CHUNK_BYTES:
-            # A flipped length would have zstd allocate it (or overflow a C size) first.
-            raise ValueError(
-                f"chunk claims {chunk.uncompressed_size} bytes uncompressed "
-                f"(over the {MAX_CHUNK_BYTES >> 20} MiB this reader accepts)"
-            )
-        for inner in breakup_chunk(chunk, validate_crc=True):
+        for inner in breakup_chunk(_uncompressed(Chunk.read(stream)), validate_crc=True):
             _inner(rec, schemas, inner)
     elif opcode == Opcode.MESSAGE:
         _inner(rec, schemas, Message.read(stream, length))
@@ -340,6 +345,48 @@ def _record(
         rec.metadata[meta.name] = dict(meta.metadata)
     # indexes, statistics, summary offsets, attachments, data end: nothing to take in
     return False
+
+
+def _uncompressed(chunk: Chunk) -> Chunk:
+    """``chunk`` with its records decompressed, never into more memory than it claims.
+
+    ``mcap``'s own ``breakup_chunk`` trusts the sizes: zstd allocates what the frame header
+    says (a flipped byte there asked for exabytes: MemoryError), and lz4 has no bound at all.
+    Here the chunk's ``uncompressed_size`` must be at most ``MAX_CHUNK_BYTES``, a zstd frame
+    must declare that size (or none), and neither codec may produce more.
+
+    Raises:
+        ValueError: sizes that disagree, an unknown compression, or lz4 data that does not
+            decompress (zstd's own errors are ``zstandard.ZstdError``).
+    """
+    size = chunk.uncompressed_size
+    if size > MAX_CHUNK_BYTES:
+        raise ValueError(
+            f"chunk claims {size} bytes uncompressed "
+            f"(over the {MAX_CHUNK_BYTES >> 20} MiB this reader accepts)"
+        )
+    if chunk.compression == "zstd":
+        declared = zstandard.frame_content_size(chunk.data)
+        if declared not in (-1, size):  # -1: the frame does not say
+            raise ValueError(f"zstd frame declares {declared} bytes, the chunk {size}")
+        data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=size)
+    elif chunk.compression == "lz4":
+        import lz4.frame  # mcap's own dependency; only other tools write lz4 chunks
+
+        lz4_frame = lz4.frame.LZ4FrameDecompressor()
+        try:
+            data = lz4_frame.decompress(chunk.data, max_length=size)
+        except RuntimeError as exc:  # lz4's error for data that is not an lz4 frame
+            raise ValueError(f"lz4: {exc}") from exc
+        if not lz4_frame.eof:
+            raise ValueError(f"lz4 frame does not end within the {size} bytes the chunk claims")
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        raise ValueError(f"unknown chunk compression {chunk.compression!r}")
+    if len(data) != size:
+        raise ValueError(f"chunk decompresses to {len(data)} bytes, not the {size} it claims")
+    return dataclasses.replace(chunk, compression="", data=data)
 
 
 def _inner(rec: Recording, schemas: dict[int, Schema], record: Any) -> None:

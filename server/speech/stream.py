@@ -14,10 +14,14 @@ microphone). Two modes:
 
 Memory is bounded in both modes: an utterance longer than ``max_utterance_s`` is refused
 (push-to-talk) or cut there (hands-free), never buffered further.
+
+Text frames carry control messages only, ``{"type": "end"}`` and ``{"type": "cancel"}``
+(:func:`control_kind`).
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -45,6 +49,18 @@ class Problem:
 
 
 Event = Interim | Final | Problem
+
+
+def control_kind(text: str) -> str | None:
+    """The ``type`` of one text frame of the stream, or None for anything that is not a JSON
+    object with a string ``type`` (never raises: not JSON, a list, a document nested deeper
+    than the interpreter's stack, which ``json`` reports as RecursionError)."""
+    try:
+        value = json.loads(text)
+    except (ValueError, RecursionError):
+        return None
+    kind = value.get("type") if isinstance(value, dict) else None
+    return kind if isinstance(kind, str) else None
 
 
 class StreamSession:

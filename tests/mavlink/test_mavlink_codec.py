@@ -80,6 +80,22 @@ def test_signing_accepts_the_key_and_rejects_others() -> None:
     assert strict.feed(_heartbeat(Codec(1, 1))) == []  # unsigned on a signed link
 
 
+def test_a_forged_frame_from_the_future_does_not_silence_a_signed_link() -> None:
+    """pymavlink 2.4.50 stored a frame's timestamp before checking its signature: one frame
+    signed with a wrong key and a far-future timestamp made every genuine frame after it
+    "old", so anyone on the link could cut a signed vehicle off. Replays stay refused."""
+    t0 = 3_000_000_000
+    vehicle = Codec(1, 1, signing_key=KEY, initial_timestamp=t0)
+    forger = Codec(1, 1, signing_key=bytes(32), initial_timestamp=t0 + 10**9)
+    gcs = Codec(255, 190, signing_key=KEY, initial_timestamp=t0)
+    first = _heartbeat(vehicle)
+    assert len(gcs.feed(first)) == 1
+    assert gcs.feed(_heartbeat(forger)) == []
+    assert len(gcs.feed(_heartbeat(vehicle) + _heartbeat(vehicle))) == 2
+    assert gcs.feed(first) == []  # a replay of an older genuine frame
+    assert gcs.rejected["bad_signature"] == 2
+
+
 @settings(max_examples=200, deadline=None)
 @given(st.binary(max_size=600))
 def test_arbitrary_bytes_never_raise(data: bytes) -> None:

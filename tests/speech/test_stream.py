@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from server.speech.audio import SAMPLE_RATE
-from server.speech.stream import Final, Interim, Problem, StreamSession
+from server.speech.stream import Final, Interim, Problem, StreamSession, control_kind
 
 
 def pcm(seconds: float, loud: bool) -> bytes:
@@ -83,3 +83,19 @@ def test_bad_mode() -> None:
         StreamSession("always")
     with pytest.raises(ValueError, match="voice activity"):
         StreamSession("handsfree")
+
+
+@pytest.mark.parametrize(
+    ("text", "kind"),
+    [
+        ('{"type": "end"}', "end"),
+        ('{"type": "cancel", "x": [1]}', "cancel"),
+        ("not json", None),
+        ("[1, 2]", None),
+        ('{"type": 3}', None),
+        ("[" * 100_000, None),  # json raises RecursionError, which the stream did not catch
+        ('{"a":' * 100_000, None),
+    ],
+)
+def test_text_frames_name_a_control_or_nothing(text: str, kind: str | None) -> None:
+    assert control_kind(text) == kind
