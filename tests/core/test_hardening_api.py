@@ -246,3 +246,22 @@ def test_audit_log_keeps_lone_surrogates(tmp_path: Path) -> None:
     log.append(utterance="take off \ud800", commands=[], action="executed", outcome="ok")
     assert log.recent(1)[0].utterance == "take off \\ud800"
     log.close()
+
+
+# Deeply nested JSON (50 000 levels: Python's JSON reader raises RecursionError) is a 400, never
+# a 500 (the fuzz campaign found the speech stream's text frames fell to it).
+DEEP = b"[" * 50_000
+
+ROUTES = [
+    "/api/v1/command",
+    "/api/v1/interpret",
+    "/api/v1/missions",
+    "/api/v1/sim/uav1/fault",
+]
+
+
+@pytest.mark.parametrize("path", ROUTES)
+async def test_deep_json_is_a_client_error(api: httpx.AsyncClient, path: str) -> None:
+    r = await api.post(path, content=DEEP, headers={"Content-Type": "application/json"})
+    assert r.status_code == 400, (r.status_code, r.text[:200])
+    assert "error parsing the body" in r.json()["detail"]
