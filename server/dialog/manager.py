@@ -400,7 +400,7 @@ class DialogManager:
                 said.append(replies.answer(item, self.vehicle.snapshot(), self._state))
             elif action == "describe":
                 said.append(await self._describe())
-            elif action == "patrol_start" or (action == "patrol_stop" and self.fleet is not None):
+            elif action == "patrol_start" or (action == "patrol_stop" and self._fleet_may_run()):
                 ok, text = await self._fleet_command(cmd)
                 if ok or action == "patrol_start":
                     said.append(text)
@@ -429,6 +429,14 @@ class DialogManager:
             for cmd in queue:
                 self._event(cmd["action"])
         return _merge(said), True
+
+    def _fleet_may_run(self) -> bool:
+        """Whether a fleet patrol may be running: asked of a port in this process
+        (``running()``); a remote one is asked to stop and says whether one ran."""
+        if self.fleet is None:
+            return False
+        running = getattr(self.fleet, "running", None)
+        return True if running is None else bool(running())
 
     def _cancel_own(self, queue: list[dict[str, Any]]) -> str:
         queue.clear()

@@ -95,7 +95,8 @@ class FleetPort(Protocol):
     """The Central patrol (``server.fleet.central.CentralPatrol``): voice's way to the CTM.
 
     A vehicle process reaches it over the link: its answers are awaitables. ``stop`` answers
-    ``ok`` False when no patrol runs (the dialog then stops the drone's own task)."""
+    ``ok`` False when no patrol runs (the dialog then stops the drone's own task); a port in
+    this process also has ``running()``, asked first."""
 
     def start(self, threshold: float = ...) -> FleetReply | Awaitable[FleetReply]: ...
 
