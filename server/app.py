@@ -8,7 +8,7 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 from fastapi import Depends, FastAPI, Request
-from fastapi.responses import HTMLResponse, RedirectResponse
+from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 
@@ -20,6 +20,7 @@ from server.audit_trail import RestAuditMiddleware
 from server.http_guard import HttpGuard
 from server.runtime import Runtime
 from server.settings import Settings
+from server.vehicles.errors import VehicleUnavailable
 
 WEB = share_dir("web")
 
@@ -58,6 +59,13 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     # Host allowlist, body limits before parsing, security headers, the token cookie (issue 14).
     app.add_middleware(HttpGuard, security=runtime.security)
     strict.install(app)  # 422s that echo NaN or lone surrogates stay 422s
+
+    @app.exception_handler(VehicleUnavailable)
+    async def vehicle_unavailable(request: Request, exc: VehicleUnavailable) -> JSONResponse:
+        # A drone whose flight process is starting, restarting or gone: not a missing drone
+        # (404) and not a server fault (500); the caller may retry.
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "1"})
+
     for router in (
         system.router,
         language.router,

@@ -55,6 +55,29 @@ def drone_facts(stack: Any) -> DroneFacts:
     )
 
 
+async def perform_async(
+    stack: Any, dialog: Any, audit: Any, action: str, *, source: str, battery_low_pct: float
+) -> DirectOutcome:
+    """:func:`perform` for any drone: a drone in its own vehicle process
+    (``server.vehicles.remote``, which has ``act``) checks and does the action there, on its
+    state now, and its own dialog follows and says a refusal; the audit row is written here.
+
+    Raises:
+        VehicleUnavailable: that vehicle is not on the link (a stop is still sent).
+    """
+    act = getattr(stack, "act", None)
+    if act is None:
+        return perform(stack, dialog, audit, action, source=source, battery_low_pct=battery_low_pct)
+    try:
+        accepted, detail = await act(action, battery_low_pct)
+    except Exception as exc:
+        _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
+        raise
+    outcome = DirectOutcome(accepted, detail)
+    _audit(audit, stack, dialog, action, source, outcome)
+    return outcome
+
+
 def perform(
     stack: Any, dialog: Any, audit: Any, action: str, *, source: str, battery_low_pct: float
 ) -> DirectOutcome:
@@ -79,6 +102,13 @@ def perform(
         outcome = DirectOutcome(False, why)
         if dialog is not None:
             dialog.announce(why, "warn")
+    _audit(audit, stack, dialog, action, source, outcome)
+    return outcome
+
+
+def _audit(
+    audit: Any, stack: Any, dialog: Any, action: str, source: str, outcome: DirectOutcome
+) -> None:
     if audit is not None:
         # On its own thread: the fsync must not hold the loop the driver sends from.
         audit.append_later(
@@ -91,4 +121,3 @@ def perform(
             drone=stack.name,
             state=str(getattr(getattr(dialog, "state", None), "value", "")),
         )
-    return outcome

@@ -25,7 +25,7 @@ from drone.sim.world import World, load_world
 from drone.vehicle import Vehicle
 from server.audit_trail import AuditTrail
 from server.captioner import BadFrame, Captioner, CaptionerUnavailable, describe_frame
-from server.captioner.grounding import ground_marker_ids, seen_markers
+from server.captioner.grounding import SeenMarker, ground_marker_ids, seen_markers
 from server.captioner.service import NOTHING, load_captioner, unavailable_text
 from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
 from server.dialog.manager import DialogManager
@@ -84,6 +84,10 @@ class DroneStack:
             self.tasks.cancel()
         getattr(self.vehicle, action)()
         return f"{action} sent"
+
+    def seen_markers(self) -> list[SeenMarker]:
+        """The markers the detector sees now (grounding a caption's "marker N on the left")."""
+        return seen_markers(self.vehicle.snapshot())
 
     def latest_jpeg(self) -> tuple[int, bytes | None]:
         """(frame counter, JPEG with the tracking overlay): the one the vehicle node encodes
@@ -352,7 +356,7 @@ class Runtime:
             raise LookupError(f"no drone '{drone}'")
         frame = stack.driver.latest_frame
         if isinstance(self._captioner, Captioner) and frame is not None:
-            seen = seen_markers(stack.vehicle.snapshot())
+            seen = stack.seen_markers()
             try:
                 caption = await self._captioner.describe(frame)
             except BadFrame as exc:

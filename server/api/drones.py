@@ -11,7 +11,7 @@ from fastapi.responses import StreamingResponse
 
 from server.api.deps import DroneDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import ActionResult, Describe
-from server.direct_actions import command_source, perform
+from server.direct_actions import command_source, perform_async
 
 router = APIRouter(prefix="/drones", tags=["drones"])
 
@@ -52,7 +52,7 @@ async def act(
     and what to do. ``X-Command-Source`` (button, keyboard, map) is recorded in the audit log.
     """
     check_lease(request, runtime, {action})
-    out = perform(
+    out = await perform_async(
         stack,
         runtime.dialogs.get(stack.name),
         runtime.audit,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import inspect
 import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -399,15 +400,14 @@ class DialogManager:
                 said.append(replies.answer(item, self.vehicle.snapshot(), self._state))
             elif action == "describe":
                 said.append(await self._describe())
-            elif action in FLEET_ACTIONS and (
-                action == "patrol_start" or (self.fleet is not None and self.fleet.running())
-            ):
-                said.append(self._fleet_command(cmd))
-            elif action in ("cancel", "patrol_stop"):  # no fleet patrol: this drone's own
-                queue.clear()
-                self.tasks.cancel()
-                self._event("cancel")
-                said.append("OK, cancelled.")
+            elif action == "patrol_start" or (action == "patrol_stop" and self._fleet_may_run()):
+                ok, text = await self._fleet_command(cmd)
+                if ok or action == "patrol_start":
+                    said.append(text)
+                else:  # no fleet patrol running: stop this drone's own task
+                    said.append(self._cancel_own(queue))
+            elif action in ("cancel", "patrol_stop"):  # no fleet: this drone's own
+                said.append(self._cancel_own(queue))
             elif action == "emergency" or (
                 action in PREEMPTING and not queue and not _motion_before(commands, i)
             ):
@@ -430,12 +430,31 @@ class DialogManager:
                 self._event(cmd["action"])
         return _merge(said), True
 
-    def _fleet_command(self, cmd: dict[str, Any]) -> str:
-        """Start or stop the Central patrol (the console's button does the same)."""
+    def _fleet_may_run(self) -> bool:
+        """Whether a fleet patrol may be running: asked of a port in this process
+        (``running()``); a remote one is asked to stop and says whether one ran."""
         if self.fleet is None:
-            return "There is no fleet manager here to run a patrol."
+            return False
+        running = getattr(self.fleet, "running", None)
+        return True if running is None else bool(running())
+
+    def _cancel_own(self, queue: list[dict[str, Any]]) -> str:
+        queue.clear()
+        self.tasks.cancel()
+        self._event("cancel")
+        return "OK, cancelled."
+
+    async def _fleet_command(self, cmd: dict[str, Any]) -> tuple[bool, str]:
+        """Start or stop the Central patrol (the console's button does the same): (ok, reply).
+
+        The fleet port answers at once in the server's process, or, from a vehicle process,
+        after a call to the central server (an awaitable)."""
+        if self.fleet is None:
+            return False, "There is no fleet manager here to run a patrol."
         reply = self.fleet.start() if cmd["action"] == "patrol_start" else self.fleet.stop()
-        return reply.text
+        if inspect.isawaitable(reply):
+            reply = await reply
+        return bool(reply.ok), str(reply.text)
 
     async def _describe(self) -> str:
         if self.describer is None:

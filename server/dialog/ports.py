@@ -6,7 +6,7 @@ directly or through a thin adapter; tests use small in-memory fakes that behave 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -92,13 +92,15 @@ class FleetReply(Protocol):
 
 
 class FleetPort(Protocol):
-    """The Central patrol (``server.fleet.central.CentralPatrol``): voice's way to the CTM."""
+    """The Central patrol (``server.fleet.central.CentralPatrol``): voice's way to the CTM.
 
-    def start(self, threshold: float = ...) -> FleetReply: ...
+    A vehicle process reaches it over the link: its answers are awaitables. ``stop`` answers
+    ``ok`` False when no patrol runs (the dialog then stops the drone's own task); a port in
+    this process also has ``running()``, asked first."""
 
-    def stop(self) -> FleetReply: ...
+    def start(self, threshold: float = ...) -> FleetReply | Awaitable[FleetReply]: ...
 
-    def running(self) -> list[str]: ...
+    def stop(self) -> FleetReply | Awaitable[FleetReply]: ...
 
 
 class DescribePort(Protocol):

@@ -25,6 +25,10 @@ STATUS_TYPE = "std_msgs/String"
 PLAN_SERVICE_TYPE = "uav_console/FlightPlan"
 FLEET_TOPIC = "/fleet/status"
 FLEET_TYPE = "uav_console/FleetStatus"
+# The Central patrol (the console's button, "start/stop the patrol"): args {op: start|stop,
+# threshold?} -> {ok, text, mission}; a vehicle process's dialog calls it over the link.
+PATROL_SERVICE = "/fleet/patrol"
+PATROL_SERVICE_TYPE = "uav_console/Patrol"
 
 
 class Role(enum.Enum):

@@ -28,6 +28,7 @@ from server.fleet.central import CentralPatrol, make_patrol_router
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import origin_of
 from server.fleet.ltm import LocalTaskManager
+from server.fleet.messages import PATROL_SERVICE, PATROL_SERVICE_TYPE
 from server.fleet.node import CtmNode, LtmNode
 from server.fleet.patrol import station_positions
 from server.fleet.planner import FlightModel, StationModel
@@ -76,8 +77,24 @@ class FleetService:
         return router
 
     async def start(self) -> None:
+        self.graph.advertise_service(PATROL_SERVICE, PATROL_SERVICE_TYPE, self._patrol_service)
         await self.node.start()
         self._task = asyncio.create_task(self._run(), name="ltm-nodes")
+
+    async def _patrol_service(self, args: dict[str, Any]) -> dict[str, Any]:
+        """``/fleet/patrol``: the Central patrol for a vehicle process's dialog ("start the
+        patrol"), as the console's button starts it here."""
+        op = args.get("op")
+        if op == "start":
+            threshold = float(args.get("threshold", 0.30))
+            if not 0.0 < threshold < 1.0:
+                raise ValueError(f"threshold must be between 0 and 1, not {threshold}")
+            reply = self.central.start(threshold)
+        elif op == "stop":
+            reply = self.central.stop()
+        else:
+            raise ValueError(f"unknown op {op!r} (start, stop)")
+        return {"ok": reply.ok, "text": reply.text, "mission": reply.mission}
 
     async def _run(self) -> None:
         while True:
@@ -87,6 +104,7 @@ class FleetService:
             await asyncio.sleep(self.period_s)
 
     async def stop(self) -> None:
+        self.graph.unadvertise_service(PATROL_SERVICE)
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):

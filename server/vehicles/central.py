@@ -175,6 +175,8 @@ class VehicleCentral:
         self.alerts: list[str] = []
         self._tasks: list[asyncio.Task[Any]] = []
         self._stopping = False
+        self._recording_sent: str | None = None
+        self._utterances: Any = None
 
     def router(self) -> APIRouter:
         router = APIRouter()
@@ -190,6 +192,11 @@ class VehicleCentral:
         g = self.runtime.graph
         g.advertise(names.HEARTBEAT, names.STRING)
         g.advertise("/console/reply", "uav_console/Reply")
+        g.advertise(names.RECORDING, names.STRING, latch=True)
+        # Subscribed before any vehicle link: called before the link passes the utterance on.
+        self._utterances = g.subscribe(
+            "/console/utterance", lambda _msg: self.touch_recording(), type="uav_console/Utterance"
+        )
         self._tasks.append(asyncio.create_task(self._beat(), name="vehicles-heartbeat"))
 
     @staticmethod
@@ -210,7 +217,8 @@ class VehicleCentral:
         the background, once the server accepts connections (see :meth:`_orphans`)."""
         s = self.runtime.settings
         host = "127.0.0.1" if s.host in ("0.0.0.0", "::", "") else s.host
-        url = f"ws://{host}:{s.port}{names.LINK_PATH}"
+        tls = self.runtime.tls  # set by `serve` before the lifespan starts us
+        url = f"{'wss' if tls else 'ws'}://{host}:{s.port}{names.LINK_PATH}"
         env = child_env(s, self.runtime.tokens.pilot_token)
         for index in range(count):
             name = f"uav{index + 1}"
@@ -218,8 +226,11 @@ class VehicleCentral:
             argv = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", name]
             argv += ["--prefix", prefix, "--index", str(index), "--drone", s.drone]
             argv += ["--world", s.world, "--safety-host", host, "--parent-pid", str(os.getpid())]
+            if tls is not None:  # our own certificate, pinned (whatever names it carries)
+                argv += ["--fingerprint", tls.fingerprint]
             self.processes[name] = VehicleProcess(argv, env, name)
             self._register(name, prefix, simulated=s.drone == "sim")
+            self._expect(name)
         self._tasks.append(asyncio.create_task(self._launch(), name="vehicles-launch"))
 
     async def _launch(self) -> None:
@@ -259,7 +270,27 @@ class VehicleCentral:
                         found[name] = pid
         return found
 
+    def touch_recording(self) -> None:
+        """An operator's command is on its way to a vehicle: open (or keep open) the flight
+        recording, as an in-process dialog's audit row does, and tell the vehicles its id
+        first, so the rows they write for the command carry it."""
+        from server.vehicles.remote import RemoteDroneStack
+
+        rec = self.runtime.recorder
+        if rec is None or not any(
+            isinstance(d, RemoteDroneStack) for d in self.runtime.drones.values()
+        ):
+            return
+        self._publish_recording(rec.touch())
+
+    def _publish_recording(self, recording: str) -> None:
+        if recording != self._recording_sent:
+            self._recording_sent = recording
+            self.runtime.graph.publish(names.RECORDING, {"data": recording})
+
     async def stop(self) -> None:
+        if self._utterances is not None:
+            self._utterances.close()
         self._stopping = True
         for t in self._tasks:
             t.cancel()
@@ -276,6 +307,7 @@ class VehicleCentral:
         if name in rt.drones:
             return
         stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
+        stack.touch_recording = self.touch_recording
         rt.drones[name] = stack
         rt.dialogs[name] = RemoteDialog(stack)
         # Listings (REST, fleet status, the console's selector) follow the names, not the
@@ -285,6 +317,14 @@ class VehicleCentral:
             table.clear()
             table.update(ordered)
         log.info("vehicle %s registered (prefix %r)", name, prefix)
+
+    def _expect(self, name: str) -> None:
+        """Its process is starting: REST and dialog calls to the drone wait for it to join."""
+        from server.vehicles.remote import RemoteDroneStack
+
+        stack = self.runtime.drones.get(name)
+        if isinstance(stack, RemoteDroneStack):
+            stack.expect()
 
     def discover(self) -> None:
         """Register every vehicle that announced itself on the graph and is not a drone yet."""
@@ -306,6 +346,7 @@ class VehicleCentral:
         n = 0
         while True:
             self.runtime.graph.publish(names.HEARTBEAT, {"data": str(n)})
+            self._publish_recording(self.runtime.recording_id() or "")
             if n % DISCOVER_EVERY == 0:
                 try:
                     self.discover()
@@ -346,6 +387,7 @@ class VehicleCentral:
             )
             await asyncio.sleep(delay)
             delay = min(delay * 2, RESTART_BACKOFF_S[1])
+            self._expect(vp.name)
             try:
                 await vp.spawn()
             except OSError as exc:

@@ -5,6 +5,7 @@
     VehicleError
     ├── LinkError             the vehicle link cannot be used (bad URL, closed)
     └── RemoteCallError       a call over the link was refused or not answered
+        └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
 """
 
 from __future__ import annotations
@@ -20,3 +21,8 @@ class LinkError(VehicleError):
 
 class RemoteCallError(VehicleError):
     """A service call over the link was refused, failed or timed out."""
+
+
+class VehicleUnavailable(RemoteCallError):
+    """The drone's vehicle process is not on the link: not joined yet (starting, restarting)
+    or gone. REST answers 503 with this message."""

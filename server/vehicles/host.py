@@ -23,10 +23,13 @@ import logging
 import os
 import signal
 import time
+from collections.abc import Awaitable
 from dataclasses import dataclass
+from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
 from server.vehicles import names
 from server.vehicles.errors import RemoteCallError, VehicleError
@@ -34,6 +37,9 @@ from server.vehicles.link import GraphLink
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
 from server.vehicles.safety import SafetyPort, loopback_origin
 from server.vehicles.watch import CentralWatch, LossAction
+
+if TYPE_CHECKING:
+    from server.direct_actions import DirectOutcome
 
 log = logging.getLogger("uav_console.vehicle")
 
@@ -55,6 +61,8 @@ class VehicleOptions:
     safety_host: str = "127.0.0.1"
     safety_port: int = 0  # 0: any free port (announced in /NAME/vehicle/info)
     parent_pid: int | None = None  # the supervising serve (None: a standalone vehicle)
+    ca_file: Path | None = None  # wss:// central: verify its certificate with this CA
+    fingerprint: str | None = None  # wss:// central: or accept exactly this certificate
 
 
 def link_spec(name: str, prefix: str) -> LinkSpec:
@@ -91,6 +99,7 @@ def link_spec(name: str, prefix: str) -> LinkSpec:
         TopicSpec(UTTERANCE, "uav_console/Utterance"),
         TopicSpec(FLEET_TOPIC, FLEET_TYPE),
         TopicSpec(names.HEARTBEAT, names.STRING),
+        TopicSpec(names.RECORDING, names.STRING, latch=True),
     )
     services = (
         (names.control_service(name), names.CONTROL_TYPE),
@@ -98,6 +107,35 @@ def link_spec(name: str, prefix: str) -> LinkSpec:
         (f"{p}{INTERPRET}", "uav_console/Interpret"),
     )
     return LinkSpec(out, inn, services, owner=f"link:{name}")
+
+
+@dataclass(frozen=True)
+class PatrolAnswer:
+    ok: bool
+    text: str
+
+
+class RemoteFleet:
+    """The dialog's fleet port in a vehicle process: the central server's patrol
+    (``/fleet/patrol``), so "start the patrol" said to this drone starts the fleet's."""
+
+    def __init__(self, core: GraphLinkCore) -> None:
+        self.core = core
+
+    async def _call(self, args: dict[str, Any]) -> PatrolAnswer:
+        try:
+            out = await self.core.call(PATROL_SERVICE, args, timeout_s=5.0)
+        except RemoteCallError as exc:
+            return PatrolAnswer(False, f"I cannot reach the fleet manager now ({exc}).")
+        if not isinstance(out, dict):
+            return PatrolAnswer(False, "The fleet manager gave no answer.")
+        return PatrolAnswer(bool(out.get("ok")), str(out.get("text", "")))
+
+    def start(self, threshold: float = 0.30) -> Awaitable[PatrolAnswer]:
+        return self._call({"op": "start", "threshold": threshold})
+
+    def stop(self) -> Awaitable[PatrolAnswer]:
+        return self._call({"op": "stop"})
 
 
 class VehicleHost:
@@ -159,7 +197,12 @@ class VehicleHost:
             self.name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s
         )
         await vehicle.start(driver)
-        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
+        # As an in-process drone (server.runtime): idle search, and jogs and /ardrone/* audited
+        # (the vehicle writes to the server's audit log file; SQLite in WAL mode).
+        tasks = TaskManager(
+            vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s, idle_search=True
+        )
+        self.audit = AuditLog(s.data_dir / "audit.db")
         node = VehicleNode(
             self.graph,
             vehicle,
@@ -167,12 +210,27 @@ class VehicleHost:
             self.name,
             o.prefix,
             heartbeat_timeout_s=s.heartbeat_timeout_s,
+            audit=self.audit,
         )
         self.stack = DroneStack(self.name, o.prefix, vehicle, driver, sim, tasks, node)
         await node.start()
         self.core = GraphLinkCore(self.graph, link_spec(self.name, o.prefix))
-        self.link = GraphLink(o.central, self.core, token=self.token, name=self.name)
-        self.audit = AuditLog(s.data_dir / "audit.db")
+        self.link = GraphLink(
+            o.central,
+            self.core,
+            token=self.token,
+            name=self.name,
+            ca_file=o.ca_file,
+            fingerprint=o.fingerprint,
+        )
+        # audit rows carry the central server's flight recording id (names.RECORDING)
+        self.recording_id = ""
+        self.audit.recording = lambda: self.recording_id
+        self._recording_sub = self.graph.subscribe(
+            names.RECORDING, self._on_recording, type=names.STRING
+        )
+        self.fleet_names: list[str] = []
+        self._fleet_sub = self.graph.subscribe(FLEET_TOPIC, self._on_fleet, type=FLEET_TYPE)
         self.dialog = DialogManager(
             self.graph,
             s,
@@ -184,6 +242,9 @@ class VehicleHost:
             nlu=default_nlu(str(s.grammar_dir)),
             drone=self.name,
             prefix=o.prefix,
+            # the central server's patrol, and every drone's name ("uav2 land", "all land")
+            fleet=RemoteFleet(self.core),
+            drones=lambda: self.fleet_names or [self.name],
         )
         pad = station_positions(self.world, o.index + 1)[-1]
         self.ltm = LtmNode(
@@ -202,7 +263,7 @@ class VehicleHost:
             o.safety_host,
             o.safety_port,
             self.token,
-            self.stack.direct,
+            lambda action: self.direct(action).detail,
             name=self.name,
             origin_allowed=lambda origin: origin in allowed or loopback_origin(origin),
         )
@@ -231,6 +292,24 @@ class VehicleHost:
         text = str(out.get("text", "")) if isinstance(out, dict) else str(out)
         return text, (ms if ms >= 0 else None)
 
+    def _on_recording(self, msg: dict[str, Any]) -> None:
+        self.recording_id = str(msg.get("data", ""))
+
+    def _on_fleet(self, msg: dict[str, Any]) -> None:
+        drones = msg.get("drones")
+        if isinstance(drones, list):
+            found = {str(d.get("name")) for d in drones if isinstance(d, dict) and d.get("name")}
+            self.fleet_names = sorted(found | {self.name}, key=names.drone_order)
+
+    def direct(self, action: str, battery_low_pct: float | None = None) -> DirectOutcome:
+        """A button, key or REST action: checked against the drone's state now, sent, and
+        followed (or its refusal said) by this vehicle's dialog, as in-process. The central
+        server writes the audit row."""
+        from server.direct_actions import perform
+
+        low = self.settings.battery_low_pct if battery_low_pct is None else battery_low_pct
+        return perform(self.stack, self.dialog, None, action, source="rest", battery_low_pct=low)
+
     async def _control(self, args: dict[str, Any]) -> dict[str, Any]:
         """``/NAME/vehicle/control`` (see :mod:`server.vehicles.names`)."""
         op = args.get("op")
@@ -238,7 +317,11 @@ class VehicleHost:
             action = str(args.get("action", ""))
             if action not in ("takeoff", "land", "hover", "emergency", "reset"):
                 raise VehicleError(f"unknown action {action!r}")
-            return {"detail": self.stack.direct(action)}
+            low = args.get("battery_low_pct")
+            out = self.direct(action, float(low) if isinstance(low, int | float) else None)
+            return {"accepted": out.accepted, "detail": out.detail}
+        if op == "telemetry":
+            return {k: v for k, v in self.telemetry().items() if k != "truth"}
         if op == "fault":
             if self.stack.sim is None:
                 raise VehicleError(f"{self.name} is a real drone: no faults")
@@ -270,7 +353,7 @@ class VehicleHost:
                 "commands": result.commands,
                 "accepted": result.accepted,
             }
-        raise VehicleError(f"unknown op {op!r} (direct, fault, truth, utterance)")
+        raise VehicleError(f"unknown op {op!r} (direct, fault, telemetry, truth, utterance)")
 
     async def _periodic(self) -> None:
         """Telemetry at 10 Hz, the LTM at 5 Hz, the central-loss watch at 20 Hz."""
@@ -338,6 +421,8 @@ class VehicleHost:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await t
         await self.safety.stop()
+        self._fleet_sub.close()
+        self._recording_sub.close()
         self.ltm.close()
         self.core.close()
         st = self.stack

@@ -5,6 +5,11 @@ token publish), sends the core's hello, then one reader (frames → core) and on
 queue → socket) until the connection drops; reconnects with exponential backoff (0.2 s doubling
 to 2 s). ``last_heard`` is the monotonic time of the last frame from the server, so the vehicle
 can tell a stalled central server from a quiet one (the server sends a heartbeat at 10 Hz).
+
+``wss://`` (a central server serving HTTPS, e.g. ``serve --host 0.0.0.0``): the certificate is
+verified with ``ca_file`` (else the system's CAs) or pinned by its SHA-256 ``fingerprint``
+(``serve`` pins its own for the vehicles it spawns); an untrusted certificate stops the link
+with the reason (:class:`~server.vehicles.errors.LinkError`), it is not retried.
 """
 
 from __future__ import annotations
@@ -12,10 +17,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import ssl
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
+from server.tls import TLSError, check_pinned, client_context
 from server.vehicles.errors import LinkError
 from server.vehicles.link_core import GraphLinkCore
 
@@ -34,10 +42,19 @@ class GraphLink:
         clock: Callable[[], float] = time.monotonic,
         backoff_s: tuple[float, float] = (0.2, 2.0),
         name: str = "vehicle",
+        ca_file: Path | None = None,
+        fingerprint: str | None = None,
     ) -> None:
         if not url.startswith(("ws://", "wss://")):
             raise LinkError(f"--central must be a ws:// or wss:// URL, got {url!r}")
         self.url = url
+        self.fingerprint = fingerprint
+        try:
+            self.ssl: ssl.SSLContext | None = (
+                client_context(ca_file, fingerprint) if url.startswith("wss://") else None
+            )
+        except TLSError as exc:
+            raise LinkError(str(exc)) from exc
         self.core = core
         self.token = token
         self.clock = clock
@@ -59,8 +76,14 @@ class GraphLink:
         while not stop.is_set():
             try:
                 async with connect(
-                    self.url, additional_headers=headers, max_size=None, open_timeout=5
+                    self.url,
+                    additional_headers=headers,
+                    max_size=None,
+                    open_timeout=5,
+                    ssl=self.ssl,
                 ) as ws:
+                    if self.ssl is not None and self.fingerprint is not None:
+                        check_pinned(ws.transport.get_extra_info("ssl_object"), self.fingerprint)
                     self._ws = ws
                     for frame in self.core.hello():
                         await ws.send(frame)
@@ -76,6 +99,13 @@ class GraphLink:
                         t.cancel()
                         with contextlib.suppress(asyncio.CancelledError, Exception):
                             await t
+            except ssl.SSLCertVerificationError as exc:
+                raise LinkError(
+                    f"the central server's certificate is not trusted ({exc.verify_message}); "
+                    "give --ca FILE (its ca.pem) or --fingerprint SHA256 (printed by serve)"
+                ) from exc
+            except TLSError as exc:
+                raise LinkError(str(exc)) from exc
             except (OSError, InvalidHandshake, WebSocketException, TimeoutError) as exc:
                 log.warning("%s: central server unreachable (%s); retrying", self.name, exc)
             finally:

@@ -36,6 +36,8 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         safety_host=args.safety_host,
         safety_port=args.safety_port,
         parent_pid=args.parent_pid,
+        ca_file=args.ca,
+        fingerprint=args.fingerprint,
     )
     try:
         asyncio.run(run_vehicle(settings, options, token))

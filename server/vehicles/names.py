@@ -11,6 +11,9 @@ A vehicle process puts its drone on the central graph through the vehicle link
 - ``/NAME/vehicle/control`` (service ``uav_console/VehicleControl``; args ``{op, ...}``): ``op``
   is ``direct`` (``action``), ``fault`` (``kind``, ``duration_s``, ``battery_pct``,
   ``wind_mps``) or ``utterance`` (``text``, ``confidence``, ``source``, ``role``);
+- ``/console/recording`` (std_msgs/String, latched, from the central server): the id of the
+  flight recording being written (``""``: none), for the vehicle's audit rows; published before
+  an operator's command is passed on, so its rows carry the recording it opened;
 - ``/vehicles/heartbeat`` (std_msgs/String, from the central server at 10 Hz): a vehicle that
   hears nothing from the central server for ``central_timeout_s`` hovers, and lands after
   ``central_loss_land_s``.
@@ -21,6 +24,7 @@ from __future__ import annotations
 STRING = "std_msgs/String"
 CONTROL_TYPE = "uav_console/VehicleControl"
 HEARTBEAT = "/vehicles/heartbeat"
+RECORDING = "/console/recording"
 HEARTBEAT_PERIOD_S = 0.1
 LINK_PATH = "/vehicle-link"
 

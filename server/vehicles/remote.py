@@ -4,8 +4,13 @@
 :class:`~server.runtime.DroneStack` (telemetry, direct actions, the latest JPEG, ground truth,
 faults) from what the vehicle publishes over the link (``/NAME/vehicle/telemetry``, the camera
 topic) and through its control service; :class:`RemoteDialog` answers ``POST /command`` through
-the vehicle's own dialog manager. Nothing here blocks: a direct action is sent and answered at
-once ("emergency sent"), as in-process.
+the vehicle's own dialog manager. Stops (land, emergency) are sent and answered at once
+("emergency sent"), as in-process; other direct actions get the vehicle's own verdict (it checks
+them against its drone's state now, not against telemetry 0.1 s old).
+
+A vehicle that ``serve`` has just spawned (or restarted) takes a few seconds to join: calls made
+meanwhile wait for it (:attr:`RemoteDroneStack.expected_until`, at most ``JOIN_WAIT_S``) instead
+of failing; a vehicle that does not come raises :class:`VehicleUnavailable` (REST: 503).
 """
 
 from __future__ import annotations
@@ -13,18 +18,20 @@ from __future__ import annotations
 import asyncio
 import base64
 import concurrent.futures
-import contextlib
 import json
 import logging
 import math
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, cast
 
+from server.captioner.grounding import SeenMarker, bearing_deg
 from server.dialog.manager import DialogResult
-from server.graph import Graph, GraphError, ServiceError
+from server.graph import Graph, GraphError, NotFound, ServiceError
 from server.msgs import header
 from server.runtime import DroneStack
 from server.vehicles import names
+from server.vehicles.errors import RemoteCallError, VehicleUnavailable
 
 if TYPE_CHECKING:
     from drone.ardrone.driver import ARDroneDriver
@@ -34,6 +41,11 @@ log = logging.getLogger(__name__)
 
 TELEMETRY_STALE_S = 1.0
 CALL_TIMEOUT_S = 10.0
+# How long a spawned or restarted vehicle process may take to join before calls to it fail
+# (start-up is 2-5 s on a busy machine: imports, simulator, driver, perception).
+JOIN_WAIT_S = 30.0
+JOIN_POLL_S = 0.05
+STOPS = ("land", "emergency")
 
 
 class _Frames:
@@ -83,6 +95,11 @@ class RemoteDroneStack(DroneStack):
         self._jpeg: tuple[int, bytes | None] = (-1, None)
         self._jpeg_count = 0
         self._pending: set[asyncio.Task[Any]] = set()
+        # monotonic time until which a vehicle that is not on the link is expected to join
+        # (set when ``serve`` spawns or restarts its process); None: not expected.
+        self.expected_until: float | None = None
+        # set by VehicleCentral: opens the flight recording and tells the vehicle its id
+        self.touch_recording: Callable[[], None] | None = None
         self._subs = [
             graph.subscribe(names.telemetry_topic(name), self._on_telemetry, type=names.STRING),
             graph.subscribe(names.info_topic(name), self._on_info, type=names.STRING),
@@ -129,14 +146,34 @@ class RemoteDroneStack(DroneStack):
         return self.connected and bool(self.last.get("link_ok"))
 
     def telemetry(self) -> dict[str, Any]:
-        out = {k: v for k, v in self.last.items() if k != "truth"}
-        out.setdefault("link_ok", False)
-        out["link_ok"] = self.link_ok()
+        """The vehicle's telemetry: asked of it now from a worker thread (a sync REST route,
+        so a read right after ``/sim/{id}/truth`` or an action is as fresh as in-process), else
+        the last periodic one (≤ 0.1 s old). Before its first telemetry a starting vehicle
+        is waited for; one that is gone answers with its last telemetry (link lost).
+
+        Raises:
+            VehicleUnavailable: nothing was ever heard from the vehicle and it did not join.
+        """
+        last, fresh_ok = self.last, False
+        if self._off_loop() and (self.joined or not last):
+            try:
+                fresh = self._call_sync({"op": "telemetry"})
+            except VehicleUnavailable:
+                if not self.last:  # never heard from it: say so (503), not an empty drone
+                    raise
+            except (GraphError, RemoteCallError, TimeoutError) as exc:
+                log.warning("%s: telemetry not answered (%s): the last one", self.name, exc)
+            else:
+                if isinstance(fresh, dict):
+                    last, fresh_ok = fresh, True
+        connected = fresh_ok or self.connected
+        out = {k: v for k, v in last.items() if k != "truth"}
+        out["link_ok"] = connected and bool(last.get("link_ok"))
         out["name"] = self.name
         out["simulated"] = self.sim is not None
         out["vehicle"] = {
             "mode": "process",
-            "connected": self.connected,
+            "connected": connected,
             "pid": self.info.get("pid"),
             "safety_url": self.info.get("safety_url"),
             "age_s": None if self.last_t is None else round(time.monotonic() - self.last_t, 3),
@@ -146,6 +183,40 @@ class RemoteDroneStack(DroneStack):
     def direct(self, action: str) -> str:
         self._send({"op": "direct", "action": action})
         return f"{action} sent"
+
+    async def act(self, action: str, battery_low_pct: float) -> tuple[bool, str]:
+        """A direct action checked and done by the vehicle: (accepted, detail).
+
+        Stops are sent and answered at once (they are never refused); anything else waits for
+        the vehicle's verdict, which its dialog also says aloud when it refuses.
+
+        Raises:
+            VehicleUnavailable: the vehicle is not on the link (a stop is sent all the same).
+        """
+        if action in STOPS:
+            self.direct(action)
+            return True, f"{action} sent"
+        args = {"op": "direct", "action": action, "check": True}
+        args["battery_low_pct"] = battery_low_pct
+        try:
+            out = await self.call(args)
+        except VehicleUnavailable:
+            raise
+        except GraphError as exc:
+            raise VehicleUnavailable(f"{self.name} did not take {action}: {exc}") from exc
+        return bool(out.get("accepted", True)), str(out.get("detail", f"{action} sent"))
+
+    def seen_markers(self) -> list[SeenMarker]:
+        """From the last telemetry (the snapshot's ``markers``, ≤ 0.1 s old)."""
+        out: list[SeenMarker] = []
+        for m in self.last.get("markers") or ():
+            try:
+                pose = (float(m["x"]), float(m["y"]), float(m["yaw_rad"]))
+                mark = (float(m["marker_x"]), float(m["marker_y"]))
+                out.append(SeenMarker(int(m["id"]), bearing_deg(*pose, *mark)))
+            except (KeyError, TypeError, ValueError):
+                continue
+        return out
 
     def latest_jpeg(self) -> tuple[int, bytes | None]:
         if self._jpeg[0] != self._jpeg_count and self._jpeg_b64 is not None:
@@ -159,10 +230,17 @@ class RemoteDroneStack(DroneStack):
         sync REST route runs); on the loop itself, the last telemetry's (≤ 0.1 s old)."""
         out: dict[str, Any] | None = None
         if self._off_loop():
-            with contextlib.suppress(GraphError, TimeoutError):
+            try:
                 out = dict(self._call_sync({"op": "truth"}))
+            except VehicleUnavailable:
+                if not self.last.get("truth"):
+                    raise
+            except (GraphError, RemoteCallError, TimeoutError) as exc:
+                log.warning("%s: truth not answered (%s): the last one", self.name, exc)
         if out is None:
-            out = dict(self.last.get("truth") or {})
+            if not self.last.get("truth"):
+                raise VehicleUnavailable(f"{self.name} has sent no ground truth yet")
+            out = dict(self.last["truth"])
         out["name"] = self.name
         return out
 
@@ -191,21 +269,62 @@ class RemoteDroneStack(DroneStack):
         return False
 
     def _call_sync(self, args: dict[str, Any], timeout_s: float = 5.0) -> Any:
-        """Call the control service from a worker thread and wait for the answer."""
+        """Call the control service from a worker thread and wait for the answer (and, while
+        the vehicle is expected to join, for the vehicle)."""
         assert self.graph.loop is not None
         fut = asyncio.run_coroutine_threadsafe(self.call(args, timeout_s), self.graph.loop)
         try:
-            return fut.result(timeout_s + 1.0)
+            return fut.result(timeout_s + self._join_wait_left() + 1.0)
         except concurrent.futures.TimeoutError as exc:
             fut.cancel()
             raise TimeoutError(f"{self.name} did not answer") from exc
 
     # ------------------------------------------------------------------ calls
+    @property
+    def joined(self) -> bool:
+        """Whether the vehicle is on the link now (its control service is on the graph)."""
+        return self.graph.service_type(names.control_service(self.name)) is not None
+
+    def expect(self, wait_s: float = JOIN_WAIT_S) -> None:
+        """The vehicle process was (re)started: calls wait up to ``wait_s`` for it to join."""
+        self.expected_until = time.monotonic() + wait_s
+
+    def _join_wait_left(self) -> float:
+        if self.expected_until is None:
+            return 0.0
+        return max(0.0, self.expected_until - time.monotonic())
+
+    async def wait_joined(self) -> None:
+        """Return once the vehicle is on the link; wait while it is expected to join.
+
+        Raises:
+            VehicleUnavailable: it is not there and not expected, or did not join in time.
+        """
+        while not self.joined:
+            if self._join_wait_left() <= 0.0:
+                if self.expected_until is not None:
+                    raise VehicleUnavailable(
+                        f"{self.name}'s flight process has not joined the server yet; "
+                        "try again in a moment"
+                    )
+                raise VehicleUnavailable(f"{self.name}'s flight process is not connected")
+            await asyncio.sleep(JOIN_POLL_S)
+        self.expected_until = None
+
     async def call(self, args: dict[str, Any], timeout_s: float = CALL_TIMEOUT_S) -> Any:
-        """Call the vehicle's control service (raises ``GraphError`` if it is not there)."""
-        return await self.graph.call_service(
-            names.control_service(self.name), args, timeout=timeout_s
-        )
+        """Call the vehicle's control service, once it has joined (see :meth:`wait_joined`).
+
+        Raises:
+            VehicleUnavailable: the vehicle is not on the link.
+            GraphError: the call failed or was not answered in ``timeout_s``.
+        """
+        await self.wait_joined()
+        try:
+            return await self.graph.call_service(
+                names.control_service(self.name), args, timeout=timeout_s
+            )
+        except NotFound as exc:  # it left between the check and the call
+            raise VehicleUnavailable(f"{self.name}'s flight process is not connected") from exc
 
     def _send(self, args: dict[str, Any]) -> None:
         """Send without waiting, from the loop or from a worker thread (sync REST routes)."""
@@ -213,7 +332,7 @@ class RemoteDroneStack(DroneStack):
         async def send() -> None:
             try:
                 await self.call(args)
-            except GraphError as exc:
+            except (GraphError, RemoteCallError) as exc:
                 log.error("%s: %s not delivered: %s", self.name, args.get("op"), exc)
 
         try:
@@ -261,11 +380,14 @@ class RemoteDialog:
     async def handle_utterance(
         self, text: str, confidence: float = 1.0, source: str = "text", role: str = "pilot"
     ) -> DialogResult:
+        touch = getattr(self.stack, "touch_recording", None)
+        if touch is not None:  # the recording's id reaches the vehicle before the utterance
+            touch()
         args: dict[str, Any] = {"op": "utterance", "text": text, "source": source, "role": role}
         args["confidence"] = confidence if math.isfinite(confidence) else 0.0
         try:
             out = await self.stack.call(args)
-        except GraphError as exc:
+        except (GraphError, RemoteCallError) as exc:
             return DialogResult(f"{self.stack.name} cannot be reached now ({exc}).", [], False)
         return DialogResult(
             str(out.get("reply", "")), list(out.get("commands") or []), bool(out.get("accepted"))
