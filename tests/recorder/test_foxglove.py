@@ -30,6 +30,7 @@ import cbor2
 import httpx
 import pytest
 
+from server.cli import main as cli_main
 from server.recorder.mcapfile import read_recording
 from server.ros1 import codec_for
 from tests.rosbridge.wsclient import RawClient
@@ -312,7 +313,9 @@ def test_replay_serves_the_recording_read_only_with_a_timeline(
         assert topics["messages"] == flight["rows"][0]["messages"]
 
 
-def test_replay_refuses_bad_files_naming_the_offset(flight: dict[str, Any], tmp_path: Path) -> None:
+def test_replay_refuses_bad_files_naming_the_offset(
+    flight: dict[str, Any], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     data = flight["path"].read_bytes()
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(data[: len(data) // 2])
@@ -320,13 +323,14 @@ def test_replay_refuses_bad_files_naming_the_offset(flight: dict[str, Any], tmp_
     junk.write_bytes(b"\x00" * 64)
 
     def replay(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [sys.executable, "-m", "server", "replay", *args],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
+        """``uav-console replay ARGS`` in this process (its exit code and stderr): each of
+        these fails before serving anything."""
+        try:
+            code = cli_main(["replay", *args])
+        except SystemExit as exc:  # argparse's refusals
+            code = int(exc.code or 0)
+        err = capsys.readouterr().err
+        return subprocess.CompletedProcess(["replay", *args], code, "", err)
 
     r = replay(str(cut))
     assert r.returncode == 2
