@@ -84,21 +84,15 @@ def test_fingerprints_and_client_contexts(tmp_path: Path) -> None:
         check_pinned(None, fp)
 
 
-def test_serve_refuses_half_a_certificate_and_a_bad_recognizer(tmp_path: Path) -> None:
-    import os
-    import subprocess
-    import sys
+def test_serve_refuses_half_a_certificate_and_a_bad_recognizer(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``uav-console serve`` in this process: both refusals come before anything starts."""
+    from server.cli import main
 
-    root = Path(__file__).resolve().parents[2]
-    base = [sys.executable, "-m", "server", "serve", "--data-dir", str(tmp_path), "--port", "1"]
-    half = subprocess.run(
-        [*base, "--host", "0.0.0.0", "--cert", str(tmp_path / "c.pem")],
-        cwd=root,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert half.returncode == 2 and "--cert and --key go together" in half.stderr
-    env = dict(os.environ, UAVC_RECOGNIZER="cloud")
-    bad = subprocess.run(base, cwd=root, env=env, capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 2 and "server, browser or auto" in bad.stderr
+    base = ["serve", "--data-dir", str(tmp_path), "--port", "1"]
+    assert main([*base, "--host", "0.0.0.0", "--cert", str(tmp_path / "c.pem")]) == 2
+    assert "--cert and --key go together" in capsys.readouterr().err
+    monkeypatch.setenv("UAVC_RECOGNIZER", "cloud")
+    assert main(base) == 2
+    assert "server, browser or auto" in capsys.readouterr().err
