@@ -204,10 +204,19 @@ def test_interim_text_shown_while_speaking(browser: Any, server: ServerProcess) 
 def test_map_marker_offers_go_there(console: ConsolePage) -> None:
     page = console.page
     page.wait_for_function("uavConsole.map.world !== null", timeout=10_000)
-    pt = page.evaluate("uavConsole.map.markerPixel(2)")
-    assert pt is not None
-    page.locator("#map").click(position={"x": pt["x"], "y": pt["y"]})
-    page.wait_for_selector("#map-popover:not([hidden])", timeout=2000)
+    # The page lays itself out again as the first telemetry fills the status bar, which can
+    # move the map between reading the marker's pixel and clicking it: read it afresh and
+    # click again until the popover opens (a person re-aims the same way).
+    for _ in range(5):
+        pt = page.evaluate("uavConsole.map.markerPixel(2)")
+        assert pt is not None
+        page.locator("#map").click(position={"x": pt["x"], "y": pt["y"]})
+        try:
+            page.wait_for_selector("#map-popover:not([hidden])", timeout=1000)
+            break
+        except PlaywrightTimeout:
+            continue
+    assert page.is_visible("#map-popover")
     assert page.text_content("#map-go") == "Go to marker 2"
     page.click("#map-cancel")
     assert page.is_hidden("#map-popover")

@@ -32,11 +32,15 @@ def test_drone_selector_switches_topics(browser: Any, fleet_server: ServerProces
             uavConsole.ros.subscribe('/uav2/cmd_vel', 'geometry_msgs/Twist',
                                      m => window.__seen.push(m)); }""")
         page.click("#arm-keys")  # keys that move the drone need keyboard flying on
+        page.wait_for_selector("#arm-keys[aria-pressed='true']", timeout=5000)
         page.click("#camera-panel")
+        # Held until two jog messages came back: our own subscription is registered by a
+        # round trip to the server, so the first messages of a short hold can precede it.
         page.keyboard.down("q")
-        page.wait_for_timeout(300)
-        page.keyboard.up("q")
-        page.wait_for_function("window.__seen.length >= 2", timeout=5000)
+        try:
+            page.wait_for_function("window.__seen.length >= 2", timeout=10_000)
+        finally:
+            page.keyboard.up("q")
         seen = page.evaluate("window.__seen")
         assert seen[0]["angular"]["z"] == pytest.approx(0.3)
         page.wait_for_function(
