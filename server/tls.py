@@ -290,6 +290,15 @@ def client_context(ca_file: Path | None = None, pinned: str | None = None) -> ss
         raise TLSError(f"cannot read the CA file {ca_file}: {exc}") from exc
 
 
+def untrusted(exc: ssl.SSLCertVerificationError) -> str:
+    """What a client joining a central server tells its operator when the server's certificate
+    does not verify, and how to trust it."""
+    return (
+        f"the central server's certificate is not trusted ({exc.verify_message}); "
+        "give --ca FILE (its ca.pem) or --fingerprint SHA256 (printed by serve)"
+    )
+
+
 def check_pinned(ssl_object: ssl.SSLObject | ssl.SSLSocket | None, pinned: str) -> None:
     """Raises TLSError unless the peer's certificate has the pinned fingerprint."""
     der = ssl_object.getpeercert(binary_form=True) if ssl_object is not None else None

@@ -35,7 +35,7 @@ from server.fleet.messages import (
     STATUS_TYPE,
     LtmStatus,
 )
-from server.tls import TLSError, check_pinned, client_context
+from server.tls import TLSError, check_pinned, client_context, untrusted
 
 log = logging.getLogger(__name__)
 
@@ -184,10 +184,7 @@ class VehicleClient:
                         with contextlib.suppress(asyncio.CancelledError, Exception):
                             await t
             except ssl.SSLCertVerificationError as exc:
-                raise ClientError(
-                    f"the central server's certificate is not trusted ({exc.verify_message}); "
-                    "give --ca FILE (its ca.pem) or --fingerprint SHA256 (printed by serve)"
-                ) from exc
+                raise ClientError(untrusted(exc)) from exc
             except TLSError as exc:
                 raise ClientError(str(exc)) from exc
             except (OSError, InvalidHandshake, WebSocketException, TimeoutError) as exc:

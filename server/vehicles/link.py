@@ -23,7 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from server.tls import TLSError, check_pinned, client_context
+from server.tls import TLSError, check_pinned, client_context, untrusted
 from server.vehicles.errors import LinkError
 from server.vehicles.link_core import GraphLinkCore
 
@@ -100,10 +100,7 @@ class GraphLink:
                         with contextlib.suppress(asyncio.CancelledError, Exception):
                             await t
             except ssl.SSLCertVerificationError as exc:
-                raise LinkError(
-                    f"the central server's certificate is not trusted ({exc.verify_message}); "
-                    "give --ca FILE (its ca.pem) or --fingerprint SHA256 (printed by serve)"
-                ) from exc
+                raise LinkError(untrusted(exc)) from exc
             except TLSError as exc:
                 raise LinkError(str(exc)) from exc
             except (OSError, InvalidHandshake, WebSocketException, TimeoutError) as exc:
