@@ -38,7 +38,14 @@ from typing import Any, Protocol
 import numpy as np
 
 from drone.ardrone.frame_clock import FrameClock
-from drone.ardrone.navdata import TAG_DEMO, TAG_GPS, TAG_PRESSURE_RAW, CtrlState, Navdata
+from drone.ardrone.navdata import (
+    TAG_DEMO,
+    TAG_GPS,
+    TAG_PRESSURE_RAW,
+    CtrlState,
+    DroneState,
+    Navdata,
+)
 from drone.control.clock import Clock, MonotonicClock
 from drone.control.loop import ControlLoop, LoopStats
 from drone.control.pid import DroneLimits, PaperGains, PaperPID, PcmdCommand, Setpoint, wrap_angle
@@ -357,8 +364,19 @@ class Vehicle:
         if not body.flying:
             rate = 0.0
         landed = not body.flying and body.ctrl_state == CtrlState.LANDED
+        # Motors cut (the EMERGENCY state bit): the drone falls; the EKF takes navdata ungated.
+        unpowered = bool(nav.state & DroneState.EMERGENCY)
         self.ekf.update_navdata(
-            NavdataInput(now, body.vx_m_s, body.vy_m_s, body.vz_m_s, body.altitude_m, rate, landed)
+            NavdataInput(
+                now,
+                body.vx_m_s,
+                body.vy_m_s,
+                body.vz_m_s,
+                body.altitude_m,
+                rate,
+                landed,
+                unpowered,
+            )
         )
         for cb in self._nav_listeners:
             cb(nav, now)
@@ -487,7 +505,7 @@ class Vehicle:
         body = nav.to_body() if nav is not None and nav.demo is not None else None
         ctrl = body.ctrl_state if body is not None else CtrlState.DEFAULT
         ctrl_name = ctrl.name if isinstance(ctrl, CtrlState) else str(ctrl)
-        emergency = bool(nav is not None and nav.state & (1 << 31))
+        emergency = bool(nav is not None and nav.state & DroneState.EMERGENCY)
         age = None if self._nav_t is None else max(0.0, now - self._nav_t)
         link_ok = self._link_ok and age is not None and age < self.link_timeout_s
         return VehicleSnapshot(

@@ -20,7 +20,11 @@ trusted height source, is never locked out by a velocity jump). A component reje
 (counted in ``EkfStats.navdata_reinits``), and while a component keeps being rejected the
 estimate says so (:attr:`Estimate.disagreement`) for the ANS to tell the operator. A drone
 standing landed (``NavdataInput.landed``) gets no process noise: it cannot wander, so its pose
-stays as certain as when it touched down.
+stays as certain as when it touched down. A drone whose motors are cut (``NavdataInput.unpowered``:
+the EMERGENCY state) falls at g and stops dead on the floor, which the constant-velocity model with
+σa,z = 3 m/s² cannot follow: its navdata is fused without the gate (the sensors are all there is
+to know about a falling drone), so the fall is neither rejected, re-initialised nor reported as a
+disagreement (the ANS said "estimate disagrees" after every emergency stop before).
 Marker update: z = [px, py, pz, ψ] from one marker's PnP pose,
 H linear, R from ``markers.py`` (grows with distance and viewing angle).
 
@@ -75,6 +79,7 @@ class NavdataInput:
     altitude_m: float  # ultrasound height over the floor
     yaw_rate: float  # CCW rad/s (from successive psi)
     landed: bool = False  # on the floor with the motors off: the drone cannot move
+    unpowered: bool = False  # motors cut (EMERGENCY): falling, or lying where it fell
 
 
 @dataclass(frozen=True, eq=False)
@@ -309,16 +314,18 @@ class ExtendedKalmanFilter:
     def _apply_navdata(self, nav: NavdataInput) -> bool:
         """Predict to ``nav.t``, then fuse each navdata component under its own gate.
 
-        Returns False when any component was rejected (and not re-initialised).
+        Returns False when any component was rejected (and not re-initialised). With the
+        motors cut (``nav.unpowered``) nothing is gated: the model does not hold (module doc).
         """
         c = self.cfg
+        gate = not nav.unpowered
         self._predict(nav.t - self.t, nav.yaw_rate, still=nav.landed)
         self.t = nav.t
         self.omega = nav.yaw_rate
         ok = True
         # altitude first: the most trusted height source (ultrasound, σ ~ 3 cm)
-        ok &= self._nav_component("altitude", IZ, nav.altitude_m, c.alt_sigma**2, nav)
-        ok &= self._nav_component("vertical speed", IVZ, nav.vz, c.vz_sigma**2, nav)
+        ok &= self._nav_component("altitude", IZ, nav.altitude_m, c.alt_sigma**2, nav, gate)
+        ok &= self._nav_component("vertical speed", IVZ, nav.vz, c.vz_sigma**2, nav, gate)
         psi, vx, vy = self.x[IYAW], self.x[IVX], self.x[IVY]
         cs, sn = math.cos(psi), math.sin(psi)
         # h(x): body-frame velocities Rᵀ(ψ)·v, and its Jacobian ∂h/∂x
@@ -328,15 +335,16 @@ class ExtendedKalmanFilter:
         H[1, IYAW], H[1, IVX], H[1, IVY] = -cs * vx - sn * vy, -sn, cs
         y = np.array([nav.vx_body, nav.vy_body]) - hx
         R = np.eye(2) * c.vel_sigma**2
-        ok &= self._nav_component("velocity", (y, H, R), 0.0, 0.0, nav)
+        ok &= self._nav_component("velocity", (y, H, R), 0.0, 0.0, nav, gate)
         if ok:
             self.stats.navdata_updates += 1
         else:
             self.stats.navdata_rejected += 1
         return bool(ok)
 
-    def _update_direct(self, i: int, z: float, r: float) -> bool:
-        """Gated update of a measurement of state ``i`` itself (H = eᵢ, scalar R = ``r``).
+    def _update_direct(self, i: int, z: float, r: float, gate: bool = True) -> bool:
+        """Gated (unless ``gate`` is False) update of a measurement of state ``i`` itself
+        (H = eᵢ, scalar R = ``r``).
 
         The general update specialised: S = Pᵢᵢ + r, K = P·eᵢ / S, and the Joseph form
         (I−KH)P(I−KH)ᵀ + K r Kᵀ reduces exactly to P − S·K·Kᵀ (symmetric by construction);
@@ -344,7 +352,7 @@ class ExtendedKalmanFilter:
         """
         y = z - self.x[i]
         S = self.P[i, i] + r
-        if y * y / S > CHI2_999[1]:
+        if gate and y * y / S > CHI2_999[1]:
             return False
         K = self.P[:, i] / S
         self.x = self.x + K * y
@@ -360,6 +368,7 @@ class ExtendedKalmanFilter:
         z: float,
         r: float,
         nav: NavdataInput,
+        gate: bool = True,
     ) -> bool:
         """Gated update of one navdata component; re-initialise it after persistent rejection.
 
@@ -368,9 +377,9 @@ class ExtendedKalmanFilter:
         (navdata is the drone's own sensing), so that part of the state restarts from navdata.
         """
         if isinstance(which, int):  # a state measured directly (altitude, vertical speed)
-            ok = self._update_direct(which, z, r)
+            ok = self._update_direct(which, z, r, gate)
         else:  # (innovation, Jacobian, R)
-            ok, _ = self._update(*which, gate=True)
+            ok, _ = self._update(*which, gate=gate)
         if ok:
             self._nav_rejects_in_row[name] = 0
             return True
