@@ -11,7 +11,7 @@ import contextlib
 import os
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from server.settings import ROOT, Settings, SettingsError
@@ -47,7 +47,8 @@ def _parser() -> argparse.ArgumentParser:
         "--vehicles",
         choices=("inline", "process"),
         default=None,
-        help="each drone's flight stack in the web process (inline) or its own process",
+        help="each drone's flight stack in its own supervised process (process, the default; "
+        "MAVLink drones stay inline) or in the web process (inline); env UAVC_VEHICLES",
     )
 
     sim = sub.add_parser("sim", help="the simulator alone, behind the AR.Drone protocol")
@@ -159,6 +160,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 2
 
 
+def serve_vehicles(flag: str | None, env: Mapping[str, str]) -> str:
+    """Where ``serve`` runs each drone's flight stack: ``--vehicles``, else ``UAVC_VEHICLES``,
+    else ``process`` (issue 14: its own supervised process). ``inline`` keeps it in the web
+    process; MAVLink drones fly inline either way (``VehicleCentral.can_spawn``). ``Settings``
+    itself defaults to ``inline``: an app built in-process (tests, embedding) spawns nothing
+    unless asked."""
+    return flag or env.get("UAVC_VEHICLES") or "process"
+
+
 def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
@@ -183,10 +193,7 @@ def _serve(args: argparse.Namespace) -> int:
         key=args.key,
         tls=False if args.no_tls else None,
         asr_preload=True,
-        # `--vehicles process` runs each drone's flight stack in its own supervised process
-        # (issue 14). Inline stays the default until every console feature (direct-action
-        # refusals, MAVLink drones, ...) works through the vehicle link.
-        vehicles=args.vehicles or os.environ.get("UAVC_VEHICLES") or "inline",
+        vehicles=serve_vehicles(args.vehicles, os.environ),
     )
     if settings.recognizer not in ("server", "browser", "auto"):
         raise SettingsError(

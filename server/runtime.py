@@ -191,7 +191,8 @@ class Runtime:
             )
         count = 0 if self.settings.drone == "none" else max(1, self.settings.fleet)
         await self.vehicles.start()
-        if self.settings.vehicles == "process" and self.vehicles.can_spawn(self.settings.drone):
+        process = self.settings.vehicles == "process"
+        if process and self.vehicles.can_spawn(self.settings.drone, count):
             await self.vehicles.spawn(count)
             count = 0
         for index in range(count):
@@ -377,6 +378,7 @@ class Runtime:
             f"{base}?token={self.tokens.pilot_token}",
             f"  observer (watch only): {base}?token={self.tokens.observer_token}",
         ]
+        lines.append(f"  flight stacks: {self.vehicles.flight_stacks()}")
         if self.tls is not None:
             lines.append(f"  certificate SHA-256: {self.tls.fingerprint}")
             if self.tls.ca is not None:

@@ -70,7 +70,8 @@ class Settings:
     cert: Path | None = None
     key: Path | None = None
     # Where each drone's flight-critical stack runs (issue 14): "inline" in the web process, or
-    # "process": one supervised vehicle process per drone (server/vehicles/).
+    # "process": one supervised vehicle process per drone (server/vehicles/). `serve` defaults
+    # to "process" (server/cli.py); an app built in-process (tests, embedding) stays inline.
     vehicles: str = "inline"
     # A vehicle process that hears nothing from the central server hovers after
     # heartbeat_timeout_s and lands after this long (the web process crashed or stalls).

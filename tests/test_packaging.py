@@ -148,6 +148,7 @@ def installed_server(venv: Path, tmp_path: Path) -> Iterator[str]:
     port = free_port()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "UAVC_MODEL_DIR")}
     env.update(UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_DATA_DIR=str(tmp_path))
+    env.setdefault("UAVC_VEHICLES", "inline")  # packaging, not isolation (tests/isolation)
     log = (tmp_path / "server.log").open("wb")
     cmd = [str(venv / "bin" / "uav-console"), "serve", "--port", str(port), "--token", TOKEN]
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=log, stderr=subprocess.STDOUT)

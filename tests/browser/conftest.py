@@ -82,6 +82,9 @@ class ServerProcess:
             UAVC_DATA_DIR=str(self.data_dir),
             PYTHONUNBUFFERED="1",
         )
+        # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says
+        # otherwise (serve defaults to process mode; tests/isolation covers it).
+        env.setdefault("UAVC_VEHICLES", "inline")
         self.log_path = self.data_dir / f"server-{self.port}.log"
         log = self.log_path.open("ab")
         cmd = [

@@ -71,6 +71,7 @@ def tls_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TlsServer]:
     data = tmp_path_factory.mktemp("speech-browser")
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, PYTHONUNBUFFERED="1")
+    env.setdefault("UAVC_VEHICLES", "inline")  # speech, not isolation (tests/isolation)
     cmd = [
         sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),
         "--token", PILOT, "--observer-token", OBSERVER, "--data-dir", str(data), "--seed", "1",

@@ -94,6 +94,20 @@ def test_serve_keeps_the_same_tokens_across_restarts(tmp_path: Path) -> None:
     assert lines[0] == lines[1]
 
 
+def test_serve_runs_flight_stacks_in_their_own_processes_unless_told_inline() -> None:
+    """Issue 14: ``serve`` defaults to ``--vehicles process``; the flag beats the environment;
+    an app built in-process (``Settings``: tests, embedding) stays inline."""
+    from server.cli import _parser, serve_vehicles
+    from server.settings import Settings
+
+    assert _parser().parse_args(["serve"]).vehicles is None
+    assert serve_vehicles(None, {}) == "process"
+    assert serve_vehicles(None, {"UAVC_VEHICLES": "inline"}) == "inline"
+    assert serve_vehicles("inline", {"UAVC_VEHICLES": "process"}) == "inline"
+    assert serve_vehicles("process", {"UAVC_VEHICLES": "inline"}) == "process"
+    assert Settings().vehicles == "inline"
+
+
 def test_bad_environment_setting_is_a_clear_error(tmp_path: Path) -> None:
     env = {**os.environ, "UAVC_PORT": "eighty"}
     out = subprocess.run(

@@ -101,6 +101,9 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     data = tmp_path_factory.mktemp("e2e-data")
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_SIM_SPEED=SIM_SPEED)
+    # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says otherwise
+    # (serve defaults to process mode; tests/isolation covers it).
+    env.setdefault("UAVC_VEHICLES", "inline")
     log_path = data / "server.log"
     cmd = [
         sys.executable,

@@ -70,6 +70,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[SimThread, S
         serve(tmp, SIM_ADDR, extra=("--vehicles", "process"), env=env) as srv,
     ):
         srv.wait_vehicle()
+        assert "flight stacks: uav1 in its own process" in srv.log_path.read_text()
         yield sim, srv
 
 

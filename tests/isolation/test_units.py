@@ -235,6 +235,27 @@ def test_which_drones_a_vehicle_process_can_fly() -> None:
     assert VehicleCentral.can_spawn("none")  # nothing to spawn
     assert not VehicleCentral.can_spawn("tcp:127.0.0.1:5760")  # MAVLink: inline for now
     assert not VehicleCentral.can_spawn("sim-mavlink")
+    assert not VehicleCentral.can_spawn("/dev/ttyUSB0,57600")
+    # a fleet: every drone of the list (the last entry repeating) must fit, or all fly inline
+    assert VehicleCentral.can_spawn("192.168.1.10,192.168.1.11", 2)
+    assert VehicleCentral.can_spawn("sim,sim-mavlink", 1)  # uav2 is not there
+    assert not VehicleCentral.can_spawn("sim,sim-mavlink", 2)
+    assert not VehicleCentral.can_spawn("sim-mavlink,sim", 3)
+
+
+def test_serve_says_where_each_flight_stack_runs() -> None:
+    from server.vehicles.central import flight_stacks_line
+
+    assert flight_stacks_line(["uav1"], [], "process") == "uav1 in its own process"
+    assert flight_stacks_line(["uav1", "uav2"], [], "process") == (
+        "uav1, uav2 each in its own process"
+    )
+    assert (
+        flight_stacks_line([], ["uav1"], "inline") == "uav1 in the web process (--vehicles inline)"
+    )
+    mavlink = flight_stacks_line([], ["uav1", "uav2"], "process")
+    assert mavlink.startswith("uav1, uav2 in the web process (a MAVLink drone cannot")
+    assert flight_stacks_line([], [], "process") == "no drone"
 
 
 def test_serve_refuses_an_unknown_vehicles_mode(tmp_path: Path) -> None:

@@ -125,6 +125,8 @@ def flight(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
         "UAVC_SIM_BASE_ADDR": SIM_ADDR,
         "UAVC_RECORDER_IDLE_S": "2",
         "UAVC_RECORDER_CHUNK_S": "0.5",
+        # recording, not isolation: flight stacks inline unless UAVC_VEHICLES says otherwise
+        "UAVC_VEHICLES": os.environ.get("UAVC_VEHICLES", "inline"),
     }
     with serve(cmd, data, port, "/api/v1/health", **env) as http:
         http.headers.update(pilot)

@@ -96,6 +96,7 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
     clips = tmp_path_factory.mktemp("speech-clips")
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_SIM_SPEED="1")
+    env.setdefault("UAVC_VEHICLES", "inline")  # speech, not isolation (tests/isolation)
     log_path = data / "server.log"
     cmd = [
         sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),
