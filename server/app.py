@@ -6,6 +6,7 @@ import contextlib
 import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
+from typing import Any
 
 from fastapi import Depends, FastAPI, Request
 from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
@@ -64,7 +65,11 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     async def vehicle_unavailable(request: Request, exc: VehicleUnavailable) -> JSONResponse:
         # A drone whose flight process is starting, restarting or gone: not a missing drone
         # (404) and not a server fault (500); the caller may retry.
-        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "1"})
+        body: dict[str, Any] = {"detail": str(exc), "retry_after_s": exc.retry_after_s}
+        if exc.drone is not None:
+            body["drone"] = exc.drone
+        headers = {"Retry-After": str(exc.retry_after_s)}
+        return JSONResponse(body, status_code=503, headers=headers)
 
     for router in (
         system.router,

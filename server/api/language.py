@@ -7,6 +7,8 @@ from fastapi import APIRouter, HTTPException, Request
 from server.api.deps import PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import CommandRequest, CommandResponse, InterpretRequest, InterpretResponse
 from server.dialog.addressing import parse_address, recipients
+from server.dialog.manager import DialogResult
+from server.vehicles.errors import VehicleUnavailable
 
 router = APIRouter(tags=["language"])
 
@@ -28,6 +30,8 @@ async def command(
     """Say ``text`` to a drone's dialog manager, as if spoken with ``confidence``.
 
     Needs the pilot lease to be free unless all it asks is land, emergency or hover (409).
+    503 (``Retry-After``) when the one drone addressed has a flight process that is starting,
+    gone or silent (``server.vehicles.remote``); a fleet command tells which drones missed it.
     """
     address = parse_address(body.text)
     check_lease(request, runtime, {c["action"] for c in runtime.interpret(address.text, None)})
@@ -44,12 +48,18 @@ async def command(
         )
     # A stated confidence means recognised speech: below the threshold it is not executed.
     source = "speech" if "confidence" in body.model_fields_set else "rest"
-    results = [
-        await runtime.dialogs[t].handle_utterance(
-            body.text, confidence=body.confidence, source=source, role=role
-        )
-        for t in targets
-    ]
+    results = []
+    for t in targets:
+        try:
+            result = await runtime.dialogs[t].handle_utterance(
+                body.text, confidence=body.confidence, source=source, role=role
+            )
+        except VehicleUnavailable as exc:
+            if len(targets) == 1:
+                raise  # 503 with Retry-After (server.app): nothing else was done
+            # "all drones land": the others have their command; say who did not get it
+            result = DialogResult(f"{exc}.", [], False)
+        results.append(result)
     return CommandResponse(
         reply=" ".join(r.reply for r in results),
         commands=results[0].commands,

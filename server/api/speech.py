@@ -91,7 +91,8 @@ async def speech(
     unless ``execute=false``, run it like ``POST /command`` with its confidence.
 
     400 not a usable WAV / no samples, 413 too long, 415 not ``audio/wav``, 403 an observer
-    asking to execute, 409 another pilot holds the lease, 503 busy (Retry-After) or no model.
+    asking to execute, 409 another pilot holds the lease, 503 busy (Retry-After), no model, or
+    the drone's flight process starting, gone or silent (Retry-After; ``server.vehicles``).
     """
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype not in WAV_TYPES:

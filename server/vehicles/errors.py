@@ -24,5 +24,10 @@ class RemoteCallError(VehicleError):
 
 
 class VehicleUnavailable(RemoteCallError):
-    """The drone's vehicle process is not on the link: not joined yet (starting, restarting)
-    or gone. REST answers 503 with this message."""
+    """The drone's vehicle process is not on the link: not joined yet (starting, restarting),
+    gone, or silent. REST answers 503 with this message, the drone and ``Retry-After``."""
+
+    def __init__(self, message: str, *, drone: str | None = None, retry_after_s: int = 2) -> None:
+        super().__init__(message)
+        self.drone = drone
+        self.retry_after_s = retry_after_s

@@ -10,7 +10,11 @@ them against its drone's state now, not against telemetry 0.1 s old).
 
 A vehicle that ``serve`` has just spawned (or restarted) takes a few seconds to join: calls made
 meanwhile wait for it (:attr:`RemoteDroneStack.expected_until`, at most ``JOIN_WAIT_S``) instead
-of failing; a vehicle that does not come raises :class:`VehicleUnavailable` (REST: 503).
+of failing; a vehicle that does not come raises :class:`VehicleUnavailable` (REST: 503). A spoken
+or typed command waits less (``COMMAND_JOIN_WAIT_S``), and is not sent to a vehicle that is on
+the link but silent (no telemetry for ``SILENT_S``: stopped, stalled), where it would wait in a
+socket buffer and act whenever the process came back; one that falls silent while the command
+is being answered is not waited for either: 503 with ``Retry-After`` at once, the caller retries.
 """
 
 from __future__ import annotations
@@ -45,6 +49,10 @@ CALL_TIMEOUT_S = 10.0
 # (start-up is 2-5 s on a busy machine: imports, simulator, driver, perception).
 JOIN_WAIT_S = 30.0
 JOIN_POLL_S = 0.05
+# What a command (``POST /command``, ``POST /speech``) waits for a starting vehicle, and how long
+# a joined one may publish no telemetry (10 Hz) before it counts as unreachable.
+COMMAND_JOIN_WAIT_S = 3.0
+SILENT_S = 2.0
 STOPS = ("land", "emergency")
 
 
@@ -286,45 +294,86 @@ class RemoteDroneStack(DroneStack):
         return self.graph.service_type(names.control_service(self.name)) is not None
 
     def expect(self, wait_s: float = JOIN_WAIT_S) -> None:
-        """The vehicle process was (re)started: calls wait up to ``wait_s`` for it to join."""
+        """The vehicle process was (re)started: calls wait up to ``wait_s`` for it to join
+        (and the old process's telemetry no longer says how long the new one is silent)."""
         self.expected_until = time.monotonic() + wait_s
+        self.last_t = None
 
     def _join_wait_left(self) -> float:
         if self.expected_until is None:
             return 0.0
         return max(0.0, self.expected_until - time.monotonic())
 
-    async def wait_joined(self) -> None:
-        """Return once the vehicle is on the link; wait while it is expected to join.
+    def _unavailable(self, why: str) -> VehicleUnavailable:
+        return VehicleUnavailable(f"{self.name}'s flight process {why}", drone=self.name)
+
+    async def wait_joined(self, max_wait_s: float | None = None) -> None:
+        """Return once the vehicle is on the link; wait while it is expected to join (at most
+        ``max_wait_s`` when given).
 
         Raises:
             VehicleUnavailable: it is not there and not expected, or did not join in time.
         """
+        end = time.monotonic() + (math.inf if max_wait_s is None else max_wait_s)
         while not self.joined:
-            if self._join_wait_left() <= 0.0:
+            if self._join_wait_left() <= 0.0 or time.monotonic() >= end:
                 if self.expected_until is not None:
-                    raise VehicleUnavailable(
-                        f"{self.name}'s flight process has not joined the server yet; "
-                        "try again in a moment"
+                    raise self._unavailable(
+                        "has not joined the server yet (it is starting); try again in a moment"
                     )
-                raise VehicleUnavailable(f"{self.name}'s flight process is not connected")
+                raise self._unavailable("is not connected")
             await asyncio.sleep(JOIN_POLL_S)
         self.expected_until = None
 
-    async def call(self, args: dict[str, Any], timeout_s: float = CALL_TIMEOUT_S) -> Any:
-        """Call the vehicle's control service, once it has joined (see :meth:`wait_joined`).
+    def silent_for(self) -> float:
+        """Seconds since the vehicle's last telemetry (0 before the first: it has just
+        joined, or the web process has just started)."""
+        return 0.0 if self.last_t is None else time.monotonic() - self.last_t
+
+    async def call(
+        self,
+        args: dict[str, Any],
+        timeout_s: float = CALL_TIMEOUT_S,
+        *,
+        join_wait_s: float | None = None,
+        silent_s: float | None = None,
+    ) -> Any:
+        """Call the vehicle's control service, once it has joined (see :meth:`wait_joined`,
+        ``join_wait_s`` its longest wait). With ``silent_s``, a vehicle whose telemetry has
+        stopped that long is not called, and the call is given up if it stops meanwhile.
 
         Raises:
-            VehicleUnavailable: the vehicle is not on the link.
+            VehicleUnavailable: the vehicle is not on the link (or silent).
             GraphError: the call failed or was not answered in ``timeout_s``.
         """
-        await self.wait_joined()
-        try:
-            return await self.graph.call_service(
-                names.control_service(self.name), args, timeout=timeout_s
+        await self.wait_joined(join_wait_s)
+        if silent_s is not None and self.silent_for() > silent_s:
+            raise self._unavailable(
+                f"is not answering (silent for {self.silent_for():.1f} s); nothing was sent"
             )
+        coro = self.graph.call_service(names.control_service(self.name), args, timeout=timeout_s)
+        try:
+            if silent_s is None:
+                return await coro
+            return await self._unless_silent(coro, silent_s)
         except NotFound as exc:  # it left between the check and the call
-            raise VehicleUnavailable(f"{self.name}'s flight process is not connected") from exc
+            raise self._unavailable("is not connected") from exc
+
+    async def _unless_silent(self, coro: Any, silent_s: float) -> Any:
+        """Await ``coro``, or give it up once the vehicle's telemetry stops for ``silent_s``."""
+        call = asyncio.ensure_future(coro)
+        try:
+            while True:
+                done, _ = await asyncio.wait({call}, timeout=0.1)
+                if done:
+                    return call.result()
+                if self.silent_for() > silent_s:
+                    raise self._unavailable(
+                        f"stopped answering (silent for {self.silent_for():.1f} s); the "
+                        "command was sent and may still be carried out if the process recovers"
+                    )
+        finally:
+            call.cancel()
 
     def _send(self, args: dict[str, Any]) -> None:
         """Send without waiting, from the loop or from a worker thread (sync REST routes)."""
@@ -380,13 +429,21 @@ class RemoteDialog:
     async def handle_utterance(
         self, text: str, confidence: float = 1.0, source: str = "text", role: str = "pilot"
     ) -> DialogResult:
+        """The vehicle's dialog's answer.
+
+        Raises:
+            VehicleUnavailable: the vehicle has not joined within ``COMMAND_JOIN_WAIT_S``, is
+                not connected, or is (or falls) silent for ``SILENT_S``.
+        """
         touch = getattr(self.stack, "touch_recording", None)
         if touch is not None:  # the recording's id reaches the vehicle before the utterance
             touch()
         args: dict[str, Any] = {"op": "utterance", "text": text, "source": source, "role": role}
         args["confidence"] = confidence if math.isfinite(confidence) else 0.0
         try:
-            out = await self.stack.call(args)
+            out = await self.stack.call(args, join_wait_s=COMMAND_JOIN_WAIT_S, silent_s=SILENT_S)
+        except VehicleUnavailable:
+            raise  # REST: 503 with Retry-After, within a few seconds
         except (GraphError, RemoteCallError) as exc:
             return DialogResult(f"{self.stack.name} cannot be reached now ({exc}).", [], False)
         return DialogResult(

@@ -141,3 +141,104 @@ async def test_stop_the_patrol_through_an_awaitable_fleet_port(running: bool, re
     assert result.reply == reply
     start = await rig.dm.handle_utterance("start the patrol with all drones")
     assert fleet.calls == ["stop", "start"] and start.accepted
+
+
+# ---- commands to an unreachable vehicle: 503 with Retry-After, within a few seconds ---------
+async def test_a_command_to_a_vehicle_that_does_not_join_gives_up_within_a_few_seconds(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from server.vehicles import remote
+
+    assert remote.COMMAND_JOIN_WAIT_S <= 5.0 < remote.JOIN_WAIT_S
+    monkeypatch.setattr(remote, "COMMAND_JOIN_WAIT_S", 0.2)
+    graph = Graph()
+    graph.bind_loop(asyncio.get_running_loop())
+    stack = _stack(graph)
+    stack.expect()  # restarting: other calls may wait 30 s for it
+    t0 = time.monotonic()
+    with pytest.raises(VehicleUnavailable, match="has not joined") as caught:
+        await remote.RemoteDialog(stack).handle_utterance("take off")
+    assert time.monotonic() - t0 < 5.0  # before: the whole JOIN_WAIT_S (30 s), then a 200
+    assert caught.value.drone == "uav1" and caught.value.retry_after_s > 0
+    assert stack.expected_until is not None  # still expected: a retry waits again
+
+
+async def test_a_silent_vehicle_is_sent_no_command_and_one_falling_silent_is_given_up(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from server.vehicles import remote
+
+    monkeypatch.setattr(remote, "SILENT_S", 0.3)
+    graph = Graph()
+    graph.bind_loop(asyncio.get_running_loop())
+    stack = _stack(graph)
+    seen: list[dict[str, Any]] = []
+    never = asyncio.Event()
+
+    async def control(args: dict[str, Any]) -> dict[str, Any]:
+        seen.append(args)
+        await never.wait()  # a stopped (SIGSTOP) or stalled vehicle process
+        return {}
+
+    graph.advertise_service(names.control_service("uav1"), names.CONTROL_TYPE, control)
+    dialog = remote.RemoteDialog(stack)
+    stack.last_t = time.monotonic() - 1.0  # its telemetry stopped a second ago
+    with pytest.raises(VehicleUnavailable, match="nothing was sent"):
+        await dialog.handle_utterance("go forward 1 meter")
+    assert seen == []  # not queued to act whenever the process comes back
+    stack.last_t = time.monotonic()  # fresh; it falls silent while answering
+    with pytest.raises(VehicleUnavailable, match="stopped answering"):
+        await dialog.handle_utterance("go forward 1 meter")
+    assert [a["text"] for a in seen] == ["go forward 1 meter"]
+
+
+class _Speech:
+    """``runtime.speech`` that hears "take off" in any WAV (no model)."""
+
+    async def recognize_wav(self, body: bytes) -> Any:
+        from server.speech.recognizer import Recognition
+
+        return Recognition("take off", 0.95, [{"action": "takeoff"}], heard="take off")
+
+    async def stop(self) -> None:
+        return None
+
+
+async def test_rest_command_and_speech_answer_503_with_retry_after(
+    tmp_path: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from server.settings import Settings
+    from server.vehicles import remote
+    from tests.app_client import app_client
+
+    monkeypatch.setattr(remote, "COMMAND_JOIN_WAIT_S", 0.2)
+    settings = Settings(data_dir=tmp_path, token="units-pilot", drone="none")
+    async with app_client(settings) as client:
+        rt = client.app.state.runtime  # type: ignore[attr-defined]
+        for name in ("uav1", "uav2"):
+            stack = RemoteDroneStack(rt.graph, name, f"/{name}", simulated=True)
+            rt.drones[name], rt.dialogs[name] = stack, remote.RemoteDialog(stack)
+        rt.drones["uav1"].expect()  # uav1 is starting and never joins
+        rt.speech = _Speech()
+
+        async def uav2(args: dict[str, Any]) -> dict[str, Any]:
+            return {"reply": "uav2: Landing.", "commands": [{"action": "land"}], "accepted": True}
+
+        rt.graph.advertise_service(names.control_service("uav2"), names.CONTROL_TYPE, uav2)
+        r = await client.post("/api/v1/command", json={"text": "take off", "drone": "uav1"})
+        assert r.status_code == 503, r.text
+        assert r.headers["Retry-After"] == "2"
+        body = r.json()
+        assert body["drone"] == "uav1" and body["retry_after_s"] == 2
+        assert "uav1's flight process has not joined the server yet" in body["detail"]
+        wav = {"Content-Type": "audio/wav"}
+        r = await client.post("/api/v1/speech?drone=uav1", content=b"RIFF", headers=wav)
+        assert r.status_code == 503 and r.headers["Retry-After"] == "2", r.text
+        assert r.json()["drone"] == "uav1"
+        # a fleet command: uav2 lands, and the reply says uav1 did not get it (no 503 to retry)
+        r = await client.post("/api/v1/command", json={"text": "all drones land"})
+        assert r.status_code == 200, r.text
+        assert (
+            "uav1's flight process" in r.json()["reply"] and "uav2: Landing." in r.json()["reply"]
+        )
+        assert not r.json()["accepted"]
