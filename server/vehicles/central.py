@@ -7,9 +7,10 @@
   (:class:`~server.vehicles.remote.RemoteDroneStack` + :class:`RemoteDialog`), whether
   ``serve`` spawned the vehicle or it joined from another host (``uav-console vehicle``).
 - Heartbeat: ``/vehicles/heartbeat`` at 10 Hz, so a vehicle can tell a stalled server.
-- Supervision (``--vehicles process``): one ``uav-console vehicle`` child per drone; when one
-  exits (a crash, ``kill -9``) the console is told on ``/console/reply`` (level ``alert``) and
-  the child is started again (backoff 0.5 s doubling to 5 s, reset after 30 s up).
+- Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle`` child
+  per drone; when one exits (a crash, ``kill -9``) the console is told on ``/console/reply``
+  (level ``alert``) and the child is started again (backoff 0.5 s doubling to 5 s, reset after
+  30 s up).
 """
 
 from __future__ import annotations
