@@ -362,12 +362,16 @@ class RemoteDroneStack(DroneStack):
     async def _unless_silent(self, coro: Any, silent_s: float) -> Any:
         """Await ``coro``, or give it up once the vehicle's telemetry stops for ``silent_s``."""
         call = asyncio.ensure_future(coro)
+        polled = time.monotonic()
         try:
             while True:
                 done, _ = await asyncio.wait({call}, timeout=0.1)
                 if done:
                     return call.result()
-                if self.silent_for() > silent_s:
+                # Our own loop stalled (a burst of untrusted input): the telemetry may be
+                # waiting in the link's socket; judge the vehicle on the next round.
+                stalled, polled = time.monotonic() - polled > 0.5, time.monotonic()
+                if not stalled and self.silent_for() > silent_s:
                     raise self._unavailable(
                         f"stopped answering (silent for {self.silent_for():.1f} s); the "
                         "command was sent and may still be carried out if the process recovers"

@@ -112,9 +112,11 @@ class ServerProcess:
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
                 raise RuntimeError(f"server exited with {self.proc.returncode}:\n{self.log_tail()}")
-            with contextlib.suppress(httpx.HTTPError):
+            with contextlib.suppress(httpx.HTTPError, ValueError):
                 r = httpx.get(f"{self.base}/api/v1/health", timeout=1.0)
-                if r.status_code == 200:
+                # and every drone linked: a vehicle process (UAVC_VEHICLES=process) joins
+                # a few seconds after the server answers, and commands wait 3 s at most
+                if r.status_code == 200 and all(r.json()["drones"].values()):
                     return
             time.sleep(0.2)
         self.stop()
