@@ -271,6 +271,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="108 clips, 5 s loop rows")
     ap.add_argument("--asr-model", type=Path, default=None)
+    ap.add_argument(
+        "--threads", type=int, default=1, help="threads per decoder (threads_per_worker)"
+    )
     ap.add_argument("--json", type=Path)
     ap.add_argument("--skip-loop", action="store_true")
     ap.add_argument("--skip-accuracy", action="store_true")
@@ -296,7 +299,9 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()
     cores = os.cpu_count()
     print(f"load average at start: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {cores} cores")
-    rec = Recognizer(load_whisper(resolve(args.asr_model), workers=1), default_nlu())
+    print(f"decoder threads: {args.threads}")
+    whisper = load_whisper(resolve(args.asr_model), workers=1, threads_per_worker=args.threads)
+    rec = Recognizer(whisper, default_nlu())
     out: dict[str, Any] = {}
     if not args.skip_accuracy:
         out["accuracy"] = bench_accuracy(rec, args.quick)

@@ -1,9 +1,10 @@
 """Audio -> text with faster-whisper, then text -> a sentence the grammars accept.
 
-Grammar guidance has two steps: the decoder is primed with the grammars' vocabulary
-(:data:`server.speech.vocabulary.PROMPT`), and its transcript is snapped to the nearest
-sentence the NLU understands (:mod:`server.speech.snap`). ``guided=False`` turns both off: the
-baseline of ``bench/speech.py``.
+Grammar guidance has three parts: the decoder is primed with the grammars' vocabulary
+(:data:`server.speech.vocabulary.PROMPT`), may only write tokens that spell grammar words,
+numbers and punctuation (:mod:`server.speech.constraint`), and its transcript is snapped to the
+nearest sentence the NLU understands (:mod:`server.speech.snap`). ``guided=False`` turns all
+three off: the baseline of ``bench/speech.py``.
 
 Decoding options and why:
   * greedy (``beam_size=1``), a single temperature (no fallback re-decodes): a command is
@@ -26,10 +27,18 @@ import numpy as np
 
 from server.language.nlu import NLU
 from server.speech.audio import SAMPLE_RATE, Samples
+from server.speech.constraint import suppressed_tokens
 from server.speech.snap import Snapper
 from server.speech.vocabulary import Vocabulary, vocabulary
 
 Command = dict[str, Any]
+# The constrained decoder (server.speech.constraint) renormalises each step's probability over
+# the allowed tokens, so its mean token probability reads higher than the free decoder's for the
+# same audio. Scaling it by 0.83 (= 0.5 / 0.6: the dialog's 0.5 threshold acts as 0.6) keeps
+# wrong commands executed at the free decoder's rate or below: bench/speech.py, 324 clips, free
+# decoder at 0.5 -> 2.5 % wrong, 35.8 % right; constrained at 0.5 -> 4.9 % / 42.6 %, at 0.6 ->
+# 2.2 % / 37.7 %, at 0.65 -> 1.5 % / 35.5 % (the free one at 0.6: 1.5 % / 29.9 %).
+CONSTRAINED_CONFIDENCE_SCALE = 0.83
 VAD_PAD_S = 0.3  # speech kept either side of what the VAD marks (its own default is 0.4 s)
 
 
@@ -38,7 +47,7 @@ class Recognition:
     """What was said, as the dialog manager gets it."""
 
     text: str  # the sentence handed on (snapped when guided); "" when no speech was heard
-    confidence: float  # 0..1: decoder confidence x exp(-snap distance)
+    confidence: float  # 0..1: decoder confidence (x the constraint's scale) x the snap factor
     commands: list[Command] = field(default_factory=list)
     heard: str = ""  # the decoder's own transcript
     asr_confidence: float = 0.0
@@ -72,6 +81,19 @@ def speech_span(samples: Samples, *, min_silence_ms: int = 300) -> tuple[int, in
     return max(0, spans[0]["start"] - pad), min(len(samples), spans[-1]["end"] + pad)
 
 
+def _suppress_list(model: Any, vocab: Vocabulary) -> list[int]:
+    """The guided ``suppress_tokens`` of a faster-whisper model: tokens outside the grammar
+    vocabulary (:mod:`server.speech.constraint`) plus the model's own non-speech symbols."""
+    from faster_whisper.tokenizer import Tokenizer
+
+    tokenizer = Tokenizer(
+        model.hf_tokenizer, model.model.is_multilingual, task="transcribe", language="en"
+    )
+    return suppressed_tokens(
+        model.hf_tokenizer, vocab.words, tokenizer.eot, tokenizer.non_speech_tokens
+    )
+
+
 class Recognizer:
     """A loaded Whisper model plus the grammars' vocabulary; ``recognize`` is thread-safe
     (CTranslate2 runs up to ``num_workers`` decodes in parallel; the snapper is read-only)."""
@@ -82,6 +104,7 @@ class Recognizer:
         self.vocab = vocab or vocabulary(nlu.grammar)
         self.snapper = Snapper(nlu, self.vocab)
         self._vad_lock = threading.Lock()  # Silero's ONNX session is shared; keep calls serial
+        self._suppress = _suppress_list(model, self.vocab)
 
     def transcribe(self, samples: Samples, *, guided: bool = True) -> tuple[str, float]:
         """(transcript, decoder confidence in 0..1) of 16 kHz mono ``samples``."""
@@ -95,6 +118,8 @@ class Recognizer:
             initial_prompt=self.vocab.prompt if guided else None,
             max_new_tokens=64,
             vad_filter=False,
+            # A copy: faster-whisper extends the list it is given.
+            suppress_tokens=list(self._suppress) if guided else [-1],
         )
         texts: list[str] = []
         logprob_sum = 0.0
@@ -133,7 +158,7 @@ class Recognizer:
         if guided:
             snapped = self.snapper.snap(heard, state)
             text, distance, commands = snapped.text.strip(" ,"), snapped.distance, snapped.commands
-            confidence = asr * snapped.factor
+            confidence = asr * CONSTRAINED_CONFIDENCE_SCALE * snapped.factor
         else:
             text, distance, commands = heard, 0.0, self.nlu.interpret(heard, state)
             confidence = asr
