@@ -76,6 +76,8 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--index", type=int, default=None, help="simulator address / station index")
     v.add_argument("--safety-host", default="127.0.0.1", help="the safety port's address")
     v.add_argument("--safety-port", type=int, default=0, help="the safety port (0: any free)")
+    v.add_argument("--safety-cert", type=Path, default=None, help="HTTPS safety port: its cert")
+    v.add_argument("--safety-key", type=Path, default=None, help="HTTPS safety port: its key")
     v.add_argument("--parent-pid", type=int, default=None, help=argparse.SUPPRESS)
 
     i = sub.add_parser("interpret", help="NLU only: text -> JSON commands")
