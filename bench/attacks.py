@@ -3,10 +3,16 @@ the drones' safety shares. Prints a table of medians; the baseline is the same l
 
 Rows (the server's event loop runs a 5 ms ticker; the stall is the worst lateness of a tick):
   idle                          nothing but the ticker (baseline).
-  PNG 900k chunks, no token     the frame that froze the loop for 12 s: now refused unread.
+  PNG 900k chunks, no token     the frame that froze the loop for 12 s: now refused at its header.
   PNG 900k chunks, pilot        the same after auth: refused by the chunk cap.
   JSON 15 MB, pilot             a large valid frame: decoded in a worker thread.
-  16 MB frames x4, no token     back-to-back frames that starved the auth deadline.
+  16 MB frames x4, no token     back-to-back frames that starved the auth deadline: now refused
+                                at the first frame's header by the transport (server.ws_guard).
+  16 MB frames, 4 connections   one such frame on each of four connections at once.
+  ... (app check only)          the two floods against uvicorn's plain transport, which reads each
+                                frame whole before the endpoint refuses it (before the cap).
+Each row also gives the server's peak RSS during the attack above its RSS before. The server
+runs in its own process, so the attacking client's work is in neither figure.
 And, outside the server: ``png_decode`` of 100 000 one-byte IDAT chunks, the old joining
 decoder (kept here for the comparison) against the linear one, with their ratio.
 
@@ -21,14 +27,16 @@ import asyncio
 import base64
 import contextlib
 import json
+import multiprocessing
 import socket
 import statistics
 import struct
 import sys
-import threading
 import time
+import urllib.request
 import zlib
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,6 +52,7 @@ from server.rosbridge.encode import PNG_SIGNATURE, png_decode, png_encode  # noq
 from server.rosbridge.endpoint import make_router  # noqa: E402
 from server.security import Security, TokenStore  # noqa: E402
 from server.settings import Settings  # noqa: E402
+from server.ws_guard import preauth_capped_ws  # noqa: E402
 
 HOST = "127.0.14.20"
 TICK_S = 0.005
@@ -73,15 +82,13 @@ def chunked_png(text: str, chunks: int) -> bytes:
     return png[:head] + body + png[-12:]
 
 
-@contextlib.contextmanager
-def server(tmp: Path) -> Iterator[tuple[int, str, list[float]]]:
-    with socket.socket() as s:
-        s.bind((HOST, 0))
-        port = int(s.getsockname()[1])
-    settings = Settings(host=HOST, port=port, data_dir=tmp)
-    tokens = TokenStore(tmp)
+def _serve(host: str, port: int, tmp: str, capped: bool) -> None:
+    """The server under attack, in its own process (so the attacking client's work shares
+    neither its GIL nor its memory figures): the rosbridge router, a ticker on its loop, and
+    ``GET /bench/stall?since=N`` (the worst lateness of tick N onwards, and the tick count)."""
+    settings = Settings(host=host, port=port, data_dir=Path(tmp))
     graph = Graph()
-    ctx = BridgeContext(graph=graph, security=Security(settings, tokens), settings=settings)
+    ctx = BridgeContext(graph, Security(settings, TokenStore(Path(tmp))), settings)
     lateness: list[float] = []
 
     @contextlib.asynccontextmanager
@@ -102,19 +109,73 @@ def server(tmp: Path) -> Iterator[tuple[int, str, list[float]]]:
 
     app = FastAPI(lifespan=lifespan)
     app.include_router(make_router(ctx))
+
+    @app.get("/bench/stall")
+    def stall(since: int = 0) -> dict[str, float]:
+        window = lateness[since:]
+        return {"ticks": len(lateness), "stall_ms": 1000 * max(window) if window else 0.0}
+
     config = uvicorn.Config(
-        app, host=HOST, port=port, log_level="error", ws_max_size=64 << 20, ws_ping_interval=None
+        app,
+        host=host,
+        port=port,
+        log_level="error",
+        ws_max_size=64 << 20,  # as serve: 4 × the 16 MB frame limit
+        ws=preauth_capped_ws() if capped else "websockets-sansio",
+        ws_ping_interval=None,
     )
-    srv = uvicorn.Server(config)
-    thread = threading.Thread(target=srv.run, daemon=True)
-    thread.start()
-    while not srv.started:
-        time.sleep(0.01)
+    uvicorn.Server(config).run()
+
+
+@dataclass
+class Target:
+    """A running :func:`_serve` process."""
+
+    port: int
+    token: str
+    pid: int
+
+    def get(self, path: str) -> dict[str, float]:
+        with urllib.request.urlopen(f"http://{HOST}:{self.port}{path}", timeout=30) as r:
+            return dict(json.loads(r.read()))
+
+    def proc_kb(self, field: str) -> int:
+        for line in Path(f"/proc/{self.pid}/status").read_text().splitlines():
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
+        return -1
+
+    def reset_peak(self) -> None:
+        # "5" resets the peak RSS (VmHWM) to the current RSS: proc(5), /proc/pid/clear_refs
+        Path(f"/proc/{self.pid}/clear_refs").write_text("5")
+
+
+@contextlib.contextmanager
+def server(tmp: Path, *, capped: bool) -> Iterator[Target]:
+    with socket.socket() as s:
+        s.bind((HOST, 0))
+        port = int(s.getsockname()[1])
+    token = TokenStore(tmp).pilot_token  # the child loads the same token file
+    proc = multiprocessing.get_context("spawn").Process(
+        target=_serve, args=(HOST, port, str(tmp), capped), daemon=True
+    )
+    proc.start()
+    assert proc.pid is not None
+    target = Target(port, token, proc.pid)
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            target.get("/bench/stall")
+            break
+        except OSError:
+            if time.monotonic() > deadline or not proc.is_alive():
+                raise RuntimeError("the bench server did not start") from None
+            time.sleep(0.05)
     try:
-        yield port, tokens.pilot_token, lateness
+        yield target
     finally:
-        srv.should_exit = True
-        thread.join(10)
+        proc.terminate()
+        proc.join(10)
 
 
 async def attack(url: str, frames: list[str], settle_s: float) -> None:
@@ -129,37 +190,35 @@ async def attack(url: str, frames: list[str], settle_s: float) -> None:
     await asyncio.sleep(0.2)
 
 
-def stall_ms(lateness: list[float], start: int) -> float:
-    window = lateness[start:]
-    return 1000 * max(window) if window else float("nan")
+@dataclass
+class Row:
+    name: str
+    stall_ms: list[float]
+    peak_mb: list[float]  # the server's peak RSS during the attack, above its RSS before
 
 
-async def run_rows(
-    port: int, token: str, lateness: list[float], rounds: int
-) -> list[tuple[str, list[float]]]:
-    base = f"ws://{HOST}:{port}/rosbridge"
-    png = chunked_png('{"op":"subscribe","topic":"/a","type":"std_msgs/String"}', 900_000)
-    png_frame = json.dumps({"op": "png", "data": base64.b64encode(png).decode()})
-    big_json = json.dumps({"op": "publish", "topic": "/big", "msg": {"data": "x" * (15 << 20)}})
-    big16 = "x" * (16 << 20)
-    cases = [
-        ("idle", None, []),
-        ("PNG 900k chunks, no token", base, [png_frame]),
-        ("PNG 900k chunks, pilot", f"{base}?token={token}", [png_frame]),
-        ("JSON 15 MB, pilot", f"{base}?token={token}", [big_json]),
-        ("16 MB frames x4, no token", base, [big16] * 4),
-    ]
-    out: list[tuple[str, list[float]]] = []
-    for name, url, frames in cases:
-        samples = []
+Case = tuple[str, bool, list[str], int]  # name, with the pilot token, frames, connections
+
+
+async def run_rows(target: Target, cases: list[Case], rounds: int) -> list[Row]:
+    """Each case ``rounds`` times, its connections at once; an empty frame list is the idle
+    baseline (1 s of nothing)."""
+    base = f"ws://{HOST}:{target.port}/rosbridge"
+    out: list[Row] = []
+    for name, with_token, frames, connections in cases:
+        row = Row(name, [], [])
         for _ in range(rounds):
-            start = len(lateness)
-            if url is None:
+            since = int(target.get("/bench/stall")["ticks"])
+            target.reset_peak()
+            before = target.proc_kb("VmRSS")
+            if not frames:
                 await asyncio.sleep(1.0)
             else:
-                await attack(url, frames, settle_s=3.0)
-            samples.append(stall_ms(lateness, start))
-        out.append((name, samples))
+                url = f"{base}?token={target.token}" if with_token else base
+                await asyncio.gather(*(attack(url, frames, 3.0) for _ in range(connections)))
+            row.peak_mb.append((target.proc_kb("VmHWM") - before) / 1024)
+            row.stall_ms.append(target.get(f"/bench/stall?since={since}")["stall_ms"])
+        out.append(row)
     return out
 
 
@@ -170,18 +229,43 @@ def main() -> int:
     rounds = 1 if args.quick else 3
     import tempfile
 
-    with tempfile.TemporaryDirectory() as tmp, server(Path(tmp)) as (port, token, lateness):
-        time.sleep(0.5)
-        rows = asyncio.run(run_rows(port, token, lateness, rounds))
-    idle = statistics.median(rows[0][1])
+    png = chunked_png('{"op":"subscribe","topic":"/a","type":"std_msgs/String"}', 900_000)
+    png_frame = json.dumps({"op": "png", "data": base64.b64encode(png).decode()})
+    big_json = json.dumps({"op": "publish", "topic": "/big", "msg": {"data": "x" * (15 << 20)}})
+    big16 = "x" * (16 << 20)
+    floods: list[Case] = [
+        ("16 MB frames x4, no token", False, [big16] * 4, 1),
+        ("16 MB frames, 4 connections, no token", False, [big16], 4),
+    ]
+    cases: list[Case] = [
+        ("idle", False, [], 1),
+        ("PNG 900k chunks, no token", False, [png_frame], 1),
+        ("PNG 900k chunks, pilot", True, [png_frame], 1),
+        ("JSON 15 MB, pilot", True, [big_json], 1),
+        *floods,
+    ]
+    with tempfile.TemporaryDirectory() as tmp:
+        with server(Path(tmp), capped=True) as target:
+            rows = asyncio.run(run_rows(target, cases, rounds))
+        # the same floods against uvicorn's plain transport: the app's own check only
+        with server(Path(tmp), capped=False) as target:
+            before = asyncio.run(run_rows(target, floods, rounds))
+    idle = statistics.median(rows[0].stall_ms)
     print(
-        f"loop stall on the server (worst lateness of a {TICK_S * 1000:g} ms tick), "
-        f"median of {rounds} round(s)"
+        f"the server process under attack: loop stall (worst lateness of a {TICK_S * 1000:g} ms "
+        f"tick) and peak RSS above its RSS before; median of {rounds} round(s)"
     )
-    print(f"{'attack':<28} {'stall ms':>10} {'× idle':>8}")
-    for name, samples in rows:
-        med = statistics.median(samples)
-        print(f"{name:<28} {med:>10.1f} {med / idle if idle > 0 else float('nan'):>8.1f}")
+    print(f"{'attack':<52} {'stall ms':>9} {'× idle':>7} {'peak MB':>8}")
+    shown = [*rows, *(Row(f"{r.name} (app check only)", r.stall_ms, r.peak_mb) for r in before)]
+    for row in shown:
+        med = statistics.median(row.stall_ms)
+        ratio = med / idle if idle > 0 else float("nan")
+        print(f"{row.name:<52} {med:>9.1f} {ratio:>7.1f} {statistics.median(row.peak_mb):>8.1f}")
+    print(
+        "(app check only: uvicorn's plain websockets-sansio transport, which reads each frame "
+        "whole before the app refuses it; the other rows run serve's, which refuses a frame "
+        "over 4 KB before auth at its header: server/ws_guard.py)"
+    )
     png = chunked_png('{"op":"auth","token":"x"}', 100_000)
     t0 = time.perf_counter()
     old_png_decode(png)

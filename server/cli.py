@@ -76,6 +76,8 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--index", type=int, default=None, help="simulator address / station index")
     v.add_argument("--safety-host", default="127.0.0.1", help="the safety port's address")
     v.add_argument("--safety-port", type=int, default=0, help="the safety port (0: any free)")
+    v.add_argument("--safety-cert", type=Path, default=None, help="HTTPS safety port: its cert")
+    v.add_argument("--safety-key", type=Path, default=None, help="HTTPS safety port: its key")
     v.add_argument("--parent-pid", type=int, default=None, help=argparse.SUPPRESS)
 
     i = sub.add_parser("interpret", help="NLU only: text -> JSON commands")
@@ -174,6 +176,7 @@ def _serve(args: argparse.Namespace) -> int:
 
     from server.app import create_app
     from server.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
+    from server.ws_guard import preauth_capped_ws
 
     settings = Settings.from_env(
         host=args.host,
@@ -214,6 +217,8 @@ def _serve(args: argparse.Namespace) -> int:
         log_level="warning",
         # uvicorn cuts off absurd frames; below this the endpoint answers with a status error.
         ws_max_size=4 * settings.max_frame_bytes,
+        # before auth, 4 KB: refused at the frame header, unread (issue 14)
+        ws=preauth_capped_ws(),
         ssl_certfile=str(tls_files.cert) if tls_files else None,
         ssl_keyfile=str(tls_files.key) if tls_files else None,
         # per-IP connection cap and a header deadline (slowloris; issue 14)

@@ -245,6 +245,20 @@ def _still_good(
     return set(names) <= have_names and set(addrs) <= have_addrs
 
 
+def server_context(cert: Path, key: Path) -> ssl.SSLContext:
+    """A server-side SSL context for this certificate and key (a vehicle's safety port).
+
+    Raises:
+        TLSError: they cannot be read or do not make a pair.
+    """
+    try:
+        ctx = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        ctx.load_cert_chain(cert, key)
+    except (OSError, ssl.SSLError, ValueError) as exc:
+        raise TLSError(f"cannot use the certificate {cert} with the key {key}: {exc}") from exc
+    return ctx
+
+
 def user_files(cert: Path, key: Path) -> TLSFiles:
     """A certificate the operator brought (``--cert/--key``), checked to load as a pair."""
     try:

@@ -12,6 +12,7 @@ from fastapi.responses import StreamingResponse
 from server.api.deps import DroneDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import ActionResult, Describe
 from server.direct_actions import command_source, perform_async
+from server.vehicles.safety import advertised_url
 
 router = APIRouter(prefix="/drones", tags=["drones"])
 
@@ -19,16 +20,28 @@ Action = Literal["takeoff", "land", "hover", "emergency", "reset"]
 MJPEG_BOUNDARY = "frame"
 
 
+def _for_caller(out: dict[str, Any], request: Request) -> dict[str, Any]:
+    """A vehicle process's ``safety_url`` as this caller can call it (the host it reached us
+    by: a phone on the LAN gets the LAN address, not the vehicle's loopback or wildcard)."""
+    vehicle = out.get("vehicle")
+    if isinstance(vehicle, dict) and vehicle.get("safety_url"):
+        vehicle["safety_url"] = advertised_url(vehicle["safety_url"], request.headers.get("host"))
+    return out
+
+
 @router.get("")
-def list_drones(runtime: RuntimeDep, _role: RoleDep) -> list[dict[str, Any]]:
+def list_drones(request: Request, runtime: RuntimeDep, _role: RoleDep) -> list[dict[str, Any]]:
     """Every drone with its telemetry, state, task and link."""
-    return [stack.telemetry() for stack in runtime.drones.values()]
+    return [_for_caller(stack.telemetry(), request) for stack in runtime.drones.values()]
 
 
 @router.get("/{drone_id}")
-def get_drone(stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
-    """One drone: telemetry, pose estimate, control state, task, link and controller timing."""
-    return stack.telemetry()
+def get_drone(request: Request, stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
+    """One drone: telemetry, pose estimate, control state, task, link and controller timing.
+
+    ``vehicle.safety_url`` (a drone in its own process): its safety port, at the host this
+    request named, for ``POST …/emergency`` and ``…/land`` that no web traffic can delay."""
+    return _for_caller(stack.telemetry(), request)
 
 
 @router.post("/{drone_id}/describe", response_model=Describe)

@@ -26,6 +26,7 @@ from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
 from server.speech.recognizer import Recognition, speech_span
 from server.speech.service import SpeechService
 from server.speech.stream import MODES, Final, Interim, Problem, StreamSession, control_kind
+from server.ws_guard import lift_frame_cap
 
 log = logging.getLogger("uav_console.speech")
 router = APIRouter(tags=["speech"])
@@ -195,6 +196,7 @@ async def speech_stream(websocket: WebSocket) -> None:
         await _refuse(websocket, CLOSE_TRY_AGAIN, "too many microphone streams; try again later")
         return
     service.streams += 1
+    lift_frame_cap(websocket.scope)  # a pilot: audio frames may exceed the pre-auth 4 KB
     try:
         await websocket.accept()
         await _Stream(websocket, service, mode).run()

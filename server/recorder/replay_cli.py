@@ -50,7 +50,15 @@ def replay_main(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     print(f"http://{settings.host}:{settings.port}/?token={token}", flush=True)
-    config = uvicorn.Config(app, host=settings.host, port=settings.port, log_level="warning")
+    from server.ws_guard import preauth_capped_ws
+
+    config = uvicorn.Config(
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level="warning",
+        ws=preauth_capped_ws(),  # frames over 4 KB before auth refused at the header
+    )
     with contextlib.suppress(KeyboardInterrupt):
         uvicorn.Server(config).run()
     return 0

@@ -14,6 +14,7 @@ from server.graph import Graph
 from server.rosbridge.values import to_json_text
 from server.security import Security
 from server.settings import Settings
+from server.ws_guard import PREAUTH_MAX_BYTES
 
 
 class JsonCache:
@@ -61,7 +62,9 @@ class BridgeContext:
         auth_timeout_s: a connection without a token must send ``auth`` within this time.
         preauth_max_bytes: the largest frame a connection may send before it authenticates
             (an ``auth`` frame is ~100 bytes; issue 14: 16 MB frames before auth starved the
-            auth deadline, one PNG frame froze the loop).
+            auth deadline, one PNG frame froze the loop). Under ``serve`` the transport refuses
+            a larger one at its frame header (``server.ws_guard``); the endpoint's own check
+            covers servers without that.
         offload_decode_bytes: frames at least this large are decoded in a worker thread, so
             parsing them never holds the event loop the drones' safety shares.
         max_calls_in_flight: concurrent ``call_service`` per connection (an observer flooding
@@ -81,7 +84,7 @@ class BridgeContext:
     out_queue_bytes: int = 64 * 1024 * 1024
     stall_close_s: float = 10.0
     auth_timeout_s: float = 5.0
-    preauth_max_bytes: int = 4096
+    preauth_max_bytes: int = PREAUTH_MAX_BYTES
     offload_decode_bytes: int = 64 * 1024
     max_calls_in_flight: int = 8
     byte_rate_per_s: float = 16 * 1024 * 1024

@@ -28,6 +28,7 @@ from server.rosbridge.protocol import PROTOCOL_VERSION, BridgeProtocol, decode_p
 from server.rosbridge.rosapi import register_rosapi
 from server.rosbridge.session import BridgeSession
 from server.security import LEASE_SERVICE, Role, token_from
+from server.ws_guard import lift_frame_cap
 
 __all__ = [
     "BridgeContext",
@@ -125,7 +126,12 @@ class _Connection:
 
     async def _reader(self) -> None:
         ctx = self.ctx
+        capped = self.session.role is None
         while self.close_code is None:
+            if capped and self.session.role is not None:
+                # authenticated by ``auth``: the transport's full frame limit from now on
+                lift_frame_cap(self.ws.scope)
+                capped = False
             message = await self.ws.receive()
             if message["type"] == "websocket.disconnect":
                 return
@@ -134,7 +140,8 @@ class _Connection:
             size = len(text) if text is not None else len(data or b"")
             if self.session.role is None and size > ctx.preauth_max_bytes:
                 # Nothing but a small auth frame before authenticating (issue 14): refused
-                # unread, and the connection closed.
+                # unread, and the connection closed. (Under ``serve`` the transport already
+                # refused it at its header, 1009: ``server.ws_guard``.)
                 self.protocol.send_status(
                     "error",
                     f"not authenticated: a frame of {size} bytes before auth (at most "
@@ -260,6 +267,8 @@ async def serve_rosbridge(websocket: WebSocket, ctx: BridgeContext) -> None:
     keys = [k for k in (ip_key, token_key) if k is not None]
     for k in keys:
         ctx.connections[k] += 1
+    if role is not None:
+        lift_frame_cap(websocket.scope)  # before the client can send its first frame
     try:
         await websocket.accept()
         conn = _Connection(websocket, ctx, role)
@@ -324,6 +333,7 @@ async def serve_rosbridge_port(
 
     from server.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
     from server.http_guard import HttpGuard
+    from server.ws_guard import preauth_capped_ws
 
     app = FastAPI(title="uav-console rosbridge")
     app.add_middleware(HttpGuard, security=ctx.security)
@@ -334,6 +344,7 @@ async def serve_rosbridge_port(
         port=port,
         log_level="warning",
         ws_max_size=4 * ctx.settings.max_frame_bytes,
+        ws=preauth_capped_ws(ctx.preauth_max_bytes),
         http=guarded_h11(ConnectionLimits()),
         timeout_keep_alive=KEEP_ALIVE_S,
         lifespan="off",

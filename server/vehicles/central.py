@@ -243,6 +243,11 @@ class VehicleCentral:
         host = "127.0.0.1" if s.host in ("0.0.0.0", "::", "") else s.host
         tls = self.runtime.tls  # set by `serve` before the lifespan starts us
         url = f"{'wss' if tls else 'ws'}://{host}:{s.port}{names.LINK_PATH}"
+        # The safety port listens where the console does (a phone on the LAN reaches both),
+        # over HTTPS with the console's certificate when the console speaks it.
+        safety = ["--safety-host", s.host]
+        if tls is not None:
+            safety += ["--safety-cert", str(tls.cert), "--safety-key", str(tls.key)]
         env = child_env(s, self.runtime.tokens.pilot_token)
         for index in range(count):
             name = f"uav{index + 1}"
@@ -250,7 +255,7 @@ class VehicleCentral:
             kind = drone_kind(s.drone, index)  # one entry of a comma-separated --drone
             argv = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", name]
             argv += ["--prefix", prefix, "--index", str(index), "--drone", kind]
-            argv += ["--world", s.world, "--safety-host", host, "--parent-pid", str(os.getpid())]
+            argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
             if tls is not None:  # our own certificate, pinned (whatever names it carries)
                 argv += ["--fingerprint", tls.fingerprint]
             self.processes[name] = VehicleProcess(argv, env, name)

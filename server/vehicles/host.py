@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
+from server.tls import TLSError, server_context
 from server.vehicles import names
 from server.vehicles.errors import RemoteCallError, VehicleError
 from server.vehicles.link import GraphLink
@@ -60,6 +61,8 @@ class VehicleOptions:
     index: int = 0  # which simulator address and station
     safety_host: str = "127.0.0.1"
     safety_port: int = 0  # 0: any free port (announced in /NAME/vehicle/info)
+    safety_cert: Path | None = None  # with safety_key: the safety port speaks HTTPS
+    safety_key: Path | None = None
     parent_pid: int | None = None  # the supervising serve (None: a standalone vehicle)
     ca_file: Path | None = None  # wss:// central: verify its certificate with this CA
     fingerprint: str | None = None  # wss:// central: or accept exactly this certificate
@@ -259,6 +262,12 @@ class VehicleHost:
         self.graph.advertise(names.telemetry_topic(self.name), names.STRING)
         console = {f"{scheme}://{s.host}:{s.port}" for scheme in ("http", "https")}
         allowed = console | set(s.allow_origins)
+        tls = None
+        if o.safety_cert is not None and o.safety_key is not None:
+            try:
+                tls = server_context(o.safety_cert, o.safety_key)
+            except TLSError as exc:
+                raise VehicleError(f"safety port: {exc}") from exc
         self.safety = SafetyPort(
             o.safety_host,
             o.safety_port,
@@ -266,6 +275,8 @@ class VehicleHost:
             lambda action: self.direct(action).detail,
             name=self.name,
             origin_allowed=lambda origin: origin in allowed or loopback_origin(origin),
+            console_port=s.port,  # the console's page on whatever address the phone used
+            tls=tls,
         )
         await self.safety.start()
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})

@@ -35,6 +35,8 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         index=index,
         safety_host=args.safety_host,
         safety_port=args.safety_port,
+        safety_cert=args.safety_cert,
+        safety_key=args.safety_key,
         parent_pid=args.parent_pid,
         ca_file=args.ca,
         fingerprint=args.fingerprint,

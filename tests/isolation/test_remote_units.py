@@ -242,3 +242,32 @@ async def test_rest_command_and_speech_answer_503_with_retry_after(
             "uav1's flight process" in r.json()["reply"] and "uav2: Landing." in r.json()["reply"]
         )
         assert not r.json()["accepted"]
+
+
+async def test_rest_advertises_the_safety_port_at_the_host_the_caller_used(
+    tmp_path: Any,
+) -> None:
+    """A vehicle's safety port bound to every interface (``serve --host 0.0.0.0``) is
+    advertised at the address the caller reached the console by, with the port's scheme."""
+    from server.settings import Settings
+    from tests.app_client import app_client
+
+    settings = Settings(data_dir=tmp_path, token="units-pilot", drone="none")
+    async with app_client(settings) as client:
+        rt = client.app.state.runtime  # type: ignore[attr-defined]
+        stack = RemoteDroneStack(rt.graph, "uav1", "", simulated=True)
+        stack.info = {"safety_url": "https://0.0.0.0:47001", "pid": 4242}
+        rt.drones["uav1"] = stack
+
+        async def control(args: dict[str, Any]) -> dict[str, Any]:
+            return {"mode": "idle", "link_ok": True}
+
+        rt.graph.advertise_service(names.control_service("uav1"), names.CONTROL_TYPE, control)
+        phone = await client.get("https://192.168.1.7:8000/api/v1/drones/uav1")
+        assert phone.status_code == 200, phone.text
+        assert phone.json()["vehicle"]["safety_url"] == "https://192.168.1.7:47001"
+        listed = await client.get("https://laptop:8000/api/v1/drones")
+        assert listed.json()[0]["vehicle"]["safety_url"] == "https://laptop:47001"
+        stack.info = {"safety_url": "http://127.0.0.1:47002", "pid": 4242}  # loopback-bound
+        local = await client.get("/api/v1/drones/uav1")
+        assert local.json()["vehicle"]["safety_url"] == "http://127.0.0.1:47002"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import ssl
 from pathlib import Path
 from typing import Any
 
@@ -15,9 +16,16 @@ from hypothesis import strategies as st
 
 from server.graph import Graph
 from server.settings import Settings, SettingsError
+from server.tls import ensure_server_cert, server_context
 from server.vehicles.central import child_env
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
-from server.vehicles.safety import SafetyPort, SafetyRequestError, parse_request
+from server.vehicles.safety import (
+    SafetyPort,
+    SafetyRequestError,
+    advertised_url,
+    page_origin,
+    parse_request,
+)
 from server.vehicles.watch import CentralWatch, LossAction
 
 # ------------------------------------------------------------------------------ CentralWatch
@@ -119,6 +127,78 @@ async def test_safety_port_over_loopback() -> None:
     finally:
         await port.stop()
     assert acted == ["emergency"]
+
+
+def test_the_advertised_url_names_the_host_the_page_came_from() -> None:
+    # bound to loopback: as bound (the page is on this machine)
+    assert advertised_url("http://127.0.13.2:5001", "localhost:8000") == "http://127.0.13.2:5001"
+    # bound to every interface or a LAN address: the host the request named, the port's own
+    # scheme and port
+    assert advertised_url("https://0.0.0.0:5001", "192.168.1.7:8000") == "https://192.168.1.7:5001"
+    assert advertised_url("https://[::]:5001", "[fe80::2]:8000") == "https://[fe80::2]:5001"
+    assert advertised_url("https://192.168.1.7:5001", "laptop:8000") == "https://laptop:5001"
+    # nothing usable
+    assert advertised_url("http://0.0.0.0:5001", None) is None
+    assert advertised_url("http://0.0.0.0:5001", "bad host") is None
+    assert advertised_url("http://192.168.1.7:5001", None) == "http://192.168.1.7:5001"
+    assert advertised_url(None, "192.168.1.7:8000") is None
+
+
+def test_the_console_page_on_the_requested_host_is_an_allowed_origin() -> None:
+    assert page_origin("https://192.168.1.7:8000", "192.168.1.7:5001", 8000)
+    assert page_origin("https://laptop:8000", "laptop:5001", 8000)  # a bare host name
+    assert not page_origin("https://192.168.1.7:9000", "192.168.1.7:5001", 8000)  # other port
+    assert not page_origin("https://192.168.1.8:8000", "192.168.1.7:5001", 8000)  # other host
+    # a DNS name could be an attacker's, re-pointed at this address (DNS rebinding)
+    assert not page_origin("http://evil.example:8000", "evil.example:5001", 8000)
+    assert not page_origin("https://192.168.1.7:8000", None, 8000)
+    assert not page_origin("https://192.168.1.7:8000.evil", "192.168.1.7:5001", 8000)
+
+
+async def test_safety_port_over_tls_for_a_page_on_the_lan(tmp_path: Path) -> None:
+    host = "127.0.78.4"  # stands for a LAN address: the port answers at the name it is called
+    files = ensure_server_cert(tmp_path / "tls", host)
+    assert files.ca is not None
+    port = SafetyPort(
+        host,
+        0,
+        "tok",
+        lambda action: f"{action} sent",
+        origin_allowed=lambda origin: False,  # as for a LAN address: no loopback leniency
+        console_port=8443,
+        tls=server_context(files.cert, files.key),
+        max_open=2,
+    )
+    await port.start()
+    try:
+        assert port.url.startswith(f"https://{host}:")
+        verify = ssl.create_default_context(cafile=str(files.ca))
+        async with httpx.AsyncClient(base_url=port.url, verify=verify) as c:
+            page = {"Authorization": "Bearer tok", "Origin": f"https://{host}:8443"}
+            ok = await c.post("/emergency", headers=page)
+            assert ok.status_code == 200, ok.text
+            assert ok.headers["access-control-allow-origin"] == f"https://{host}:8443"
+            other = {**page, "Origin": f"https://{host}:9999"}
+            assert (await c.post("/land", headers=other)).status_code == 403
+        # a flood: beyond max_open connections the next is closed unread
+        held = [await asyncio.open_connection(host, port.port, ssl=verify) for _ in range(2)]
+        for _ in range(250):  # (the server's side of each handshake ends a moment later)
+            if port.open == 2:
+                break
+            await asyncio.sleep(0.02)
+        assert port.open == 2
+        refused = port.refused
+        reader, writer = await asyncio.open_connection(host, port.port, ssl=verify)
+        try:
+            answer = await asyncio.wait_for(reader.read(), 10)
+        except OSError:  # a reset
+            answer = b""
+        assert answer == b"" and port.refused == refused + 1
+        writer.close()
+        for _, w in held:
+            w.close()
+    finally:
+        await port.stop()
 
 
 # ------------------------------------------------------------------------------ graph link

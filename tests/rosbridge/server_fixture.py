@@ -20,6 +20,7 @@ from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
 from server.security import Security, TokenStore
 from server.settings import Settings
+from server.ws_guard import preauth_capped_ws
 
 T = TypeVar("T")
 
@@ -59,7 +60,11 @@ class RunningServer:
 
 
 @contextlib.contextmanager
-def running_server(tmp: Path, **ctx_overrides: Any) -> Iterator[RunningServer]:
+def running_server(
+    tmp: Path, *, ws: str | type[Any] | None = None, **ctx_overrides: Any
+) -> Iterator[RunningServer]:
+    """``ws``: uvicorn's WebSocket implementation; by default the one ``serve`` uses (the
+    transport's pre-auth frame cap, ``server.ws_guard``)."""
     settings_overrides = {
         k: ctx_overrides.pop(k) for k in list(ctx_overrides) if hasattr(Settings, k)
     }
@@ -88,6 +93,7 @@ def running_server(tmp: Path, **ctx_overrides: Any) -> Iterator[RunningServer]:
         port=port,
         log_level="error",
         ws_max_size=4 * settings.max_frame_bytes,
+        ws=ws or preauth_capped_ws(ctx.preauth_max_bytes),
         ws_ping_interval=None,
         timeout_graceful_shutdown=1,
     )

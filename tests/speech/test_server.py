@@ -239,7 +239,10 @@ def test_microphone_stream_push_to_talk_over_wss(served: Served) -> None:
         got: list[dict[str, Any]] = []
         async with connect(url, ssl=_ws_ssl(served)) as ws:
             got.append(json.loads(await ws.recv()))
-            for i in range(0, len(pcm), 3200):  # 100 ms frames, as the worklet sends
+            # the first 400 ms in one frame: over the transport's 4 KB limit before auth, which
+            # the token at the handshake lifted (server/ws_guard.py)
+            await ws.send(pcm[:12800])
+            for i in range(12800, len(pcm), 3200):  # 100 ms frames, as the worklet sends
                 await ws.send(pcm[i : i + 3200])
                 await asyncio.sleep(0.02)
             await ws.send(json.dumps({"type": "end"}))
