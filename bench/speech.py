@@ -14,11 +14,16 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    * latency = end of speech (the whole clip handed over) -> commands: VAD + decode + snap + NLU;
    * RTF = that time / clip duration.
    Targets (issue 15): >= 90 % exact clean, >= 80 % at 10 dB, p50 <= 400 ms.
-2. The 100 Hz control loop (drone/control/loop.py, sleep+spin as flown) alone, then while 3
+2. The microphone stream, end of speech -> command: clips fed in real time (20 ms chunks)
+   through the stream session and a one-decoder pool as the server's stream route does;
+   push-to-talk released 0.5 s after the speech ends, and hands-free (0.7 s of silence ends the
+   utterance); with the speculative decode at the first 0.4 s of silence and the reuse of its
+   result (the product) vs without either (the baseline), same clips, same run.
+3. The 100 Hz control loop (drone/control/loop.py, sleep+spin as flown) alone, then while 3
    streams keep decoding through the server's bounded pool (one decoder per core less one),
    then through an unbounded one (3 decoders at once): period error p99, overruns.
 
-    .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop]
+    .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop] [--skip-stream]
 """
 
 from __future__ import annotations
@@ -38,13 +43,16 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import numpy as np  # noqa: E402
+
 from drone.control.loop import ControlLoop, LoopStats  # noqa: E402
 from drone.control.pid import PaperPID, Setpoint  # noqa: E402
 from server.language.nlu import default_nlu  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
 from server.speech.model import default_workers, load_whisper, resolve  # noqa: E402
 from server.speech.pool import DecoderPool  # noqa: E402
-from server.speech.recognizer import Recognizer  # noqa: E402
+from server.speech.recognizer import Recognizer, speech_span  # noqa: E402
+from server.speech.stream import Final, Interim, StreamSession  # noqa: E402
 from tests.speech.conftest import synthesise  # noqa: E402
 
 VOICES = ["en-us", "en-gb", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us+f3", "en-us-nyc"]
@@ -193,6 +201,77 @@ def bench_accuracy(recognizer: Recognizer, quick: bool) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------------------------
+async def _stream_once(
+    rec: Recognizer, clip: Any, speech_end: int, mode: str, speculate: bool
+) -> float:
+    """Seconds from the end of speech to the final recognition, fed in real time."""
+    pool = DecoderPool(1, queue=4)
+    session = StreamSession(
+        mode, detect=lambda x: speech_span(x, min_silence_ms=100) is not None,
+        settle_s=0.4 if speculate else 1e6,  # 1e6 s: the tail is never all silence
+    )  # fmt: skip
+    hold = int(0.5 * SAMPLE_RATE)
+    tail = hold if mode == "ptt" else int(1.5 * SAMPLE_RATE)
+    audio = np.concatenate([clip[:speech_end], np.zeros(tail, np.float32)])
+    pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2").tobytes()
+    chunk = int(0.02 * SAMPLE_RATE)
+    interim: asyncio.Task[Any] | None = None
+    start = time.perf_counter()
+    end_of_speech = start + speech_end / SAMPLE_RATE
+    try:
+        for i in range(0, len(audio), chunk):
+            await asyncio.sleep(max(0.0, start + i / SAMPLE_RATE - time.perf_counter()))
+            events = await asyncio.to_thread(session.feed, pcm[2 * i : 2 * (i + chunk)])
+            if mode == "ptt" and i + chunk >= len(audio):
+                events += session.end()
+            for ev in events:
+                if isinstance(ev, Interim) and (interim is None or interim.done()):
+                    interim = asyncio.create_task(pool.try_run(rec.recognize, ev.samples))
+                elif isinstance(ev, Final):
+                    if interim is not None:
+                        interim.cancel()
+                    await pool.run(rec.recognize, ev.samples)
+                    return time.perf_counter() - end_of_speech
+        return float("nan")
+    finally:
+        pool.close()
+
+
+def bench_stream(recognizer: Recognizer, quick: bool) -> dict[str, Any]:
+    shared = Recognizer(recognizer.model, recognizer.nlu)  # reuse on (the product)
+    utterances = pick_utterances(6 if quick else 12)
+    work = Path(tempfile.mkdtemp(prefix="uavc-speech-stream-"))
+    rows: dict[str, list[float]] = defaultdict(list)
+    reused = 0
+    for i, row in enumerate(utterances):
+        wav = synthesise(work / f"s{i}.wav", row["text"], voice=VOICES[i % len(VOICES)], seed=i)
+        clip = read_wav(wav.read_bytes())
+        span = speech_span(clip, min_silence_ms=300)
+        if span is None:
+            continue
+        speech_end = min(len(clip), span[1] - int(0.3 * SAMPLE_RATE))  # without the VAD pad
+        for mode in ("ptt", "handsfree"):
+            for speculate in (False, True):
+                rec = shared if speculate else recognizer
+                before = shared.shared.hits if shared.shared else 0
+                latency = asyncio.run(_stream_once(rec, clip, speech_end, mode, speculate))
+                reused += (shared.shared.hits if shared.shared else 0) - before
+                rows[f"{mode}, {'speculative + reuse' if speculate else 'baseline'}"].append(
+                    latency * 1000
+                )
+    print("\n## Microphone stream: end of speech -> final recognition (real-time feed)")
+    print("| stream | clips | p50 ms | p95 ms |")
+    print("|---|---|---|---|")
+    out: dict[str, Any] = {}
+    for name, xs in rows.items():
+        out[name] = {"p50_ms": pct(xs, 0.5), "p95_ms": pct(xs, 0.95), "n": len(xs)}
+        print(f"| {name} | {len(xs)} | {pct(xs, 0.5):.0f} | {pct(xs, 0.95):.0f} |")
+    print(f"finals that reused a speculative decode: {reused}")
+    out["reused"] = reused
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
 class _State:
     x = y = 0.0
     z = 1.0
@@ -244,7 +323,7 @@ def bench_loop(recognizer: Recognizer, model_dir: Path | None, seconds: float) -
         return run
 
     bounded = default_workers()
-    wide = Recognizer(load_whisper(resolve(model_dir), workers=3), recognizer.nlu)
+    wide = Recognizer(load_whisper(resolve(model_dir), workers=3), recognizer.nlu, reuse=False)
     rows = [
         ("idle (baseline)", None),
         (f"3 streams, bounded pool ({bounded} decoder)", streams(bounded, recognizer)),
@@ -276,6 +355,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--json", type=Path)
     ap.add_argument("--skip-loop", action="store_true")
+    ap.add_argument("--skip-stream", action="store_true")
     ap.add_argument("--skip-accuracy", action="store_true")
     ap.add_argument(
         "--report", type=Path, help="only print the tables of a (partial) progress file"
@@ -301,10 +381,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average at start: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {cores} cores")
     print(f"decoder threads: {args.threads}")
     whisper = load_whisper(resolve(args.asr_model), workers=1, threads_per_worker=args.threads)
-    rec = Recognizer(whisper, default_nlu())
+    rec = Recognizer(whisper, default_nlu(), reuse=False)  # every clip decoded, none shared
     out: dict[str, Any] = {}
     if not args.skip_accuracy:
         out["accuracy"] = bench_accuracy(rec, args.quick)
+    if not args.skip_stream:
+        out["stream"] = bench_stream(rec, args.quick)
     if not args.skip_loop:
         out["loop"] = bench_loop(rec, args.asr_model, 5.0 if args.quick else 20.0)
     load = os.getloadavg()

@@ -220,7 +220,8 @@ class _Stream:
         self.ws = ws
         self.service = service
         self.mode = mode
-        self.session = StreamSession(mode, detect=self._voiced if mode == "handsfree" else None)
+        # Both modes listen for the end of speech, to decode speculatively (server.speech.stream).
+        self.session = StreamSession(mode, detect=self._voiced)
         self._interim: asyncio.Task[None] | None = None
         self._finals: asyncio.Queue[Samples | None] = asyncio.Queue(maxsize=2)
         self._vad_lock = asyncio.Lock()
@@ -269,11 +270,8 @@ class _Stream:
                     await self._send({"type": "error", "error": "audio frame over 64 KiB"})
                     await self.ws.close(CLOSE_POLICY, "audio frame too large")
                     return
-                if self.mode == "handsfree":
-                    async with self._vad_lock:
-                        events = await asyncio.to_thread(self.session.feed, data)
-                else:
-                    events = self.session.feed(data)
+                async with self._vad_lock:  # the session runs the VAD: off the event loop
+                    events = await asyncio.to_thread(self.session.feed, data)
             elif text is not None:
                 kind = control_kind(text)
                 if kind == "end":
@@ -316,11 +314,13 @@ class _Stream:
                 )
 
     async def _decode_interim(self, samples: Samples) -> None:
+        """A whole recognition (VAD, decode, snap), not only a transcript: when the utterance
+        ends with the same speech, the final reuses it (server.speech.memo)."""
         assert self.service.pool is not None and self.service.recognizer is not None
         rec = self.service.recognizer
-        out = await self.service.pool.try_run(rec.transcribe, samples)
-        if out is not None and out[0]:
-            await self._send({"type": "interim", "text": out[0]})
+        out = await self.service.pool.try_run(rec.recognize, samples)
+        if out is not None and out.heard:
+            await self._send({"type": "interim", "text": out.heard})
 
     async def _decode_finals(self) -> None:
         while (samples := await self._finals.get()) is not None:

@@ -17,10 +17,11 @@ Decoding options and why:
 
 from __future__ import annotations
 
+import copy
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,7 @@ import numpy as np
 from server.language.nlu import NLU
 from server.speech.audio import SAMPLE_RATE, Samples
 from server.speech.constraint import suppressed_tokens
+from server.speech.memo import SharedResults, digest
 from server.speech.snap import Snapper
 from server.speech.vocabulary import Vocabulary, vocabulary
 
@@ -55,6 +57,7 @@ class Recognition:
     audio_s: float = 0.0
     decode_ms: float = 0.0
     speech: bool = True  # False: the VAD found no speech, nothing was decoded
+    reused: bool = False  # the same speech was decoded (or was being decoded) already
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -98,13 +101,17 @@ class Recognizer:
     """A loaded Whisper model plus the grammars' vocabulary; ``recognize`` is thread-safe
     (CTranslate2 runs up to ``num_workers`` decodes in parallel; the snapper is read-only)."""
 
-    def __init__(self, model: Any, nlu: NLU, *, vocab: Vocabulary | None = None) -> None:
+    def __init__(
+        self, model: Any, nlu: NLU, *, vocab: Vocabulary | None = None, reuse: bool = True
+    ) -> None:
         self.model = model
         self.nlu = nlu
         self.vocab = vocab or vocabulary(nlu.grammar)
         self.snapper = Snapper(nlu, self.vocab)
         self._vad_lock = threading.Lock()  # Silero's ONNX session is shared; keep calls serial
         self._suppress = _suppress_list(model, self.vocab)
+        # reuse=False: every call decodes (bench/speech.py decodes one clip over and over).
+        self.shared: SharedResults[Recognition] | None = SharedResults(size=8) if reuse else None
 
     def transcribe(self, samples: Samples, *, guided: bool = True) -> tuple[str, float]:
         """(transcript, decoder confidence in 0..1) of 16 kHz mono ``samples``."""
@@ -140,7 +147,10 @@ class Recognizer:
     def recognize(
         self, samples: Samples, *, guided: bool = True, state: str | None = None, vad: bool = True
     ) -> Recognition:
-        """Decode, snap (when ``guided``) and interpret one utterance."""
+        """Decode, snap (when ``guided``) and interpret one utterance.
+
+        Speech already decoded (or being decoded) with the same guidance and state, e.g. by the
+        stream's speculative decode, is not decoded again (:mod:`server.speech.memo`)."""
         t0 = time.perf_counter()
         audio_s = len(samples) / SAMPLE_RATE
         if vad:
@@ -151,10 +161,21 @@ class Recognizer:
             samples = samples[span[0] : span[1]]
         if not np.isfinite(samples).all():
             samples = np.nan_to_num(samples, nan=0.0, posinf=0.0, neginf=0.0)
+        if self.shared is None:
+            rec, reused = self._decode(samples, guided, state), False
+        else:
+            key = (digest(samples), guided, state)
+            rec, reused = self.shared.get(key, lambda: self._decode(samples, guided, state))
+        ms = (time.perf_counter() - t0) * 1000
+        # A copy of the commands: whoever gets a shared result may change its own.
+        commands = copy.deepcopy(rec.commands)
+        return replace(rec, commands=commands, audio_s=audio_s, decode_ms=ms, reused=reused)
+
+    def _decode(self, samples: Samples, guided: bool, state: str | None) -> Recognition:
+        """Decode, snap and interpret speech already trimmed by the VAD."""
         heard, asr = self.transcribe(samples, guided=guided)
         if not heard:
-            ms = (time.perf_counter() - t0) * 1000
-            return Recognition("", 0.0, audio_s=audio_s, decode_ms=ms)
+            return Recognition("", 0.0)
         if guided:
             snapped = self.snapper.snap(heard, state)
             text, distance, commands = snapped.text.strip(" ,"), snapped.distance, snapped.commands
@@ -162,5 +183,4 @@ class Recognizer:
         else:
             text, distance, commands = heard, 0.0, self.nlu.interpret(heard, state)
             confidence = asr
-        ms = (time.perf_counter() - t0) * 1000
-        return Recognition(text, confidence, commands, heard, asr, distance, audio_s, ms)
+        return Recognition(text, confidence, commands, heard, asr, distance)

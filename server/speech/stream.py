@@ -12,6 +12,12 @@ microphone). Two modes:
   it ends the utterance. Audio before any speech is dropped, so an open microphone in a quiet
   room holds at most ``keep_s`` of samples.
 
+Both modes also decode speculatively: when ``detect`` (if given) hears the last
+``settle_s`` of audio fall silent after speech, an :class:`Interim` is emitted at once. The
+speech it carries is, most often, exactly the speech of the :class:`Final` that follows (the
+release a moment later, or hands-free's ``end_silence_s``), and the recogniser then reuses that
+decode instead of starting over (:mod:`server.speech.memo`).
+
 Memory is bounded in both modes: an utterance longer than ``max_utterance_s`` is refused
 (push-to-talk) or cut there (hands-free), never buffered further.
 
@@ -76,6 +82,8 @@ class StreamSession:
         end_silence_s: float = 0.7,
         vad_window_s: float = 0.5,
         keep_s: float = 1.0,
+        settle_s: float = 0.35,
+        settle_step_s: float = 0.1,
     ) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
@@ -88,12 +96,18 @@ class StreamSession:
         self.end_silence = int(end_silence_s * SAMPLE_RATE)
         self.vad_window = int(vad_window_s * SAMPLE_RATE)
         self.keep = int(keep_s * SAMPLE_RATE)
+        # > the recogniser's VAD pad (0.3 s), so the speculative decode trims to the same speech
+        self.settle = int(settle_s * SAMPLE_RATE)
+        self.settle_step = int(settle_step_s * SAMPLE_RATE)  # how often the tail is checked
+        self._since_settle = 0
         self._buf = np.zeros(0, np.float32)
         self._since_interim = 0
         self._since_vad = 0
         self._overflow = False
         self._speaking = False
         self._silent = 0  # samples of silence since the last speech (hands-free)
+        self._heard = False  # speech heard since the last speculative decode
+        self.speculated = 0  # speculative decodes asked for (tests, logs)
         self.utterances = 0
 
     @property
@@ -119,16 +133,37 @@ class StreamSession:
             return [Problem(f"longer than {seconds:.0f} s: this utterance is discarded")]
         self._buf = np.concatenate([self._buf, chunk])
         self._since_interim += len(chunk)
+        if (speculation := self._settled(len(chunk))) is not None:
+            return [speculation]
         if self._since_interim >= self.interim_step:
             self._since_interim = 0
             return [Interim(self._buf)]
         return []
+
+    def _settled(self, added: int) -> Interim | None:
+        """Every ``settle_step`` of audio: the speculative :class:`Interim` if the last
+        ``settle`` of audio is silent after speech was heard, else None."""
+        self._since_settle += added
+        if self.detect is None or self._since_settle < self.settle_step:
+            return None
+        self._since_settle = 0
+        if self.detect(self._buf[-self.settle :]):
+            self._heard = True
+            return None
+        if not self._heard:
+            return None
+        self._heard = False  # speech, then silence: the utterance is likely complete
+        self._since_interim = 0
+        self.speculated += 1
+        return Interim(self._buf)
 
     def _feed_handsfree(self, chunk: Samples) -> list[Event]:
         assert self.detect is not None
         self._buf = np.concatenate([self._buf, chunk])
         self._since_vad += len(chunk)
         events: list[Event] = []
+        if self._speaking and (speculation := self._settled(len(chunk))) is not None:
+            events.append(speculation)
         if self._since_vad < self.vad_window // 2:
             return events
         self._since_vad = 0
@@ -136,6 +171,7 @@ class StreamSession:
         if not self._speaking:
             if voiced:
                 self._speaking, self._silent, self._since_interim = True, 0, 0
+                self._heard = True
             else:
                 self._buf = self._buf[-self.keep :]  # pre-roll: the start of the first word
             return events
@@ -148,7 +184,8 @@ class StreamSession:
             self.utterances += 1
             self._buf = np.zeros(0, np.float32)
             self._speaking = False
-        elif self._since_interim >= self.interim_step:
+            return events
+        if self._since_interim >= self.interim_step:
             self._since_interim = 0
             events.append(Interim(self._buf))
         return events
@@ -167,5 +204,5 @@ class StreamSession:
     def cancel(self) -> None:
         """Drop whatever was heard."""
         self._buf = np.zeros(0, np.float32)
-        self._since_interim = self._since_vad = self._silent = 0
-        self._overflow = self._speaking = False
+        self._since_interim = self._since_vad = self._silent = self._since_settle = 0
+        self._overflow = self._speaking = self._heard = False

@@ -99,3 +99,31 @@ def test_bad_mode() -> None:
 )
 def test_text_frames_name_a_control_or_nothing(text: str, kind: str | None) -> None:
     assert control_kind(text) == kind
+
+
+def test_push_to_talk_decodes_speculatively_when_speech_falls_silent() -> None:
+    s = StreamSession("ptt", detect=energy, interim_step_s=5.0, settle_s=0.4)
+    assert feed(s, pcm(0.3, False)) == []  # silence before any speech: nothing to decode
+    assert feed(s, pcm(1.0, True)) == []  # speaking (no interim step reached)
+    events = feed(s, pcm(0.8, False))  # the operator stops, still holding the button
+    assert [type(e) for e in events] == [Interim] and s.speculated == 1
+    spoken = len(events[0].samples) / SAMPLE_RATE  # type: ignore[attr-defined]
+    assert 1.7 - 1e-9 <= spoken <= 2.1  # all the speech and >= settle_s of silence after it
+    assert feed(s, pcm(0.5, False)) == []  # more silence: no second speculation
+    feed(s, pcm(0.5, True))
+    assert [type(e) for e in feed(s, pcm(0.6, False))] == [Interim]  # spoke again, fell silent
+    assert [type(e) for e in s.end()] == [Final] and s.speculated == 2
+
+
+def test_handsfree_decodes_speculatively_before_the_end_of_the_utterance() -> None:
+    s = StreamSession("handsfree", detect=energy, end_silence_s=0.7, settle_s=0.4)
+    events = feed(s, pcm(1.2, True) + pcm(1.2, False))
+    kinds = [type(e) for e in events]
+    assert kinds.count(Final) == 1 and s.speculated == 1
+    speculative = [e for e in events if isinstance(e, Interim)][-1]
+    final = next(e for e in events if isinstance(e, Final))
+    assert kinds.index(Final) > kinds.index(Interim)
+    # The final only adds silence to what the speculative decode had.
+    n = len(speculative.samples)
+    assert np.array_equal(final.samples[:n], speculative.samples)
+    assert not np.any(final.samples[n:])
