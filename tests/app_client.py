@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+from typing import Any
 
 import httpx
+import pytest
 
 from server.app import create_app
 from server.settings import Settings
@@ -25,3 +28,26 @@ async def app_client(settings: Settings) -> AsyncIterator[httpx.AsyncClient]:
         ) as client:
             client.app = app  # type: ignore[attr-defined]
             yield client
+
+
+def app_fixture(
+    sim_base_addr: str, token: str, observer_token: str, **settings: Any
+) -> Callable[[Path], AsyncIterator[httpx.AsyncClient]]:
+    """A pytest fixture ``api``: :func:`app_client` on its own simulator at ``sim_base_addr``
+    (each test file has its own loopback address, so files never share a drone), data in the
+    test's tmp_path, ``settings`` passed on to :class:`Settings`. Use: ``api = app_fixture(...)``.
+    """
+
+    @pytest.fixture
+    async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
+        config = Settings(
+            data_dir=tmp_path / "data",
+            token=token,
+            observer_token=observer_token,
+            sim_base_addr=sim_base_addr,
+            **settings,
+        )
+        async with app_client(config) as client:
+            yield client
+
+    return api  # type: ignore[no-any-return]

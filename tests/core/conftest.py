@@ -2,27 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
-from pathlib import Path
-
-import httpx
-import pytest
-
-from server.settings import Settings
-from tests.app_client import app_client
+from tests.app_client import app_fixture
 
 PILOT = "pilot-token-for-tests"
 OBSERVER = "observer-token-for-tests"
 
 
-@pytest.fixture
-async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
-    settings = Settings(
-        data_dir=tmp_path,
-        token=PILOT,
-        observer_token=OBSERVER,
-        sim_base_addr="127.0.0.31",
-        sim_speed=4.0,
-    )
-    async with app_client(settings) as client:
-        yield client
+# The app on its own simulator, shared by the REST tests of this directory.
+api = app_fixture("127.0.0.31", PILOT, OBSERVER, sim_speed=4.0)

@@ -25,35 +25,15 @@ from pathlib import Path
 import httpx
 import pytest
 
-from server.app import create_app
 from server.security import TOKEN_COOKIE, TokenStore
-from server.settings import Settings
 from server.store import AuditLog
+from tests.app_client import app_fixture
 
 PILOT = "pilot-token-for-hardening"
 OBSERVER = "observer-token-for-hardening"
 
 
-@pytest.fixture
-async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
-    settings = Settings(
-        data_dir=tmp_path / "data",
-        token=PILOT,
-        observer_token=OBSERVER,
-        sim_base_addr="127.0.14.10",
-        sim_speed=4.0,
-    )
-    app = create_app(settings)
-    async with (
-        app.router.lifespan_context(app),
-        httpx.AsyncClient(
-            transport=httpx.ASGITransport(app=app),
-            base_url="http://127.0.0.1:8000",
-            headers={"Authorization": f"Bearer {PILOT}"},
-        ) as client,
-    ):
-        client.app = app  # type: ignore[attr-defined]
-        yield client
+api = app_fixture("127.0.14.10", PILOT, OBSERVER, sim_speed=4.0)
 
 
 async def test_body_limits_come_before_the_token(api: httpx.AsyncClient) -> None:

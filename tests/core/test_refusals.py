@@ -13,23 +13,12 @@ import pytest
 
 from server.app import create_app
 from server.settings import Settings
-from tests.app_client import app_client
+from tests.app_client import app_fixture
 from tests.core.conftest import OBSERVER, PILOT
 from tests.core.test_api import wait_for
 
-
-@pytest.fixture
-async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
-    """The app on its own simulator (127.0.18.2: this test file's loopback address)."""
-    settings = Settings(
-        data_dir=tmp_path,
-        token=PILOT,
-        observer_token=OBSERVER,
-        sim_base_addr="127.0.18.2",
-        sim_speed=4.0,
-    )
-    async with app_client(settings) as client:
-        yield client
+# The app on its own simulator (127.0.18.2: this test file's loopback address).
+api = app_fixture("127.0.18.2", PILOT, OBSERVER, sim_speed=4.0)
 
 
 async def test_takeoff_in_emergency_and_at_low_battery_is_refused_with_the_way_out(

@@ -7,32 +7,19 @@ from __future__ import annotations
 import asyncio
 import json
 import time
-from collections.abc import AsyncIterator
-from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 
 from server.fleet.central import world_route
-from server.settings import Settings
-from tests.app_client import app_client
+from tests.app_client import app_fixture
 
 PILOT = "pilot-token-central"
 OBSERVER = "observer-token-central"
 
 
-@pytest.fixture
-async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
-    settings = Settings(
-        data_dir=tmp_path,
-        token=PILOT,
-        observer_token=OBSERVER,
-        sim_base_addr="127.0.12.2",
-        fleet=2,
-    )
-    async with app_client(settings) as client:
-        yield client
+api = app_fixture("127.0.12.2", PILOT, OBSERVER, fleet=2)
 
 
 async def _until(api: httpx.AsyncClient, pred: Any, timeout_s: float) -> dict[str, Any]:
