@@ -47,8 +47,8 @@ def _parser() -> argparse.ArgumentParser:
         "--vehicles",
         choices=("inline", "process"),
         default=None,
-        help="each drone's flight stack in its own supervised process (process, the default; "
-        "MAVLink drones stay inline) or in the web process (inline); env UAVC_VEHICLES",
+        help="each drone's flight stack, AR.Drone or MAVLink, in its own supervised process "
+        "(process, the default) or in the web process (inline); env UAVC_VEHICLES",
     )
 
     sim = sub.add_parser("sim", help="the simulator alone, behind the AR.Drone protocol")
@@ -164,10 +164,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def serve_vehicles(flag: str | None, env: Mapping[str, str]) -> str:
     """Where ``serve`` runs each drone's flight stack: ``--vehicles``, else ``UAVC_VEHICLES``,
-    else ``process`` (issue 14: its own supervised process). ``inline`` keeps it in the web
-    process; MAVLink drones fly inline either way (``VehicleCentral.can_spawn``). ``Settings``
-    itself defaults to ``inline``: an app built in-process (tests, embedding) spawns nothing
-    unless asked."""
+    else ``process`` (issue 14: its own supervised process, for AR.Drones and MAVLink drones
+    alike). ``inline`` keeps it in the web process. ``Settings`` itself defaults to ``inline``:
+    an app built in-process (tests, embedding) spawns nothing unless asked."""
     return flag or env.get("UAVC_VEHICLES") or "process"
 
 
@@ -202,6 +201,10 @@ def _serve(args: argparse.Namespace) -> int:
         raise SettingsError(
             f"recognizer must be server, browser or auto, not {settings.recognizer!r}"
         )
+    from server.mavlink_stack import drone_kind, is_mavlink
+
+    for index in range(max(1, settings.fleet)):  # a bad connection string: refused up front
+        is_mavlink(drone_kind(settings.drone, index))
     from server.tls import TLSError, tls_for
 
     try:

@@ -48,6 +48,7 @@ MAVROS_TOPICS = {
     "home": ("/mavros/home_position/home", "mavros_msgs/HomePosition"),
     "statustext": ("/mavros/statustext/recv", "mavros_msgs/StatusText"),
 }
+MAVROS_LATCHED = ("state", "home")  # latched on the graph: a late subscriber gets the last
 _LANDED = {"UNDEFINED": 0, "ON_GROUND": 1, "IN_AIR": 2, "TAKEOFF": 3, "LANDING": 4}
 
 
@@ -66,7 +67,7 @@ class MavrosNode(VehicleNode):
         g, o = self.graph, self.owner
         self.topic.update({k: self._name(v[0]) for k, v in MAVROS_TOPICS.items()})
         for key, (_, type_) in MAVROS_TOPICS.items():
-            g.advertise(self.topic[key], type_, latch=key in ("state", "home"), owner=o)
+            g.advertise(self.topic[key], type_, latch=key in MAVROS_LATCHED, owner=o)
         g.advertise(self.topic["pose"], POSE, owner=o)
         g.advertise(self.topic["task"], TASK, latch=True, owner=o)
         g.advertise(REPLY, "uav_console/Reply", owner=o)  # the vehicle's notices (with the dialog)

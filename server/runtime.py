@@ -192,7 +192,7 @@ class Runtime:
         count = 0 if self.settings.drone == "none" else max(1, self.settings.fleet)
         await self.vehicles.start()
         process = self.settings.vehicles == "process"
-        if process and self.vehicles.can_spawn(self.settings.drone, count):
+        if process:
             await self.vehicles.spawn(count)
             count = 0
         for index in range(count):

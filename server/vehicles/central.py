@@ -8,9 +8,10 @@
   ``serve`` spawned the vehicle or it joined from another host (``uav-console vehicle``).
 - Heartbeat: ``/vehicles/heartbeat`` at 10 Hz, so a vehicle can tell a stalled server.
 - Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle`` child
-  per drone; when one exits (a crash, ``kill -9``) the console is told on ``/console/reply``
-  (level ``alert``) and the child is started again (backoff 0.5 s doubling to 5 s, reset after
-  30 s up).
+  per drone, AR.Drone or MAVLink, each given its own ``--drone`` entry (a simulator, AR.Drone
+  or PX4, is started and owned by its vehicle); when one exits (a crash, ``kill -9``) the
+  console is told on ``/console/reply`` (level ``alert``) and the child is started again
+  (backoff 0.5 s doubling to 5 s, reset after 30 s up).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from fastapi import APIRouter, WebSocket
 
-from server.mavlink_stack import drone_kind
+from server.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.msgs import header
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge
@@ -83,6 +84,8 @@ CHILD_SETTINGS = (
     "seed",
     "sim_base_addr",
     "sim_speed",
+    "mavlink_sim_port",
+    "mavlink_key",
     "allow_origins",
     "data_dir",
     "grammar_dir",
@@ -201,32 +204,6 @@ class VehicleCentral:
         )
         self._tasks.append(asyncio.create_task(self._beat(), name="vehicles-heartbeat"))
 
-    @staticmethod
-    def spawnable(kind: str) -> bool:
-        """Whether a vehicle process can fly this one ``--drone`` entry: the AR.Drone simulator
-        or an AR.Drone's address. A MAVLink connection string (``tcp:…``, ``sim-mavlink``,
-        ``/dev/…``) stays in the web process until the vehicle host learns to drive it."""
-        return kind == "sim" or (
-            kind != "none" and ":" not in kind and not kind.startswith(("sim-", "/dev/"))
-        )
-
-    @classmethod
-    def can_spawn(cls, drone: str, count: int = 1) -> bool:
-        """Whether every one of the ``count`` drones of ``--drone`` (a comma-separated list,
-        the last entry repeating) can fly in a vehicle process; if one cannot, they all fly in
-        the web process, with a warning naming it. ``none`` (no drone): nothing to spawn."""
-        if drone == "none":
-            return True
-        kinds = {drone_kind(drone, index) for index in range(max(1, count))}
-        inline = sorted(k for k in kinds if not cls.spawnable(k))
-        if inline:
-            log.warning(
-                "--drone %s cannot run in a vehicle process yet: flying every drone in the web "
-                "process (--vehicles inline)",
-                ", ".join(inline),
-            )
-        return not inline
-
     def flight_stacks(self) -> str:
         """Where each drone's flight stack runs, for ``serve``'s start-up lines."""
         from server.vehicles.remote import RemoteDroneStack
@@ -234,7 +211,7 @@ class VehicleCentral:
         drones = self.runtime.drones
         remote = [n for n, d in drones.items() if isinstance(d, RemoteDroneStack)]
         local = [n for n in drones if n not in remote]
-        return flight_stacks_line(remote, local, self.runtime.settings.vehicles)
+        return flight_stacks_line(remote, local)
 
     async def spawn(self, count: int) -> None:
         """Register drones ``uav1`` … ``uavN`` now; start (or adopt) their vehicle processes in
@@ -252,14 +229,14 @@ class VehicleCentral:
         for index in range(count):
             name = f"uav{index + 1}"
             prefix = "" if count == 1 else f"/{name}"
-            kind = drone_kind(s.drone, index)  # one entry of a comma-separated --drone
             argv = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", name]
+            kind = drone_kind(s.drone, index)  # its own entry of a comma-separated --drone
             argv += ["--prefix", prefix, "--index", str(index), "--drone", kind]
             argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
             if tls is not None:  # our own certificate, pinned (whatever names it carries)
                 argv += ["--fingerprint", tls.fingerprint]
             self.processes[name] = VehicleProcess(argv, env, name)
-            self._register(name, prefix, simulated=kind == "sim")
+            self._register(name, prefix, simulated=kind in ("sim", SIM_MAVLINK))
             self._expect(name)
         self._tasks.append(asyncio.create_task(self._launch(), name="vehicles-launch"))
 
@@ -426,20 +403,15 @@ class VehicleCentral:
             log.warning("%s: vehicle process restarted (pid %s)", vp.name, vp.pid)
 
 
-def flight_stacks_line(remote: list[str], local: list[str], mode: str) -> str:
-    """``uav1, uav2 each in its own process``, ``uav1 in the web process (--vehicles inline)``
-    or, in process mode, ``uav2 in the web process (MAVLink: …)`` (see :meth:`can_spawn`)."""
+def flight_stacks_line(remote: list[str], local: list[str]) -> str:
+    """``uav1, uav2 each in its own process`` (``--vehicles process``, MAVLink drones included)
+    or ``uav1 in the web process (--vehicles inline)``."""
     parts = []
     if remote:
         each = "in its own process" if len(remote) == 1 else "each in its own process"
         parts.append(f"{', '.join(remote)} {each}")
     if local:
-        why = (
-            "--vehicles inline"
-            if mode == "inline"
-            else "a MAVLink drone cannot run in a vehicle process yet"
-        )
-        parts.append(f"{', '.join(local)} in the web process ({why})")
+        parts.append(f"{', '.join(local)} in the web process (--vehicles inline)")
     return "; ".join(parts) or "no drone"
 
 

@@ -41,6 +41,7 @@ from server.vehicles.watch import CentralWatch, LossAction
 
 if TYPE_CHECKING:
     from server.direct_actions import DirectOutcome
+    from server.runtime import DroneStack
 
 log = logging.getLogger("uav_console.vehicle")
 
@@ -68,8 +69,9 @@ class VehicleOptions:
     fingerprint: str | None = None  # wss:// central: or accept exactly this certificate
 
 
-def link_spec(name: str, prefix: str) -> LinkSpec:
-    """The topics and services a whole vehicle shares with the central server."""
+def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
+    """The topics and services a whole vehicle shares with the central server: an AR.Drone's
+    navdata and camera, or a MAVLink drone's ``/mavros/*`` topics (no camera over MAVLink)."""
     from server.dialog.manager import INTERPRET, REPLY, STATE, UTTERANCE
     from server.fleet.messages import (
         FLEET_TOPIC,
@@ -79,12 +81,22 @@ def link_spec(name: str, prefix: str) -> LinkSpec:
         STATUS_TOPIC,
         STATUS_TYPE,
     )
+    from server.mavros_node import MAVROS_LATCHED, MAVROS_TOPICS
     from server.vehicle_node import EMPTY, IMAGE, MARKERS, NAVDATA, POSE, TASK, TWIST
 
     p = prefix
+    if mavlink:
+        drone: tuple[TopicSpec, ...] = tuple(
+            TopicSpec(f"{p}{topic}", typ, latch=key in MAVROS_LATCHED)
+            for key, (topic, typ) in MAVROS_TOPICS.items()
+        )
+    else:
+        drone = (
+            TopicSpec(f"{p}/ardrone/navdata", NAVDATA),
+            TopicSpec(f"{p}/ardrone/image_raw/compressed", IMAGE),
+        )
     out = (
-        TopicSpec(f"{p}/ardrone/navdata", NAVDATA),
-        TopicSpec(f"{p}/ardrone/image_raw/compressed", IMAGE),
+        *drone,
         TopicSpec(f"{p}/uav/pose", POSE),
         TopicSpec(f"{p}/uav/markers", MARKERS),
         TopicSpec(f"{p}/uav/task", TASK, latch=True),
@@ -159,11 +171,7 @@ class VehicleHost:
         self.stop_requested = asyncio.Event()
 
     async def start(self) -> None:
-        from drone.ardrone.driver import ARDroneDriver, DriverConfig
-        from drone.camera import CameraModel
-        from drone.sim.server import SimServer, sim_endpoint
         from drone.sim.world import load_world
-        from drone.vehicle import Vehicle
         from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
         from server.dialog.manager import DialogManager
         from server.fleet.geo import origin_of
@@ -172,52 +180,26 @@ class VehicleHost:
         from server.fleet.patrol import station_positions
         from server.graph import Graph
         from server.language.nlu import default_nlu
-        from server.runtime import DroneStack
+        from server.mavlink_stack import is_mavlink
         from server.store import AuditLog
-        from server.tasks.manager import TaskManager
-        from server.vehicle_node import VehicleNode
 
         s, o = self.settings, self.options
         self.graph = Graph()
         self.graph.bind_loop(asyncio.get_running_loop())
         self.world = load_world(s.world)
-        sim: SimServer | None = None
-        if s.drone == "sim":
-            addr, ports = sim_endpoint(o.index, s.sim_base_addr)
-            sim = SimServer(addr, self.world, ports=ports, speed=s.sim_speed, seed=s.seed + o.index)
-            await sim.start()
-            driver = ARDroneDriver(
-                addr,
-                at_port=ports.at,
-                navdata_port=ports.navdata,
-                video_port=ports.video,
-                config=DriverConfig(link_timeout_s=s.link_timeout_s),
-            )
-        else:
-            driver = ARDroneDriver(s.drone, config=DriverConfig(link_timeout_s=s.link_timeout_s))
-        await driver.start()
-        vehicle = Vehicle(
-            self.name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s
-        )
-        await vehicle.start(driver)
-        # As an in-process drone (server.runtime): idle search, and jogs and /ardrone/* audited
-        # (the vehicle writes to the server's audit log file; SQLite in WAL mode).
-        tasks = TaskManager(
-            vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s, idle_search=True
-        )
+        # As an in-process drone (server.runtime): jogs and /ardrone/* audited (the vehicle
+        # writes to the server's audit log file; SQLite in WAL mode).
         self.audit = AuditLog(s.data_dir / "audit.db")
-        node = VehicleNode(
-            self.graph,
-            vehicle,
-            tasks,
-            self.name,
-            o.prefix,
-            heartbeat_timeout_s=s.heartbeat_timeout_s,
-            audit=self.audit,
-        )
-        self.stack = DroneStack(self.name, o.prefix, vehicle, driver, sim, tasks, node)
-        await node.start()
-        self.core = GraphLinkCore(self.graph, link_spec(self.name, o.prefix))
+        self.mavlink = is_mavlink(s.drone)
+        if self.mavlink:
+            self.stack = await self._start_mavlink()
+        else:
+            self.stack = await self._start_ardrone()
+        vehicle, tasks = self.stack.vehicle, self.stack.tasks
+        assert tasks is not None and self.stack.node is not None
+        await self.stack.node.start()
+        spec = link_spec(self.name, o.prefix, mavlink=self.mavlink)
+        self.core = GraphLinkCore(self.graph, spec)
         self.link = GraphLink(
             o.central,
             self.core,
@@ -284,6 +266,78 @@ class VehicleHost:
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]
+
+    async def _start_ardrone(self) -> DroneStack:
+        """An AR.Drone: its simulator (``--drone sim``) or its address, the driver, the
+        vehicle (EKF, 100 Hz controller), the task manager (idle search) and its node."""
+        from drone.ardrone.driver import ARDroneDriver, DriverConfig
+        from drone.camera import CameraModel
+        from drone.sim.server import SimServer, sim_endpoint
+        from drone.vehicle import Vehicle
+        from server.runtime import DroneStack
+        from server.tasks.manager import TaskManager
+        from server.vehicle_node import VehicleNode
+
+        s, o = self.settings, self.options
+        sim: SimServer | None = None
+        if s.drone == "sim":
+            addr, ports = sim_endpoint(o.index, s.sim_base_addr)
+            sim = SimServer(addr, self.world, ports=ports, speed=s.sim_speed, seed=s.seed + o.index)
+            await sim.start()
+            driver = ARDroneDriver(
+                addr,
+                at_port=ports.at,
+                navdata_port=ports.navdata,
+                video_port=ports.video,
+                config=DriverConfig(link_timeout_s=s.link_timeout_s),
+            )
+        else:
+            driver = ARDroneDriver(s.drone, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+        await driver.start()
+        vehicle = Vehicle(
+            self.name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s
+        )
+        await vehicle.start(driver)
+        tasks = TaskManager(
+            vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s, idle_search=True
+        )
+        node = VehicleNode(
+            self.graph,
+            vehicle,
+            tasks,
+            self.name,
+            o.prefix,
+            heartbeat_timeout_s=s.heartbeat_timeout_s,
+            audit=self.audit,
+        )
+        return DroneStack(self.name, o.prefix, vehicle, driver, sim, tasks, node)
+
+    async def _start_mavlink(self) -> DroneStack:
+        """A PX4/ArduPilot drone (``--drone tcp:…``, ``udpin:…``, ``/dev/…``), or the simulated
+        PX4 (``sim-mavlink``), which this process starts and owns on its drone's simulator
+        address, as it does the AR.Drone simulator: the autopilot flies, the console sends
+        targets; its topics are MAVROS's (:class:`~server.mavros_node.MavrosNode`)."""
+        from server.mavlink_stack import start_mavlink
+        from server.mavros_node import MavrosNode
+        from server.runtime import DroneStack
+        from server.tasks.manager import TaskManager
+
+        s, o = self.settings, self.options
+        parts = await start_mavlink(self.name, s.drone, o.index, self.world, s)
+        vehicle: Any = parts.vehicle
+        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
+        node = MavrosNode(
+            self.graph,
+            vehicle,
+            tasks,
+            self.name,
+            o.prefix,
+            heartbeat_timeout_s=s.heartbeat_timeout_s,
+            audit=self.audit,
+        )
+        driver: Any = parts.driver
+        sim: Any = parts.sim
+        return DroneStack(self.name, o.prefix, vehicle, driver, sim, tasks, node)
 
     def info(self) -> dict[str, Any]:
         return {

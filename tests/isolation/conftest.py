@@ -51,10 +51,11 @@ class Served:
     proc: subprocess.Popen[bytes]
     http: httpx.Client
     log_path: Path
+    host: str = HOST
 
     @property
     def ws(self) -> str:
-        return f"ws://{HOST}:{self.port}/rosbridge?token={PILOT}"
+        return f"ws://{self.host}:{self.port}/rosbridge?token={PILOT}"
 
     def drone(self, name: str = "uav1") -> dict[str, Any]:
         r = self.http.get(f"/api/v1/drones/{name}")
@@ -97,18 +98,19 @@ def serve(
     extra: tuple[str, ...] = (),
     env: dict[str, str] | None = None,
     port: int | None = None,
+    host: str = HOST,
 ) -> Iterator[Served]:
-    port = port or free_port()
+    port = port or free_port(host)
     log_path = tmp / f"serve-{port}.log"
     full_env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), **(env or {})}
-    argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
+    argv = [sys.executable, "-m", "server", "serve", "--host", host, "--port", str(port)]
     argv += ["--drone", drone, "--token", PILOT, *extra]
     with open(log_path, "wb") as log:
         proc = subprocess.Popen(argv, cwd=ROOT, env=full_env, stdout=log, stderr=log)
     http = httpx.Client(
-        base_url=f"http://{HOST}:{port}", headers={"Authorization": f"Bearer {PILOT}"}, timeout=10
+        base_url=f"http://{host}:{port}", headers={"Authorization": f"Bearer {PILOT}"}, timeout=10
     )
-    served = Served(port, proc, http, log_path)
+    served = Served(port, proc, http, log_path, host)
     try:
         wait_for(lambda: http.get("/api/v1/health").status_code == 200, "serve to start", 30)
         yield served

@@ -307,35 +307,40 @@ def test_unknown_vehicles_mode_is_refused(tmp_path: Path) -> None:
         Runtime(Settings(data_dir=tmp_path, vehicles="threads"))
 
 
-def test_which_drones_a_vehicle_process_can_fly() -> None:
-    from server.vehicles.central import VehicleCentral
-
-    assert VehicleCentral.can_spawn("sim")
-    assert VehicleCentral.can_spawn("192.168.1.1")
-    assert VehicleCentral.can_spawn("none")  # nothing to spawn
-    assert not VehicleCentral.can_spawn("tcp:127.0.0.1:5760")  # MAVLink: inline for now
-    assert not VehicleCentral.can_spawn("sim-mavlink")
-    assert not VehicleCentral.can_spawn("/dev/ttyUSB0,57600")
-    # a fleet: every drone of the list (the last entry repeating) must fit, or all fly inline
-    assert VehicleCentral.can_spawn("192.168.1.10,192.168.1.11", 2)
-    assert VehicleCentral.can_spawn("sim,sim-mavlink", 1)  # uav2 is not there
-    assert not VehicleCentral.can_spawn("sim,sim-mavlink", 2)
-    assert not VehicleCentral.can_spawn("sim-mavlink,sim", 3)
-
-
 def test_serve_says_where_each_flight_stack_runs() -> None:
     from server.vehicles.central import flight_stacks_line
 
-    assert flight_stacks_line(["uav1"], [], "process") == "uav1 in its own process"
-    assert flight_stacks_line(["uav1", "uav2"], [], "process") == (
-        "uav1, uav2 each in its own process"
-    )
-    assert (
-        flight_stacks_line([], ["uav1"], "inline") == "uav1 in the web process (--vehicles inline)"
-    )
-    mavlink = flight_stacks_line([], ["uav1", "uav2"], "process")
-    assert mavlink.startswith("uav1, uav2 in the web process (a MAVLink drone cannot")
-    assert flight_stacks_line([], [], "process") == "no drone"
+    assert flight_stacks_line(["uav1"], []) == "uav1 in its own process"
+    assert flight_stacks_line(["uav1", "uav2"], []) == "uav1, uav2 each in its own process"
+    assert flight_stacks_line([], ["uav1"]) == "uav1 in the web process (--vehicles inline)"
+    assert flight_stacks_line([], []) == "no drone"
+
+
+def test_a_mavlink_vehicle_shares_mavros_topics_not_a_camera() -> None:
+    from server.vehicles.host import link_spec
+
+    ardrone = {t.name for t in link_spec("uav2", "/uav2").out_topics}
+    spec = link_spec("uav2", "/uav2", mavlink=True)
+    mavlink = {t.name: t for t in spec.out_topics}
+    assert "/uav2/ardrone/image_raw/compressed" in ardrone
+    assert "/uav2/ardrone/image_raw/compressed" not in mavlink
+    assert "/uav2/ardrone/navdata" not in mavlink
+    assert mavlink["/uav2/mavros/state"].latch
+    assert not mavlink["/uav2/mavros/local_position/pose"].latch
+    assert {"/uav2/uav/pose", "/uav2/uav/task", "/uav2/vehicle/telemetry"} <= set(mavlink)
+    # the signing secret reaches a MAVLink vehicle process (as the token does: environment only)
+    env = child_env(Settings(mavlink_key="ab" * 32, mavlink_sim_port=5761), "secret")
+    assert env["UAVC_MAVLINK_KEY"] == "ab" * 32 and env["UAVC_MAVLINK_SIM_PORT"] == "5761"
+
+
+def test_serve_refuses_a_bad_mavlink_entry_before_spawning_anything(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from server.cli import main
+
+    argv = ["serve", "--drone", "sim,tcp:nohost", "--fleet", "2", "--data-dir", str(tmp_path)]
+    assert main([*argv, "--vehicles", "process"]) == 2
+    assert "'tcp:nohost' is not a MAVLink connection string" in capsys.readouterr().err
 
 
 def test_serve_refuses_an_unknown_vehicles_mode(tmp_path: Path) -> None:
