@@ -7,7 +7,8 @@ advertises ``/NAME/fleet/ltm_status`` (std_msgs/String) and the service
 ``result: false`` and the reason), and turns statuses into ``publish`` frames.
 ``VehicleClient`` is the asyncio driver (``websockets``): it keeps the LTM stepping whether or
 not the central server is reachable (so the LTM's own "CTM silent → fly home" rule works) and
-reconnects with exponential backoff (0.5 s doubling to 5 s).
+reconnects with exponential backoff (0.5 s doubling to 5 s) through
+:class:`~server.central_connection.CentralConnection`.
 """
 
 from __future__ import annotations
@@ -18,12 +19,12 @@ import contextlib
 import json
 import logging
 import os
-import ssl
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from server.central_connection import CentralConnection, CentralServer
 from server.fleet.errors import ClientError, FleetError
 from server.fleet.ltm import LocalTaskManager
 from server.fleet.messages import (
@@ -35,7 +36,7 @@ from server.fleet.messages import (
     STATUS_TYPE,
     LtmStatus,
 )
-from server.tls import TLSError, check_pinned, client_context, untrusted
+from server.tls import TLSError
 
 log = logging.getLogger(__name__)
 
@@ -124,81 +125,37 @@ class VehicleClient:
         ca_file: Path | None = None,
         fingerprint: str | None = None,
     ) -> None:
-        if not url.startswith(("ws://", "wss://")):
-            raise ClientError(f"--central must be a ws:// or wss:// URL, got {url!r}")
-        self.url = url
         # wss:// (issue 15): verify the central's certificate with a CA file or a pinned
         # SHA-256 fingerprint; a wrong certificate stops the client with the reason.
-        self.fingerprint = fingerprint
-        self.ssl: ssl.SSLContext | None = (
-            client_context(ca_file, fingerprint) if url.startswith("wss://") else None
+        self.conn = CentralConnection(
+            CentralServer(url, token, ca_file, fingerprint),
+            error=ClientError,
+            name=ltm.name,
+            log=log,
+            backoff_s=backoff_s,
         )
+        self.url = url
         self.core = BridgeClientCore(ltm)
         self.ltm = ltm
-        self.token = token
         self.clock = clock
         self.period_s = period_s
         self.step_tasks = step_tasks
-        self.backoff_s = backoff_s
-        self.connects = 0
-        self.connected = asyncio.Event()
-        self._ws: Any | None = None
-        self._hold_until = 0.0  # loop time before which no reconnect is tried (``drop``)
+
+    @property
+    def connects(self) -> int:
+        """How many times the client has joined the central server."""
+        return self.conn.connects
 
     async def run(self, stop: asyncio.Event | None = None) -> None:
         """Run until ``stop`` is set (or forever)."""
         stop = stop or asyncio.Event()
         stepper = asyncio.create_task(self._step_loop(stop))
         try:
-            await self._connect_loop(stop)
+            await self.conn.run(stop, hello=self.core.hello, session=lambda ws: [self._read(ws)])
         finally:
             stepper.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await stepper
-
-    async def _connect_loop(self, stop: asyncio.Event) -> None:
-        from websockets.asyncio.client import connect
-        from websockets.exceptions import InvalidHandshake, WebSocketException
-
-        delay = self.backoff_s[0]
-        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
-        while not stop.is_set():
-            try:
-                async with connect(
-                    self.url, additional_headers=headers, max_size=None, ssl=self.ssl
-                ) as ws:
-                    if self.ssl is not None and self.fingerprint is not None:
-                        check_pinned(ws.transport.get_extra_info("ssl_object"), self.fingerprint)
-                    self._ws = ws
-                    for frame in self.core.hello():
-                        await ws.send(frame)
-                    self.connects += 1
-                    self.connected.set()
-                    delay = self.backoff_s[0]
-                    log.info("%s joined %s", self.ltm.name, self.url)
-                    reader = asyncio.create_task(self._read(ws))
-                    waiter = asyncio.create_task(stop.wait())
-                    await asyncio.wait({reader, waiter}, return_when=asyncio.FIRST_COMPLETED)
-                    for t in (reader, waiter):
-                        t.cancel()
-                        with contextlib.suppress(asyncio.CancelledError, Exception):
-                            await t
-            except ssl.SSLCertVerificationError as exc:
-                raise ClientError(untrusted(exc)) from exc
-            except TLSError as exc:
-                raise ClientError(str(exc)) from exc
-            except (OSError, InvalidHandshake, WebSocketException, TimeoutError) as exc:
-                log.warning("%s: central server unreachable (%s); retrying", self.ltm.name, exc)
-            finally:
-                self._ws = None
-                self.connected.clear()
-            if stop.is_set():
-                break
-            loop = asyncio.get_running_loop()
-            wait = max(delay, self._hold_until - loop.time())
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(stop.wait(), wait)
-            delay = min(delay * 2, self.backoff_s[1])
 
     async def _read(self, ws: Any) -> None:
         async for text in ws:
@@ -213,7 +170,7 @@ class VehicleClient:
             if self.step_tasks is not None:
                 self.step_tasks(now)
             st = self.ltm.step(now)
-            ws = self._ws
+            ws = self.conn.ws
             if st is not None and ws is not None:
                 with contextlib.suppress(Exception):  # a dropped connection: the reader notices
                     await ws.send(self.core.status_frame(st))
@@ -222,9 +179,7 @@ class VehicleClient:
     async def drop(self, hold_s: float = 0.0) -> None:
         """Close the current connection and stay away ``hold_s`` before reconnecting (a network
         outage, for tests and drills)."""
-        self._hold_until = asyncio.get_running_loop().time() + hold_s
-        if self._ws is not None:
-            await self._ws.close()
+        await self.conn.drop(hold_s)
 
 
 def vehicle_main(args: argparse.Namespace) -> int:

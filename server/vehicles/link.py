@@ -9,21 +9,21 @@ can tell a stalled central server from a quiet one (the server sends a heartbeat
 ``wss://`` (a central server serving HTTPS, e.g. ``serve --host 0.0.0.0``): the certificate is
 verified with ``ca_file`` (else the system's CAs) or pinned by its SHA-256 ``fingerprint``
 (``serve`` pins its own for the vehicles it spawns); an untrusted certificate stops the link
-with the reason (:class:`~server.vehicles.errors.LinkError`), it is not retried.
+with the reason (:class:`~server.vehicles.errors.LinkError`), it is not retried. The reconnect
+loop is :class:`~server.central_connection.CentralConnection`, shared with the fleet client.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-import ssl
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
-from server.tls import TLSError, check_pinned, client_context, untrusted
+from server.central_connection import CentralConnection, CentralServer
+from server.tls import TLSError
 from server.vehicles.errors import LinkError
 from server.vehicles.link_core import GraphLinkCore
 
@@ -45,75 +45,34 @@ class GraphLink:
         ca_file: Path | None = None,
         fingerprint: str | None = None,
     ) -> None:
-        if not url.startswith(("ws://", "wss://")):
-            raise LinkError(f"--central must be a ws:// or wss:// URL, got {url!r}")
-        self.url = url
-        self.fingerprint = fingerprint
         try:
-            self.ssl: ssl.SSLContext | None = (
-                client_context(ca_file, fingerprint) if url.startswith("wss://") else None
+            self.conn = CentralConnection(
+                CentralServer(url, token, ca_file, fingerprint),
+                error=LinkError,
+                name=name,
+                log=log,
+                backoff_s=backoff_s,
+                open_timeout_s=5,
             )
         except TLSError as exc:
             raise LinkError(str(exc)) from exc
+        self.url = url
         self.core = core
-        self.token = token
         self.clock = clock
-        self.backoff_s = backoff_s
         self.name = name
-        self.connects = 0
-        self.connected = asyncio.Event()
         self.last_heard: float | None = None
         self._wake = asyncio.Event()
         core.on_output = self._wake.set
-        self._ws: Any | None = None
 
     async def run(self, stop: asyncio.Event) -> None:
-        from websockets.asyncio.client import connect
-        from websockets.exceptions import InvalidHandshake, WebSocketException
+        """Keep the link up (reconnecting) until ``stop`` is set."""
+        await self.conn.run(
+            stop, hello=self.core.hello, session=self._session, on_close=self.core.disconnected
+        )
 
-        delay = self.backoff_s[0]
-        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
-        while not stop.is_set():
-            try:
-                async with connect(
-                    self.url,
-                    additional_headers=headers,
-                    max_size=None,
-                    open_timeout=5,
-                    ssl=self.ssl,
-                ) as ws:
-                    if self.ssl is not None and self.fingerprint is not None:
-                        check_pinned(ws.transport.get_extra_info("ssl_object"), self.fingerprint)
-                    self._ws = ws
-                    for frame in self.core.hello():
-                        await ws.send(frame)
-                    self.connects += 1
-                    self.last_heard = self.clock()
-                    self.connected.set()
-                    delay = self.backoff_s[0]
-                    log.info("%s joined %s", self.name, self.url)
-                    parts = [self._read(ws), self._write(ws), stop.wait()]
-                    tasks = [asyncio.create_task(p) for p in parts]
-                    await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-                    for t in tasks:
-                        t.cancel()
-                        with contextlib.suppress(asyncio.CancelledError, Exception):
-                            await t
-            except ssl.SSLCertVerificationError as exc:
-                raise LinkError(untrusted(exc)) from exc
-            except TLSError as exc:
-                raise LinkError(str(exc)) from exc
-            except (OSError, InvalidHandshake, WebSocketException, TimeoutError) as exc:
-                log.warning("%s: central server unreachable (%s); retrying", self.name, exc)
-            finally:
-                self._ws = None
-                self.connected.clear()
-                self.core.disconnected()
-            if stop.is_set():
-                break
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(stop.wait(), delay)
-            delay = min(delay * 2, self.backoff_s[1])
+    def _session(self, ws: Any) -> list[Coroutine[Any, Any, None]]:
+        self.last_heard = self.clock()  # joined: the server counts as heard from now
+        return [self._read(ws), self._write(ws)]
 
     async def _read(self, ws: Any) -> None:
         async for text in ws:
@@ -130,5 +89,4 @@ class GraphLink:
 
     async def drop(self) -> None:
         """Close the current connection (it reconnects after the backoff); for drills."""
-        if self._ws is not None:
-            await self._ws.close()
+        await self.conn.drop()
