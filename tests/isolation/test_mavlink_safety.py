@@ -1,0 +1,251 @@
+"""A MAVLink drone in its own vehicle process stays safe (issue 14), as an AR.Drone does
+(tests/isolation/test_processes.py): an emergency through the vehicle's safety port force-disarms
+the simulated PX4 while the web process is stopped; a killed vehicle process is reported and
+restarted, with its PX4; a stopped web process makes the vehicle hold the PX4 where it is (a
+position setpoint streamed in OFFBOARD, as the hover task does for any localised drone), then
+land it after the long-loss time.
+
+One ``serve --vehicles process --drone sim-mavlink`` for the module (127.0.82.0/24). The vehicle
+owns the simulated PX4 (on 127.0.82.20:5760); the test watches that PX4's own wire through a
+second, passive TCP link of its own (:class:`Px4Wire`: it only reads, so it is no ground station
+to the PX4), so what it checks while the web process is stopped comes from the autopilot, never
+through the server under test.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+
+from drone.mavlink.codec import Codec, Message, mav
+from drone.mavlink.modes import mode_name
+from tests.isolation.conftest import PILOT, Served, reply_texts, serve, wait_for
+from tests.isolation.test_processes import Listener
+
+pytestmark = pytest.mark.timeout(180)
+HOST = "127.0.82.1"
+SIM_ADDR = "127.0.82.20"  # the vehicle's simulated PX4 (UAVC_SIM_BASE_ADDR)
+PX4_PORT = 5760
+LAND_AFTER_S = 6.0  # the long-loss landing, shortened for the test (20 s by default)
+
+
+@dataclass(frozen=True)
+class Px4State:
+    """What the PX4 last said about itself on the wire."""
+
+    t: float  # time.monotonic() of the latest HEARTBEAT
+    armed: bool
+    mode: str  # QGroundControl's name: AUTO.LOITER, AUTO.LAND, OFFBOARD…
+    landed_state: int  # MAV_LANDED_STATE_*
+    rel_alt_m: float
+    speed_m_s: float  # horizontal ground speed
+    north_m: float  # local position (LOCAL_POSITION_NED)
+    east_m: float
+
+
+class Px4Wire:
+    """A passive TCP link to the simulated PX4: decodes its streams, sends nothing; reconnects
+    when the PX4 goes away (its vehicle process was killed) and comes back."""
+
+    def __init__(self, addr: str, port: int = PX4_PORT) -> None:
+        self.addr, self.port = addr, port
+        self.state: Px4State | None = None
+        self.connects = 0
+        self.history: list[tuple[float, bool, str]] = []  # (t, armed, mode) at each change
+        self._alt = self._speed = self._north = self._east = 0.0
+        self._landed = mav.MAV_LANDED_STATE_UNDEFINED
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> Px4Wire:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                with socket.create_connection((self.addr, self.port), timeout=1.0) as sock:
+                    self.connects += 1
+                    self._read(sock)
+            except OSError:
+                pass
+            self._stop.wait(0.2)
+
+    def _read(self, sock: socket.socket) -> None:
+        codec = Codec(255, 191)
+        while not self._stop.is_set():
+            try:
+                data = sock.recv(65536)
+            except TimeoutError:
+                continue
+            if not data:
+                return
+            for msg in codec.feed(data):
+                self._on(msg)
+
+    def _on(self, m: Message) -> None:
+        kind = m.get_type()
+        if kind == "GLOBAL_POSITION_INT":
+            self._alt = m.relative_alt / 1000.0
+            self._speed = float(abs(complex(m.vx, m.vy))) / 100.0
+        elif kind == "LOCAL_POSITION_NED":
+            self._north, self._east = float(m.x), float(m.y)
+        elif kind == "EXTENDED_SYS_STATE":
+            self._landed = int(m.landed_state)
+        elif kind == "HEARTBEAT":
+            armed = bool(m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+            mode = mode_name(m.autopilot, m.custom_mode)
+            if not self.history or self.history[-1][1:] != (armed, mode):
+                self.history.append((time.monotonic(), armed, mode))
+            self.state = Px4State(
+                time.monotonic(),
+                armed,
+                mode,
+                self._landed,
+                self._alt,
+                self._speed,
+                self._north,
+                self._east,
+            )
+
+    def now(self, since: float) -> Px4State:
+        """The PX4's state from a heartbeat sent after ``since`` (monotonic)."""
+        return wait_for(
+            lambda: (s := self.state) is not None and s.t > since and s, "a PX4 heartbeat", 10
+        )
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Px4Wire, Served]]:
+    tmp: Path = tmp_path_factory.mktemp("mavlink-safety")
+    env = {
+        "UAVC_SIM_BASE_ADDR": SIM_ADDR,
+        "UAVC_SIM_SPEED": "2",
+        "UAVC_CENTRAL_LOSS_LAND_S": str(LAND_AFTER_S),
+    }
+    extra = ("--vehicles", "process", "--world", "outdoor")
+    with serve(tmp, "sim-mavlink", extra=extra, env=env, host=HOST) as srv:
+        srv.wait_vehicle()
+        with Px4Wire(SIM_ADDR) as wire:
+            wait_for(lambda: wire.state, "the PX4's heartbeat on the test's own link")
+            yield wire, srv
+
+
+def take_off(wire: Px4Wire, srv: Served) -> None:
+    r = srv.http.post("/api/v1/drones/uav1/takeoff")
+    assert r.status_code == 200 and r.json()["accepted"], r.text
+    wait_for(
+        lambda: (s := wire.state) and s.armed and s.rel_alt_m > 2.0 and s.mode != "AUTO.TAKEOFF",
+        "the PX4 to take off",
+        30,
+    )
+    wait_for(lambda: srv.drone()["flying"], "the console to see it flying", 10)
+
+
+def on_ground(wire: Px4Wire) -> bool:
+    s = wire.state
+    return s is not None and not s.armed and s.landed_state == mav.MAV_LANDED_STATE_ON_GROUND
+
+
+def test_stalled_web_process_px4_holds_then_lands(rig: tuple[Px4Wire, Served]) -> None:
+    wire, srv = rig
+    pid = srv.vehicle()["pid"]
+    take_off(wire, srv)
+    home = wire.now(0.0)
+    out = srv.command("go forward 20 meters")
+    assert out["accepted"], out
+    wait_for(lambda: (s := wire.state) and s.speed_m_s > 1.0, "the PX4 to fly the move", 10)
+    srv.pause()  # the whole web process stops: no heartbeat, no REST, no rosbridge
+    try:
+        t0 = time.monotonic()
+        # after 1 s of silence the vehicle holds the PX4 where it is (a position setpoint
+        # streamed in OFFBOARD): it stops short of the 20 m, still in the air, and stays
+        held = wait_for(
+            lambda: (s := wire.now(t0 + 1.5)).speed_m_s < 0.3 and s, "the PX4 to hold", 4
+        )
+        later = wire.now(held.t)
+        assert time.monotonic() - t0 < LAND_AFTER_S - 0.5, "no hold before the landing"
+        for s in (held, later):
+            assert s.armed and s.rel_alt_m > 1.5 and s.mode != "AUTO.LAND", s
+        moved = abs(complex(held.north_m - home.north_m, held.east_m - home.east_m))
+        assert 1.0 < moved < 15.0, f"finished the move despite the silent server ({moved:.1f} m)"
+        drift = abs(complex(later.north_m - held.north_m, later.east_m - held.east_m))
+        assert drift < 0.5, f"the hold drifted {drift:.2f} m"
+        # it lands after LAND_AFTER_S of silence
+        wait_for(lambda: on_ground(wire), "the landing after a long loss", LAND_AFTER_S + 20)
+        assert "AUTO.LAND" in [mode for t, _, mode in wire.history if t > t0], wire.history
+    finally:
+        srv.resume()
+    again = srv.wait_vehicle()
+    assert again["pid"] == pid, "the vehicle should reconnect, not be restarted"
+    assert srv.drone()["central_loss"]["actions"][-2:] == ["hover", "land"]
+
+
+def test_emergency_through_the_safety_port_force_disarms_the_px4(
+    rig: tuple[Px4Wire, Served],
+) -> None:
+    wire, srv = rig
+    safety = srv.vehicle()["safety_url"]
+    take_off(wire, srv)
+    srv.pause()
+    try:
+        t0 = time.monotonic()
+        r = httpx.post(f"{safety}/emergency", headers={"Authorization": f"Bearer {PILOT}"})
+        assert r.status_code == 200, r.text
+        assert r.json()["action"] == "emergency" and r.json()["accepted"], r.text
+        # motors off in the air: the PX4 accepted a forced disarm, and is on the ground
+        wait_for(lambda: on_ground(wire) and wire.now(t0), "the PX4 to disarm", 10)
+        after = [mode for t, _, mode in wire.history if t > t0]
+        assert "AUTO.LAND" not in after, f"it landed instead of stopping its motors: {after}"
+        assert srv.proc.poll() is None  # still stopped, not gone: the path never touched it
+        assert httpx.post(f"{safety}/emergency").status_code == 401  # the pilot token only
+    finally:
+        srv.resume()
+    wait_for(lambda: srv.drone()["emergency"], "the console to show the emergency")
+    r = srv.http.post("/api/v1/drones/uav1/reset")
+    assert r.status_code == 200 and r.json()["accepted"], r.text
+    wait_for(lambda: not srv.drone()["emergency"], "the drone to leave EMERGENCY")
+
+
+def test_killed_vehicle_process_is_reported_and_restarted(rig: tuple[Px4Wire, Served]) -> None:
+    wire, srv = rig
+    lis = Listener(srv.ws, {"/console/reply": "uav_console/Reply"})
+    try:
+        old = srv.vehicle()["pid"]
+        links = wire.connects
+        os.kill(old, signal.SIGKILL)
+        wait_for(
+            lambda: any("flight process stopped" in t for t in reply_texts(lis.frames)),
+            "the console's alert",
+        )
+        assert any("killed by signal 9" in t for t in reply_texts(lis.frames))
+        again = wait_for(
+            lambda: (v := srv.wait_vehicle())["pid"] != old and v,
+            "a new vehicle process",
+            40,
+        )
+        assert again["connected"]
+        # its new PX4 speaks on the wire, and its telemetry reaches the console again
+        wait_for(lambda: wire.connects > links, "the new PX4 on the test's link")
+        wire.now(time.monotonic())
+        t1 = srv.drone()["t"]
+        wait_for(lambda: srv.drone()["t"] > t1 and srv.drone()["link_ok"], "fresh telemetry")
+        take_off(wire, srv)
+        r = srv.http.post("/api/v1/drones/uav1/land")
+        assert r.status_code == 200 and r.json()["accepted"], r.text
+        wait_for(lambda: on_ground(wire), "the PX4 to land", 30)
+    finally:
+        lis.close()
