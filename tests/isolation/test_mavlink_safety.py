@@ -14,6 +14,7 @@ through the server under test.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -25,10 +26,12 @@ from pathlib import Path
 
 import httpx
 import pytest
+from websockets.sync.client import connect
 
 from drone.mavlink.codec import Codec, Message, mav
 from drone.mavlink.modes import mode_name
 from tests.isolation.conftest import PILOT, Served, reply_texts, serve, wait_for
+from tests.isolation.test_mavlink_process import assert_own_process
 from tests.isolation.test_processes import Listener
 
 pytestmark = pytest.mark.timeout(180)
@@ -160,6 +163,15 @@ def on_ground(wire: Px4Wire) -> bool:
     return s is not None and not s.armed and s.landed_state == mav.MAV_LANDED_STATE_ON_GROUND
 
 
+def test_the_px4_flies_in_a_child_process_that_owns_it(rig: tuple[Px4Wire, Served]) -> None:
+    _wire, srv = rig
+    assert_own_process(srv, "uav1", "sim-mavlink", SIM_ADDR)
+    assert "flight stacks: uav1 in its own process" in srv.log_path.read_text()
+    d = srv.drone()
+    assert d["vehicle"]["mode"] == "process" and d["simulated"]
+    assert d["extra"]["protocol"] == "mavlink" and d["extra"]["autopilot"] == "PX4"
+
+
 def test_stalled_web_process_px4_holds_then_lands(rig: tuple[Px4Wire, Served]) -> None:
     wire, srv = rig
     pid = srv.vehicle()["pid"]
@@ -200,6 +212,16 @@ def test_emergency_through_the_safety_port_force_disarms_the_px4(
     wire, srv = rig
     safety = srv.vehicle()["safety_url"]
     take_off(wire, srv)
+    # the vehicle's MAVROS topics cross the link: /mavros/state (latched) says armed
+    with connect(srv.ws) as ws:
+        sub = {"op": "subscribe", "topic": "/mavros/state", "type": "mavros_msgs/State"}
+        ws.send(json.dumps(sub))
+
+        def armed() -> bool:
+            msg = json.loads(ws.recv(timeout=5))
+            return bool(msg.get("topic") == "/mavros/state" and msg["msg"]["armed"])
+
+        wait_for(armed, "/mavros/state armed", 15, period=0)
     srv.pause()
     try:
         t0 = time.monotonic()
