@@ -112,6 +112,60 @@ class DroneStack:
         self.sim.inject_fault(body.kind, **params)
 
 
+async def build_drone_stack(
+    name: str,
+    prefix: str,
+    index: int,
+    kind: str,
+    world: World,
+    settings: Settings,
+    graph: Graph,
+    audit: Any,
+) -> DroneStack:
+    """One drone's flight stack, built alike in the web process (inline) and in a vehicle
+    process: its simulator for ``sim`` / ``sim-mavlink`` (started) or its link, the driver and
+    vehicle (started), the task manager and its graph node (not yet started). ``kind`` is the
+    drone's ``--drone`` entry; ``audit`` (an AuditLog) gets the node's jog and topic rows.
+
+    Raises:
+        SettingsError: ``kind`` looks like a MAVLink connection string but is not one.
+    """
+    s = settings
+    node_class: type[VehicleNode]
+    if is_mavlink(kind):
+        parts = await start_mavlink(name, kind, index, world, s)
+        vehicle: Any = parts.vehicle
+        driver: Any = parts.driver
+        sim: Any = parts.sim
+        node_class, idle_search = MavrosNode, False  # the autopilot flies; no camera to search
+    else:
+        sim = None
+        if kind == "sim":
+            addr, ports = sim_endpoint(index, s.sim_base_addr)
+            sim = SimServer(addr, world, ports=ports, speed=s.sim_speed, seed=s.seed + index)
+            await sim.start()
+            driver = ARDroneDriver(
+                addr,
+                at_port=ports.at,
+                navdata_port=ports.navdata,
+                video_port=ports.video,
+                config=DriverConfig(link_timeout_s=s.link_timeout_s),
+            )
+        else:
+            driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+        await driver.start()
+        vehicle = Vehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
+        await vehicle.start(driver)
+        node_class, idle_search = VehicleNode, True
+    tasks = TaskManager(
+        vehicle, world, vehicle.clock, search_after_s=s.search_after_s, idle_search=idle_search
+    )
+    node = node_class(
+        graph, vehicle, tasks, name, prefix, heartbeat_timeout_s=s.heartbeat_timeout_s, audit=audit
+    )
+    return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
+
+
 def to_json_ready(value: Any) -> Any:
     """Dataclasses, enums, tuples and floats as JSON values (enums by name, NaN/inf as null)."""
     if is_dataclass(value) and not isinstance(value, type):
@@ -212,40 +266,13 @@ class Runtime:
     async def _start_drone(self, name: str, prefix: str, index: int) -> DroneStack:
         s = self.settings
         kind = drone_kind(s.drone, index)
-        if is_mavlink(kind):
-            return await self._start_mavlink_drone(name, prefix, index, kind)
-        sim: SimServer | None = None
-        if kind == "sim":
-            addr, ports = sim_endpoint(index, s.sim_base_addr)
-            sim = SimServer(addr, self.world, ports=ports, speed=s.sim_speed, seed=s.seed + index)
-            await sim.start()
-            driver = ARDroneDriver(
-                addr,
-                at_port=ports.at,
-                navdata_port=ports.navdata,
-                video_port=ports.video,
-                config=DriverConfig(link_timeout_s=s.link_timeout_s),
-            )
-        else:
-            driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
-        await driver.start()
-        vehicle = Vehicle(name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
-        await vehicle.start(driver)
-        tasks = TaskManager(
-            vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s, idle_search=True
+        stack = await build_drone_stack(
+            name, prefix, index, kind, self.world, s, self.graph, self.audit
         )
-        node = VehicleNode(
-            self.graph,
-            vehicle,
-            tasks,
-            name,
-            prefix,
-            heartbeat_timeout_s=s.heartbeat_timeout_s,
-            audit=self.audit,
-        )
-        await node.start()
-        self._start_dialog(name, prefix, vehicle, tasks)
-        return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
+        assert stack.node is not None and stack.tasks is not None
+        await stack.node.start()
+        self._start_dialog(name, prefix, stack.vehicle, stack.tasks)
+        return stack
 
     def _start_dialog(self, name: str, prefix: str, vehicle: Any, tasks: TaskManager) -> None:
         """The drone's dialog manager (SNS + its ANS monitors), running until ``stop``."""
@@ -265,23 +292,6 @@ class Runtime:
         )
         self.dialogs[name] = dialog
         self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
-
-    async def _start_mavlink_drone(
-        self, name: str, prefix: str, index: int, kind: str
-    ) -> DroneStack:
-        """A PX4/ArduPilot drone (issue 16): the autopilot flies, the console sends targets."""
-        s = self.settings
-        parts = await start_mavlink(name, kind, index, self.world, s)
-        vehicle: Any = parts.vehicle
-        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
-        node = MavrosNode(
-            self.graph, vehicle, tasks, name, prefix, heartbeat_timeout_s=s.heartbeat_timeout_s
-        )
-        await node.start()
-        self._start_dialog(name, prefix, vehicle, tasks)
-        driver: Any = parts.driver
-        sim: Any = parts.sim
-        return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
 
     async def stop(self) -> None:
         await self.vehicles.stop()

@@ -41,7 +41,6 @@ from server.vehicles.watch import CentralWatch, LossAction
 
 if TYPE_CHECKING:
     from server.direct_actions import DirectOutcome
-    from server.runtime import DroneStack
 
 log = logging.getLogger("uav_console.vehicle")
 
@@ -181,6 +180,7 @@ class VehicleHost:
         from server.graph import Graph
         from server.language.nlu import default_nlu
         from server.mavlink_stack import is_mavlink
+        from server.runtime import build_drone_stack
         from server.store import AuditLog
 
         s, o = self.settings, self.options
@@ -191,10 +191,10 @@ class VehicleHost:
         # writes to the server's audit log file; SQLite in WAL mode).
         self.audit = AuditLog(s.data_dir / "audit.db")
         self.mavlink = is_mavlink(s.drone)
-        if self.mavlink:
-            self.stack = await self._start_mavlink()
-        else:
-            self.stack = await self._start_ardrone()
+        # The same stack the web process builds for an inline drone (server.runtime).
+        self.stack = await build_drone_stack(
+            self.name, o.prefix, o.index, s.drone, self.world, s, self.graph, self.audit
+        )
         vehicle, tasks = self.stack.vehicle, self.stack.tasks
         assert tasks is not None and self.stack.node is not None
         await self.stack.node.start()
@@ -266,78 +266,6 @@ class VehicleHost:
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]
-
-    async def _start_ardrone(self) -> DroneStack:
-        """An AR.Drone: its simulator (``--drone sim``) or its address, the driver, the
-        vehicle (EKF, 100 Hz controller), the task manager (idle search) and its node."""
-        from drone.ardrone.driver import ARDroneDriver, DriverConfig
-        from drone.camera import CameraModel
-        from drone.sim.server import SimServer, sim_endpoint
-        from drone.vehicle import Vehicle
-        from server.runtime import DroneStack
-        from server.tasks.manager import TaskManager
-        from server.vehicle_node import VehicleNode
-
-        s, o = self.settings, self.options
-        sim: SimServer | None = None
-        if s.drone == "sim":
-            addr, ports = sim_endpoint(o.index, s.sim_base_addr)
-            sim = SimServer(addr, self.world, ports=ports, speed=s.sim_speed, seed=s.seed + o.index)
-            await sim.start()
-            driver = ARDroneDriver(
-                addr,
-                at_port=ports.at,
-                navdata_port=ports.navdata,
-                video_port=ports.video,
-                config=DriverConfig(link_timeout_s=s.link_timeout_s),
-            )
-        else:
-            driver = ARDroneDriver(s.drone, config=DriverConfig(link_timeout_s=s.link_timeout_s))
-        await driver.start()
-        vehicle = Vehicle(
-            self.name, self.world, camera=CameraModel(), link_timeout_s=s.link_timeout_s
-        )
-        await vehicle.start(driver)
-        tasks = TaskManager(
-            vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s, idle_search=True
-        )
-        node = VehicleNode(
-            self.graph,
-            vehicle,
-            tasks,
-            self.name,
-            o.prefix,
-            heartbeat_timeout_s=s.heartbeat_timeout_s,
-            audit=self.audit,
-        )
-        return DroneStack(self.name, o.prefix, vehicle, driver, sim, tasks, node)
-
-    async def _start_mavlink(self) -> DroneStack:
-        """A PX4/ArduPilot drone (``--drone tcp:…``, ``udpin:…``, ``/dev/…``), or the simulated
-        PX4 (``sim-mavlink``), which this process starts and owns on its drone's simulator
-        address, as it does the AR.Drone simulator: the autopilot flies, the console sends
-        targets; its topics are MAVROS's (:class:`~server.mavros_node.MavrosNode`)."""
-        from server.mavlink_stack import start_mavlink
-        from server.mavros_node import MavrosNode
-        from server.runtime import DroneStack
-        from server.tasks.manager import TaskManager
-
-        s, o = self.settings, self.options
-        parts = await start_mavlink(self.name, s.drone, o.index, self.world, s)
-        vehicle: Any = parts.vehicle
-        tasks = TaskManager(vehicle, self.world, vehicle.clock, search_after_s=s.search_after_s)
-        node = MavrosNode(
-            self.graph,
-            vehicle,
-            tasks,
-            self.name,
-            o.prefix,
-            heartbeat_timeout_s=s.heartbeat_timeout_s,
-            audit=self.audit,
-        )
-        driver: Any = parts.driver
-        sim: Any = parts.sim
-        return DroneStack(self.name, o.prefix, vehicle, driver, sim, tasks, node)
 
     def info(self) -> dict[str, Any]:
         return {
