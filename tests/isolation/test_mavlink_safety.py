@@ -147,14 +147,33 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Px4Wire, Ser
             yield wire, srv
 
 
+def settled(wire: Px4Wire, srv: Served) -> bool:
+    """On the ground, disarmed, and the console's drone landed with no task under way (after a
+    long-loss landing the vehicle's land task finishes a moment after the PX4 disarms)."""
+    if not on_ground(wire):
+        return False
+    d = srv.drone()
+    return d["ctrl_state"] == "LANDED" and d["task"]["state"] not in ("queued", "running")
+
+
 def take_off(wire: Px4Wire, srv: Served) -> None:
+    wait_for(lambda: settled(wire, srv), "the drone settled on the ground", 20)
     r = srv.http.post("/api/v1/drones/uav1/takeoff")
     assert r.status_code == 200 and r.json()["accepted"], r.text
-    wait_for(
-        lambda: (s := wire.state) and s.armed and s.rel_alt_m > 2.0 and s.mode != "AUTO.TAKEOFF",
-        "the PX4 to take off",
-        30,
-    )
+    try:
+        wait_for(
+            lambda: (
+                (s := wire.state) and s.armed and s.rel_alt_m > 2.0 and s.mode != "AUTO.TAKEOFF"
+            ),
+            "the PX4 to take off",
+            30,
+        )
+    except AssertionError as exc:  # say what the PX4 and the console were doing
+        d, log_tail = srv.drone(), srv.log_path.read_text()[-800:]
+        raise AssertionError(
+            f"{exc}; PX4 {wire.state}, modes {wire.history[-6:]}; console "
+            f"{d.get('ctrl_state')} task {d.get('task')}; log tail {log_tail}"
+        ) from exc
     wait_for(lambda: srv.drone()["flying"], "the console to see it flying", 10)
 
 
