@@ -594,7 +594,12 @@ class GcsProtocol:
         return self.set_mode(intent_mode(ap, intent), now)
 
     def arm_and_takeoff(self, rel_alt_m: float, now: float | None = None) -> int:
-        """Arm, then NAV_TAKEOFF to ``rel_alt_m`` above home (sent only once armed)."""
+        """Arm, then NAV_TAKEOFF to ``rel_alt_m`` above home (sent only once armed).
+
+        The arm is sent even when telemetry says armed: that flag is up to a heartbeat old, and
+        a PX4 that has just auto-disarmed after landing denies a bare take-off. Arming an armed
+        vehicle is accepted by PX4 and ArduPilot alike, so it costs one round trip.
+        """
         home = self.telemetry.home
         alt = (home[2] + rel_alt_m) if home else math.nan
         Step = tuple[int, tuple[float, ...]]
@@ -608,12 +613,9 @@ class GcsProtocol:
             # altitude relative to home in param7.
             takeoff = (takeoff[0], (0.0, 0.0, 0.0, math.nan, 0.0, 0.0, rel_alt_m))
             guided = float(custom_mode(mav.MAV_AUTOPILOT_ARDUPILOTMEGA, "GUIDED"))
-            chain: list[Step] = [takeoff] if self.telemetry.armed else [arm, takeoff]
             base = float(mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
-            self.command(mav.MAV_CMD_DO_SET_MODE, base, guided, now=now, then=chain)
+            self.command(mav.MAV_CMD_DO_SET_MODE, base, guided, now=now, then=[arm, takeoff])
             return self._token
-        if self.telemetry.armed:
-            return self.command(takeoff[0], *takeoff[1], now=now)
         self.command(arm[0], *arm[1], now=now, then=[takeoff])
         return self._token  # the take-off's token
 

@@ -103,6 +103,21 @@ def test_arm_takeoff_land_disarm(world: Any) -> None:
     assert r.ap.physics.body.z == pytest.approx(0.0)
 
 
+def test_take_off_again_the_moment_the_px4_auto_disarms(world: Any) -> None:
+    """The console's "armed" is a heartbeat old: a take-off sent just after the PX4 disarmed
+    on landing still arms first (a bare NAV_TAKEOFF was denied, "Takeoff denied: disarmed")."""
+    r = Rig(world)
+    r.connect()
+    r.p.arm_and_takeoff(3.0)
+    assert r.until(lambda: r.p.telemetry.rel_alt_m > 2.9, 10.0)
+    r.p.intent("land")
+    assert r.until(lambda: not r.ap.armed, 20.0)
+    assert r.p.telemetry.armed  # not heard yet
+    r.p.arm_and_takeoff(3.0)
+    assert r.until(lambda: r.p.telemetry.rel_alt_m > 2.9, 10.0)
+    assert all(e.ok for e in r.results("NAV_TAKEOFF"))
+
+
 def test_denial_carries_the_vehicles_reason(world: Any) -> None:
     r = Rig(world)
     r.connect()
