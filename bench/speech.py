@@ -21,7 +21,9 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    result (the product) vs without either (the baseline), same clips, same run.
 3. The 100 Hz control loop (drone/control/loop.py, sleep+spin as flown) alone, then while 3
    streams keep decoding through the server's bounded pool (one decoder per core less one),
-   then through an unbounded one (3 decoders at once): period error p99, overruns.
+   then through an unbounded one (3 decoders at once): period error p99, overruns; in this
+   process, and in a process of its own set up as a vehicle process is (real-time control
+   thread where permitted, GIL held through the spin, 0.5 ms switch interval).
 
     .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop] [--skip-stream]
 """
@@ -47,12 +49,15 @@ import numpy as np  # noqa: E402
 
 from drone.control.loop import ControlLoop, LoopStats  # noqa: E402
 from drone.control.pid import PaperPID, Setpoint  # noqa: E402
+from drone.vehicle import OWN_PROCESS_SPIN_S  # noqa: E402
 from server.language.nlu import default_nlu  # noqa: E402
+from server.settings import Settings  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
 from server.speech.model import default_workers, load_whisper, resolve  # noqa: E402
 from server.speech.pool import DecoderPool  # noqa: E402
 from server.speech.recognizer import Recognizer, speech_span  # noqa: E402
 from server.speech.stream import Final, Interim, StreamSession  # noqa: E402
+from server.vehicles.host import VEHICLE_SWITCH_INTERVAL_S, raise_priority  # noqa: E402
 from tests.speech.conftest import synthesise  # noqa: E402
 
 VOICES = ["en-us", "en-gb", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us+f3", "en-us-nyc"]
@@ -278,9 +283,10 @@ class _State:
     yaw_rad = vx = vy = vz = 0.0
 
 
-def _loop_while(seconds: float, busy: Any | None) -> LoopStats:
+def _loop_while(seconds: float, busy: Any | None, **options: Any) -> LoopStats:
     pid, sp, st = PaperPID(), Setpoint(1.0, 0.5, 1.2, 0.3), _State()
-    loop = ControlLoop(lambda now, dt: pid.step(st, sp, 0.01), period_s=0.01, spin_s=0.002)
+    options.setdefault("spin_s", 0.002)
+    loop = ControlLoop(lambda now, dt: pid.step(st, sp, 0.01), period_s=0.01, **options)
     stop = threading.Event()
     worker = threading.Thread(target=busy, args=(stop,)) if busy else None
     if worker:
@@ -296,7 +302,18 @@ def _loop_while(seconds: float, busy: Any | None) -> LoopStats:
 
 
 def _loop_child(seconds: float, out: Any) -> None:
-    out.put(_loop_while(seconds, None).as_dict())
+    """The loop as a vehicle process runs it (server/vehicles/host.py, drone/vehicle.py)."""
+    sys.setswitchinterval(VEHICLE_SWITCH_INTERVAL_S)
+    settings = Settings()
+    raise_priority(settings.vehicle_nice, settings.vehicle_rt_priority)
+    stats = _loop_while(
+        seconds,
+        None,
+        spin_s=OWN_PROCESS_SPIN_S,
+        yield_while_spinning=False,
+        realtime_priority=settings.control_rt_priority,
+    )
+    out.put(stats.as_dict())
 
 
 def _loop_in_process(seconds: float, busy: Any | None) -> dict[str, Any]:

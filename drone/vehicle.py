@@ -56,6 +56,12 @@ from drone.perception.markers import FrameResult, MarkerLocaliser, PerceptionWor
 __all__ = ["Commander", "MarkerSeen", "Setpoint", "Vehicle", "VehicleMode", "VehicleSnapshot"]
 
 FLYING_STATES = (CtrlState.FLYING, CtrlState.HOVERING, CtrlState.GOTOFIX)
+# In a vehicle process the control thread wakes this long before each deadline and keeps the GIL
+# from then on, so the GIL is in hand when the deadline comes; the process's other threads give up
+# ≤ 2 ms of every 10 ms for it. 1 ms was too short where the GIL's holder is itself preempted on
+# a loaded CPU: p99 period error 0.96 ms against 0.17 ms with 2 ms, 3 busy processes on 2 cores
+# and a busy thread at nice -10 in the loop's process (the default in a vehicle process).
+OWN_PROCESS_SPIN_S = 0.002
 ALTITUDE_MAX_DEFAULT_MM = 3000  # control:altitude_max firmware default (ARDroneLib config_keys.h)
 
 
@@ -563,6 +569,8 @@ class Vehicle:
         control_period_s: float = 0.01,
         least_frame_delay_s: float = 0.0,
         frame_latency_s: float = 0.05,
+        own_process: bool = False,
+        realtime_priority: int = 0,
     ) -> None:
         """Fly in real time with the asyncio ``ARDroneDriver`` ``driver`` (already started).
 
@@ -572,6 +580,9 @@ class Vehicle:
         mapped to this clock by :class:`FrameClock`, less ``least_frame_delay_s`` (the least
         capture-to-decode delay, which the mapping cannot see: about 6 ms on the simulator,
         ``bench/frame_stamps.py``); a driver without timestamps gets "seen − ``frame_latency_s``".
+        ``own_process``: this process is the drone's alone (a vehicle process), so the control
+        thread may hold the GIL while it spins to its deadline; ``realtime_priority``: the
+        SCHED_FIFO priority it asks for (0: normal scheduling). See drone/control/loop.py.
         """
         self.commander = driver
         self._driver = driver
@@ -601,6 +612,9 @@ class Vehicle:
             on_stall=self._stalled,
             name=self.name,
             clock=self.clock.now,
+            spin_s=OWN_PROCESS_SPIN_S if own_process else 0.002,
+            yield_while_spinning=not own_process,
+            realtime_priority=realtime_priority,
         )
         self._loop.start()
 

@@ -121,11 +121,15 @@ async def build_drone_stack(
     settings: Settings,
     graph: Graph,
     audit: Any,
+    *,
+    own_process: bool = False,
 ) -> DroneStack:
     """One drone's flight stack, built alike in the web process (inline) and in a vehicle
     process: its simulator for ``sim`` / ``sim-mavlink`` (started) or its link, the driver and
     vehicle (started), the task manager and its graph node (not yet started). ``kind`` is the
-    drone's ``--drone`` entry; ``audit`` (an AuditLog) gets the node's jog and topic rows.
+    drone's ``--drone`` entry; ``audit`` (an AuditLog) gets the node's jog and topic rows;
+    ``own_process``: built by a vehicle process (the AR.Drone's control thread then holds the
+    GIL while it spins and asks for ``control_rt_priority``).
 
     Raises:
         SettingsError: ``kind`` looks like a MAVLink connection string but is not one.
@@ -155,7 +159,11 @@ async def build_drone_stack(
             driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
         await driver.start()
         vehicle = Vehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
-        await vehicle.start(driver)
+        await vehicle.start(
+            driver,
+            own_process=own_process,
+            realtime_priority=s.control_rt_priority if own_process else 0,
+        )
         node_class, idle_search = VehicleNode, True
     tasks = TaskManager(
         vehicle, world, vehicle.clock, search_after_s=s.search_after_s, idle_search=idle_search

@@ -78,6 +78,13 @@ class Settings:
     central_loss_land_s: float = 20.0
     # Niceness a vehicle process asks for (applied only where permitted: root, CAP_SYS_NICE).
     vehicle_nice: int = -10
+    # SCHED_FIFO priority the 100 Hz control thread of a vehicle process asks for (applied only
+    # where permitted, like vehicle_nice; 0 = normal scheduling). Below the kernel's own
+    # threaded interrupt handlers (50), above every normal task.
+    control_rt_priority: int = 10
+    # SCHED_RR priority of every other thread of a vehicle process (where permitted; 0 = only
+    # vehicle_nice). Below control_rt_priority; see server/vehicles/host.py raise_priority.
+    vehicle_rt_priority: int = 5
     # Flight recorder (server/recorder; README "Flight recordings"): every graph topic of every
     # drone to one MCAP file per flight session, on by default.
     recorder: bool = True

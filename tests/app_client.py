@@ -12,6 +12,7 @@ import pytest
 
 from server.app import create_app
 from server.settings import Settings
+from tests.loopback import for_worker
 
 
 @contextlib.asynccontextmanager
@@ -44,7 +45,7 @@ def app_fixture(
             data_dir=tmp_path / "data",
             token=token,
             observer_token=observer_token,
-            sim_base_addr=sim_base_addr,
+            sim_base_addr=for_worker(sim_base_addr),
             **settings,
         )
         async with app_client(config) as client:

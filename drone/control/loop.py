@@ -6,6 +6,13 @@ sub-millisecond accuracy: ``time.sleep`` alone wakes 50–1000 µs late on Linux
 (bench/autonomy.py measures both; ``spin_s=0`` gives the plain-sleep loop). A step that finishes
 after the *next* deadline is an overrun; missed ticks are skipped, not bunched up.
 
+In a vehicle process (``serve``'s default) the loop is also told to hold the GIL while it spins
+(``yield_while_spinning=False``: the deadline is met by the thread that already holds it, not by
+one that waits up to ``sys.getswitchinterval()`` for it) and to ask the OS for real-time
+scheduling (``realtime_priority``: SCHED_FIFO, as PX4 runs its Linux control tasks), which a
+loaded CPU cannot delay; where the OS refuses (not root, no CAP_SYS_NICE) it says so in
+``scheduling`` and runs as before.
+
 Watchdog (like ArduPilot's main-loop watchdog): a second thread checks that ticks keep coming; if
 none has finished for ``stall_s`` (0.2 s) it calls ``on_stall`` once per stall (the vehicle
 tells the driver to hover).
@@ -18,10 +25,11 @@ lockstep the rig calls the same callable on a virtual clock and this module is n
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -47,8 +55,9 @@ class LoopStats:
     lateness_p99_s: float  # how late after its deadline a tick started
     step_p50_s: float  # time spent in the step itself
     step_max_s: float
+    scheduling: str = "normal"  # what the OS granted the control thread (ControlLoop.scheduling)
 
-    def as_dict(self) -> dict[str, float | int]:
+    def as_dict(self) -> dict[str, float | int | str]:
         return dict(vars(self))
 
 
@@ -111,6 +120,7 @@ class ControlLoop:
         name: str = "control",
         clock: Callable[[], float] = time.monotonic,
         yield_while_spinning: bool = True,
+        realtime_priority: int = 0,
     ) -> None:
         if not 0 < period_s <= 1.0:
             raise GainError(f"period_s must be in (0, 1], got {period_s!r}")
@@ -118,10 +128,14 @@ class ControlLoop:
             raise GainError(f"spin_s must be in [0, period_s), got {spin_s!r}")
         if stall_s <= period_s:
             raise GainError("stall_s must exceed period_s")
+        if not 0 <= realtime_priority <= 99:  # sched_get_priority_max(SCHED_FIFO) on Linux
+            raise GainError(f"realtime_priority must be in [0, 99], got {realtime_priority!r}")
         self._step = step
         self._clock = clock  # what ``step`` receives as ``now`` (deadlines use perf_counter)
         self.yield_while_spinning = yield_while_spinning  # False: pure busy-wait, holds the GIL
         self.period_s = period_s
+        self.realtime_priority = realtime_priority
+        self.scheduling = "normal"  # what the OS granted the control thread
         self.spin_s = spin_s
         self.stall_s = stall_s
         self._on_stall = on_stall
@@ -162,7 +176,7 @@ class ControlLoop:
                 t.join(timeout)
 
     def stats(self) -> LoopStats:
-        return self.timing.stats()
+        return replace(self.timing.stats(), scheduling=self.scheduling)
 
     def _wait_until(self, deadline: float) -> None:
         remaining = deadline - time.perf_counter() - self.spin_s
@@ -175,7 +189,20 @@ class ControlLoop:
             while time.perf_counter() < deadline:
                 pass
 
+    def _enter_realtime(self) -> None:
+        """SCHED_FIFO at ``realtime_priority`` for the calling (control) thread, if permitted."""
+        if self.realtime_priority <= 0:
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
+        except (OSError, AttributeError) as exc:  # EPERM without privilege; not on macOS
+            self.scheduling = f"normal (SCHED_FIFO refused: {exc})"
+            log.info("%s: control thread keeps normal scheduling (%s)", self._name, exc)
+        else:
+            self.scheduling = f"SCHED_FIFO {self.realtime_priority}"
+
     def _run(self) -> None:
+        self._enter_realtime()
         period = self.period_s
         t0 = time.perf_counter()
         k = 1

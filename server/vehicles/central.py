@@ -100,6 +100,8 @@ CHILD_SETTINGS = (
     "search_after_s",
     "central_loss_land_s",
     "vehicle_nice",
+    "control_rt_priority",
+    "vehicle_rt_priority",
 )
 
 

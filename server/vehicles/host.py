@@ -22,6 +22,7 @@ import json
 import logging
 import os
 import signal
+import sys
 import time
 from collections.abc import Awaitable
 from dataclasses import dataclass
@@ -45,6 +46,8 @@ if TYPE_CHECKING:
 log = logging.getLogger("uav_console.vehicle")
 
 TELEMETRY_PERIOD_S = 0.1
+# GIL switch interval of a vehicle process (CPython's default is 5 ms, half a control period).
+VEHICLE_SWITCH_INTERVAL_S = 0.0005
 WATCH_PERIOD_S = 0.05
 # A vehicle whose parent ``serve`` is gone waits this long on the ground for a new one to adopt
 # it before it exits (it never exits while flying).
@@ -193,7 +196,15 @@ class VehicleHost:
         self.mavlink = is_mavlink(s.drone)
         # The same stack the web process builds for an inline drone (server.runtime).
         self.stack = await build_drone_stack(
-            self.name, o.prefix, o.index, s.drone, self.world, s, self.graph, self.audit
+            self.name,
+            o.prefix,
+            o.index,
+            s.drone,
+            self.world,
+            s,
+            self.graph,
+            self.audit,
+            own_process=True,
         )
         vehicle, tasks = self.stack.vehicle, self.stack.tasks
         assert tasks is not None and self.stack.node is not None
@@ -430,20 +441,40 @@ class VehicleHost:
         self.audit.close()
 
 
-def raise_priority(nice: int) -> None:
-    """Run the flight stack ahead of the web process on a busy CPU (``vehicle_nice``, e.g.
-    -10), where the OS permits it (root or CAP_SYS_NICE); otherwise say so and go on."""
+def raise_priority(nice: int, rt_priority: int = 0) -> str:
+    """Run the flight stack ahead of the web process on a busy CPU, where the OS permits it
+    (root or CAP_SYS_NICE), else say so and go on; returns what was granted. Called before the
+    process starts its threads, which inherit it (Linux: scheduling is per thread).
+
+    ``rt_priority`` > 0: real-time round-robin (SCHED_RR) at that priority, below the control
+    thread's SCHED_FIFO, so no normal task (the web process, a speech decoder, the captioner)
+    can preempt a vehicle thread that holds the GIL or a lock the control thread needs next;
+    with only a nice value (``vehicle_nice``, e.g. -10) a saturated CPU still could (bench/
+    isolation.py: control-loop p99 1.39 ms, 15 overruns, with nice alone under speech decodes).
+    """
+    if rt_priority > 0:
+        try:
+            os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(rt_priority))
+        except (OSError, AttributeError) as exc:
+            log.info("vehicle keeps normal scheduling (SCHED_RR %d: %s)", rt_priority, exc)
+        else:
+            return f"SCHED_RR {rt_priority}"
     if nice >= os.getpriority(os.PRIO_PROCESS, 0):
-        return
+        return f"nice {os.getpriority(os.PRIO_PROCESS, 0)}"
     try:
         os.setpriority(os.PRIO_PROCESS, 0, nice)
     except OSError as exc:
         log.info("vehicle priority unchanged (nice %d not permitted: %s)", nice, exc)
+    return f"nice {os.getpriority(os.PRIO_PROCESS, 0)}"
 
 
 async def run_vehicle(settings: Settings, options: VehicleOptions, token: str) -> None:
     """Run one vehicle process until SIGTERM/SIGINT (then land and stop)."""
-    raise_priority(settings.vehicle_nice)
+    granted = raise_priority(settings.vehicle_nice, settings.vehicle_rt_priority)
+    log.info("%s: vehicle threads run at %s", options.name, granted)
+    # The control thread waits at most this long for the GIL (CPython's 5 ms default is half a
+    # 100 Hz period); drone/vehicle.py's OWN_PROCESS_SPIN_S is set from it.
+    sys.setswitchinterval(VEHICLE_SWITCH_INTERVAL_S)
     host = VehicleHost(settings, options, token)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()

@@ -6,6 +6,7 @@ the loop sets, with generous timeouts.
 
 from __future__ import annotations
 
+import os
 import threading
 
 import pytest
@@ -53,6 +54,54 @@ def test_bad_loop_parameters() -> None:
         ControlLoop(lambda now, dt: None, period_s=0.01, spin_s=0.02)
     with pytest.raises(GainError):
         ControlLoop(lambda now, dt: None, period_s=0.01, stall_s=0.005)
+    for bad in (-1, 100):
+        with pytest.raises(GainError):
+            ControlLoop(lambda now, dt: None, realtime_priority=bad)
+
+
+def _run_a_few_ticks(**options: object) -> ControlLoop:
+    """A loop with ``options`` started, ticked 5 times and stopped; checks what the OS says of
+    its control thread's scheduling against what the loop reports."""
+    ticked = threading.Event()
+    threads: list[int] = []
+
+    def step(now: float, dt: float) -> None:
+        threads.append(threading.get_native_id())
+        if len(threads) >= 5:
+            ticked.set()
+
+    loop = ControlLoop(step, **options)  # type: ignore[arg-type]
+    loop.start()
+    try:
+        assert ticked.wait(5.0)
+        policy = os.sched_getscheduler(threads[0])
+        assert policy == (
+            os.SCHED_FIFO if loop.scheduling.startswith("SCHED_FIFO") else os.SCHED_OTHER
+        )
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER  # this thread was not changed
+    finally:
+        loop.stop()
+    return loop
+
+
+def test_the_control_thread_asks_for_real_time_scheduling_and_says_what_it_got() -> None:
+    """Granted (root, CAP_SYS_NICE) → SCHED_FIFO on the control thread alone; refused → said."""
+    loop = _run_a_few_ticks(realtime_priority=5, yield_while_spinning=False)
+    s = loop.stats()
+    assert s.scheduling == loop.scheduling
+    assert s.scheduling == "SCHED_FIFO 5" or s.scheduling.startswith("normal (SCHED_FIFO refused")
+    assert ControlLoop(lambda now, dt: None).stats().scheduling == "normal"  # not asked
+
+
+def test_a_refused_real_time_request_keeps_the_loop_running(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def refuse(*_: object) -> None:
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)  # what an unprivileged user gets
+    loop = _run_a_few_ticks(realtime_priority=5)
+    assert loop.scheduling == "normal (SCHED_FIFO refused: [Errno 1] Operation not permitted)"
 
 
 def test_the_thread_runs_at_100_hz_with_absolute_deadlines() -> None:

@@ -22,6 +22,8 @@ from typing import Any
 import httpx
 import pytest
 
+from tests.loopback import for_worker
+
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = Path(os.environ.get("UAVC_CHROMIUM", "/usr/bin/chromium"))
 # Flags that keep a headless Chromium off the network and quiet (no updates, sync, QUIC, GPU).
@@ -166,7 +168,7 @@ def _server(
 ) -> Iterator[ServerProcess]:
     if os.environ.get("UAVC_SKIP_BROWSER") == "1":
         pytest.skip("UAVC_SKIP_BROWSER=1")
-    server = ServerProcess(tmp_path_factory.mktemp(name), addr, tuple(extra))
+    server = ServerProcess(tmp_path_factory.mktemp(name), for_worker(addr), tuple(extra))
     server.start()
     try:
         yield server

@@ -37,6 +37,13 @@ async def test_health_needs_no_token_and_reports_parts(api: httpx.AsyncClient) -
     assert list(body["drones"]) == ["uav1"]
 
 
+async def test_an_inline_control_thread_keeps_normal_scheduling(api: httpx.AsyncClient) -> None:
+    """Real-time scheduling is for a vehicle process's control thread (tests/isolation), not
+    for a thread of the web process."""
+    drone = await wait_for(api, "/api/v1/drones/uav1", lambda d: d["controller"] is not None)
+    assert drone["controller"]["scheduling"] == "normal"
+
+
 async def test_tokens_and_roles(api: httpx.AsyncClient) -> None:
     assert (await api.get("/api/v1/world", headers={"Authorization": ""})).status_code == 401
     bad = await api.get("/api/v1/world", headers={"Authorization": "Bearer nope"})

@@ -1,11 +1,11 @@
 """The whole server as a third party sees it: ``python -m server serve`` in a subprocess.
 
 One server for the directory (start-up costs a few seconds): the real simulated AR.Drone on
-127.0.0.120 (UAVC_SIM_BASE_ADDR) in real time (UAVC_SIM_SPEED 1: the EKF and the 100 Hz PID run
-on the wall clock, so a faster simulator would be a drone that reacts faster than the controller
-was tuned for), the real driver, vehicle, task manager, dialog manager and rosbridge. Clients are
-real: roslibpy (PyPI), the ``websockets`` library, and httpx over TCP. Tests that fly leave the
-drone landed.
+127.0.0.120 (UAVC_SIM_BASE_ADDR; 127.N.0.120 in xdist worker N) in real time (UAVC_SIM_SPEED
+1: the EKF and the 100 Hz PID run on the wall clock, so a faster simulator would be a drone that
+reacts faster than the controller was tuned for), the real driver, vehicle, task manager, dialog
+manager and rosbridge. Clients are real: roslibpy (PyPI), the ``websockets`` library, and httpx
+over TCP. Tests that fly leave the drone landed.
 """
 
 from __future__ import annotations
@@ -25,10 +25,12 @@ import httpx
 import pytest
 import roslibpy
 
+from tests.loopback import for_worker
+
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "e2e-pilot-token"
 OBSERVER = "e2e-observer-token"
-SIM_ADDR = "127.0.0.120"
+SIM_ADDR = for_worker("127.0.0.120")
 SIM_SPEED = "1"
 TIMEOUT = 10.0
 

@@ -100,6 +100,27 @@ def leave_emergency(sim: SimThread, srv: Served) -> None:
     wait_for(reset, "the drone to leave EMERGENCY", 40)
 
 
+def assert_control_thread_scheduling(pid: int, controller: dict[str, Any]) -> None:
+    """The vehicle's control thread asked for SCHED_FIFO 10 (``control_rt_priority``) and its
+    other threads for SCHED_RR 5 (``vehicle_rt_priority``): what the loop reports is what the OS
+    says of the process's threads (granted where privileged, e.g. root; else refused and said,
+    and then no thread of the vehicle runs real-time). The numeric libraries' worker threads
+    (OpenBLAS, OpenCV), started at import before the vehicle asks, stay normal."""
+    threads = {
+        int(tid): (os.sched_getscheduler(int(tid)), os.sched_getparam(int(tid)).sched_priority)
+        for tid in os.listdir(f"/proc/{pid}/task")
+    }
+    control = [tid for tid, policy in threads.items() if policy == (os.SCHED_FIFO, 10)]
+    if controller["scheduling"] == "SCHED_FIFO 10":
+        assert len(control) == 1, threads
+        assert threads[pid] == (os.SCHED_RR, 5), threads  # the asyncio (main) thread
+        others = {policy for tid, policy in threads.items() if tid != control[0]}
+        assert others <= {(os.SCHED_RR, 5), (os.SCHED_OTHER, 0)}, threads
+    else:
+        assert controller["scheduling"].startswith("normal (SCHED_FIFO refused"), controller
+        assert {policy for policy, _ in threads.values()} == {os.SCHED_OTHER}, threads
+
+
 def test_a_remote_vehicle_is_a_whole_vehicle(rig: tuple[SimThread, Served]) -> None:
     """Camera, navdata, pose, task, replies, typed commands and the jog all cross the link."""
     sim, srv = rig
@@ -133,6 +154,7 @@ def test_a_remote_vehicle_is_a_whole_vehicle(rig: tuple[SimThread, Served]) -> N
         drone = srv.drone()
         assert drone["vehicle"]["mode"] == "process"
         assert drone["controller"]["rate_hz"] > 50  # the 100 Hz loop runs in the vehicle
+        assert_control_thread_scheduling(int(srv.vehicle()["pid"]), drone["controller"])
         with srv.http.stream("GET", "/api/v1/drones/uav1/video.mjpg") as stream:
             assert stream.status_code == 200
             first = b""

@@ -1,0 +1,26 @@
+"""Loopback addresses of their own for each pytest-xdist worker.
+
+``make test`` runs test files in two worker processes (``-n 2 --dist loadfile``): a file's
+tests stay in one worker, but a fixture shared by several files (a conftest's server, the
+browser suite's session server) is started once per worker, so its simulated drones need a
+different address in each. Worker ``gwN`` moves ``127.0.c.d`` to ``127.N.c.d`` (all of
+127.0.0.0/8 is loopback on Linux); without xdist, and in ``gw0``, the address is unchanged.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+def worker_index() -> int:
+    """0 without xdist, N in worker ``gwN``."""
+    name = os.environ.get("PYTEST_XDIST_WORKER", "")
+    return int(name[2:]) if name.startswith("gw") and name[2:].isdigit() else 0
+
+
+def for_worker(addr: str) -> str:
+    """``addr`` (an IPv4 loopback address ``127.0.c.d``) in this worker's own ``127.N.c.d``."""
+    a, b, c, d = addr.split(".")
+    if a != "127" or b != "0":
+        raise ValueError(f"{addr!r} is not a 127.0.c.d loopback address")
+    return f"127.{worker_index()}.{c}.{d}"
