@@ -581,7 +581,8 @@ class Vehicle:
         capture-to-decode delay, which the mapping cannot see: about 6 ms on the simulator,
         ``bench/frame_stamps.py``); a driver without timestamps gets "seen − ``frame_latency_s``".
         ``own_process``: this process is the drone's alone (a vehicle process), so the control
-        thread may hold the GIL while it spins to its deadline; ``realtime_priority``: the
+        thread may hold the GIL while it spins to its deadline, and video decodes wait for room
+        between its ticks (:meth:`ControlLoop.wait_for_room`); ``realtime_priority``: the
         SCHED_FIFO priority it asks for (0: normal scheduling). See drone/control/loop.py.
         """
         self.commander = driver
@@ -617,6 +618,8 @@ class Vehicle:
             realtime_priority=realtime_priority,
         )
         self._loop.start()
+        if own_process and hasattr(driver, "decode_gate"):
+            driver.decode_gate = self._loop.wait_for_room
 
     async def _frame_pump(
         self, driver: Any, least_delay_s: float, latency_s: float, period_s: float = 0.01

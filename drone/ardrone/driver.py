@@ -44,6 +44,11 @@ log = logging.getLogger(__name__)
 AT_PORT = 5556
 NAVDATA_PORT = 5554
 VIDEO_PORT = 5555
+# The decode time a gated decode asks room for: the longest recent one, decaying by 0.95 a frame
+# (≈ 1 s at 15 fps back to the P-frames' time after an I-frame); 640×360 decodes take ≈ 2–4 ms
+# here, an I-frame the longest.
+DECODE_S_INITIAL = 0.004
+DECODE_S_DECAY = 0.95
 
 
 @dataclass(frozen=True)
@@ -514,6 +519,11 @@ class ARDroneDriver:
         self.latest_frame_ms = 0  # its PaVE timestamp: capture time on the drone's clock, ms
         self.frames_decoded = 0
         self.video_errors = 0
+        # Called with the expected decode time before each H.264 decode, in the decoding thread:
+        # a vehicle process sets it to its control loop's wait_for_room (libavcodec holds the
+        # GIL while it decodes; drone/control/loop.py).
+        self.decode_gate: Callable[[float], object] | None = None
+        self.decode_s = DECODE_S_INITIAL  # longest recent decode, decaying (I-frames are long)
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._wake: asyncio.Event | None = None
@@ -706,6 +716,18 @@ class ARDroneDriver:
                         await self._wake.wait()
 
     # ---------------------------------------------------------------- video
+    def _decode(self, decoder: Any, frame: Any) -> list[Any]:
+        """Decode one PaVE frame in a worker thread, once the decode gate lets it."""
+        gate = self.decode_gate
+        if gate is not None:
+            gate(self.decode_s)
+        t0 = time.perf_counter()
+        try:
+            return list(decoder.decode_packet(frame))
+        finally:
+            took = time.perf_counter() - t0
+            self.decode_s = max(took, self.decode_s * DECODE_S_DECAY)
+
     async def _video(self) -> None:
         """Read PaVE frames from TCP 5555, decode H.264 in a worker thread, keep the latest."""
         try:
@@ -724,7 +746,7 @@ class ARDroneDriver:
                     if not chunk:
                         break
                     for frame in parser.feed(chunk):
-                        images = await asyncio.to_thread(decoder.decode_packet, frame)
+                        images = await asyncio.to_thread(self._decode, decoder, frame)
                         for image in images:
                             self.latest_frame = image
                             self.latest_frame_ms = frame.timestamp_ms

@@ -13,6 +13,12 @@ scheduling (``realtime_priority``: SCHED_FIFO, as PX4 runs its Linux control tas
 loaded CPU cannot delay; where the OS refuses (not root, no CAP_SYS_NICE) it says so in
 ``scheduling`` and runs as before.
 
+Work elsewhere in the process that holds the GIL for milliseconds without a break (libavcodec's
+H.264 decode does: PyAV keeps the GIL through it) would still make a tick late if it began just
+before the thread wakes. :meth:`ControlLoop.wait_for_room` lets such work wait for a gap between
+ticks that is long enough for it: the control loop's time is shared out by appointment, as in a
+time-triggered executive, not by preemption, which the GIL does not allow.
+
 Watchdog (like ArduPilot's main-loop watchdog): a second thread checks that ticks keep coming; if
 none has finished for ``stall_s`` (0.2 s) it calls ``on_stall`` once per stall (the vehicle
 tells the driver to hover).
@@ -38,6 +44,22 @@ from drone.control.errors import GainError, LoopStateError
 log = logging.getLogger(__name__)
 
 StepFn = Callable[[float, float], object]  # the return value is ignored
+ROOM_POLL_S = 0.0002  # how often wait_for_room looks again while a tick is under way
+STEP_ALLOWANCE_S = 0.001  # room left after a tick's spin for its step (step p50 ≈ 0.1 ms)
+
+
+def room_wait_s(
+    now: float, next_wake: float, in_tick: bool, need_s: float, spin_s: float, period_s: float
+) -> float:
+    """How long work needing ``need_s`` of the GIL should wait so that it ends before the
+    control thread wakes at ``next_wake`` (0: start now). ``need_s`` is capped at the gap
+    between two ticks, so work longer than that starts right after a tick instead."""
+    need = min(need_s, period_s - spin_s - STEP_ALLOWANCE_S)
+    if in_tick:
+        return ROOM_POLL_S
+    if now + need <= next_wake:
+        return 0.0
+    return max(ROOM_POLL_S, next_wake + spin_s - now)  # until the tick is under way
 
 
 @dataclass(frozen=True)
@@ -145,6 +167,8 @@ class ControlLoop:
         self._thread: threading.Thread | None = None
         self._watchdog: threading.Thread | None = None
         self._last_tick_end = 0.0
+        self._next_wake = 0.0  # when the control thread next wakes (perf_counter)
+        self._in_tick = False  # from that wake until its step has run
         self.errors = 0
         self.last_error: str | None = None
 
@@ -178,10 +202,29 @@ class ControlLoop:
     def stats(self) -> LoopStats:
         return replace(self.timing.stats(), scheduling=self.scheduling)
 
+    def wait_for_room(self, need_s: float) -> float:
+        """Block the calling thread until ``need_s`` of GIL-holding work can finish before the
+        control thread next wakes (at most one period); returns how long it waited. A no-op on
+        the control thread itself and when the loop is not running."""
+        if not self.running or threading.current_thread() is self._thread:
+            return 0.0
+        t0 = time.perf_counter()
+        limit = t0 + self.period_s
+        while (now := time.perf_counter()) < limit:
+            wait = room_wait_s(
+                now, self._next_wake, self._in_tick, need_s, self.spin_s, self.period_s
+            )
+            if wait <= 0.0:
+                break
+            time.sleep(min(wait, limit - now))
+        return time.perf_counter() - t0
+
     def _wait_until(self, deadline: float) -> None:
+        self._next_wake = deadline - self.spin_s
         remaining = deadline - time.perf_counter() - self.spin_s
         if remaining > 0:
             time.sleep(remaining)
+        self._in_tick = True
         if self.yield_while_spinning:
             while time.perf_counter() < deadline:
                 time.sleep(0)  # yields the GIL (and the CPU) while spinning
@@ -220,6 +263,7 @@ class ControlLoop:
             end = time.perf_counter()
             self.timing.record(start, deadline, end - start)
             self._last_tick_end = end
+            self._in_tick = False
             last = start
             k += 1
             next_deadline = t0 + k * period

@@ -12,7 +12,14 @@ import threading
 
 import pytest
 
-from drone.ardrone.driver import ARDroneDriver, DriverEvent, LinkLost, LinkRestored
+from drone.ardrone.driver import (
+    DECODE_S_DECAY,
+    DECODE_S_INITIAL,
+    ARDroneDriver,
+    DriverEvent,
+    LinkLost,
+    LinkRestored,
+)
 from drone.ardrone.errors import DriverNotStartedError
 from drone.ardrone.navdata import CtrlState, DroneState, Navdata, encode_navdata
 from drone.sim.server import SimServer
@@ -162,9 +169,13 @@ async def test_video_frames_decoded_from_tcp_5555() -> None:
 
     world = load_world("indoor")
     srv = SimServer("127.0.0.58", world, speed=1.0)
+    asked: list[float] = []  # what each decode asked the gate for (a vehicle's control loop)
     async with srv, ARDroneDriver("127.0.0.58") as drv:
+        drv.decode_gate = asked.append
         await drv.wait_handshake(WAIT)
         await drv.wait_for(lambda d: d.frames_decoded >= 5, WAIT)
+        assert len(asked) >= 5 and all(0 < s < 1 for s in asked)  # asked before each decode
+        assert drv.decode_s >= DECODE_S_DECAY ** len(asked) * DECODE_S_INITIAL
         frame = drv.latest_frame
         assert frame is not None and frame.shape == (360, 640, 3) and frame.dtype.name == "uint8"
         # The decoded image is the rendered view, not noise: compare with a fresh render.

@@ -13,7 +13,7 @@ import pytest
 
 from drone.control.clock import MonotonicClock, VirtualClock
 from drone.control.errors import GainError, LoopStateError
-from drone.control.loop import ControlLoop, TimingRecorder
+from drone.control.loop import ROOM_POLL_S, ControlLoop, TimingRecorder, room_wait_s
 
 
 def test_virtual_clock_only_moves_forward() -> None:
@@ -91,6 +91,41 @@ def test_the_control_thread_asks_for_real_time_scheduling_and_says_what_it_got()
     assert s.scheduling == loop.scheduling
     assert s.scheduling == "SCHED_FIFO 5" or s.scheduling.startswith("normal (SCHED_FIFO refused")
     assert ControlLoop(lambda now, dt: None).stats().scheduling == "normal"  # not asked
+
+
+def test_room_between_ticks_for_gil_holding_work() -> None:
+    """Work that holds the GIL (a video decode) starts only where it ends before the control
+    thread wakes: 10 ms period, 2 ms spin, next wake at t = 10 ms."""
+    args = {"next_wake": 0.010, "spin_s": 0.002, "period_s": 0.01}
+    assert room_wait_s(0.002, in_tick=False, need_s=0.004, **args) == 0.0  # ends at 6 ms
+    assert room_wait_s(0.006, in_tick=False, need_s=0.004, **args) == 0.0  # ends at 10 ms
+    # ends after the wake: wait until the tick is under way (10 ms + 2 ms spin), then re-check
+    assert room_wait_s(0.007, in_tick=False, need_s=0.004, **args) == pytest.approx(0.005)
+    assert room_wait_s(0.011, in_tick=True, need_s=0.004, **args) == ROOM_POLL_S  # tick runs
+    # work longer than a gap between ticks is not held back for ever: right after a tick
+    # (step done at 10.5 ms, next wake at 18 ms) it fits, as it would in any fresh gap
+    after = {"next_wake": 0.018, "spin_s": 0.002, "period_s": 0.01}
+    assert room_wait_s(0.0105, in_tick=False, need_s=0.5, **after) == 0.0
+
+
+def test_wait_for_room_is_a_no_op_unless_the_loop_runs() -> None:
+    loop = ControlLoop(lambda now, dt: None)
+    assert loop.wait_for_room(0.004) == 0.0  # not started
+    waited: list[float] = []
+    ticked = threading.Event()
+
+    def step(now: float, dt: float) -> None:
+        waited.append(loop.wait_for_room(0.004))  # asked on the control thread itself
+        ticked.set()
+
+    loop = ControlLoop(step)
+    loop.start()
+    try:
+        assert ticked.wait(5.0)
+    finally:
+        loop.stop()
+    assert waited[0] == 0.0
+    assert loop.wait_for_room(0.004) == 0.0  # stopped
 
 
 def test_a_refused_real_time_request_keeps_the_loop_running(
