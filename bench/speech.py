@@ -23,7 +23,7 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    streams keep decoding through the server's bounded pool (one decoder per core less one),
    then through an unbounded one (3 decoders at once): period error p99, overruns; in this
    process, and in a process of its own set up as a vehicle process is (real-time control
-   thread where permitted, GIL held through the spin, 0.5 ms switch interval).
+   thread where permitted, GIL held through the spin, 0.1 ms switch interval).
 
     .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop] [--skip-stream]
 """

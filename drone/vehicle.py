@@ -57,8 +57,9 @@ __all__ = ["Commander", "MarkerSeen", "Setpoint", "Vehicle", "VehicleMode", "Veh
 
 FLYING_STATES = (CtrlState.FLYING, CtrlState.HOVERING, CtrlState.GOTOFIX)
 # In a vehicle process the control thread wakes this long before each deadline and keeps the GIL
-# from then on, so the GIL is in hand when the deadline comes; the process's other threads give up
-# ≤ 2 ms of every 10 ms for it. 1 ms was too short where the GIL's holder is itself preempted on
+# from then on (a thread that has waited a switch interval, 0.1 ms there, can still take it), so
+# the GIL is in hand when the deadline comes; the process's other threads give up ≤ 2 ms of
+# every 10 ms for it. 1 ms was too short where the GIL's holder is itself preempted on
 # a loaded CPU: p99 period error 0.96 ms against 0.17 ms with 2 ms, 3 busy processes on 2 cores
 # and a busy thread at nice -10 in the loop's process (the default in a vehicle process).
 OWN_PROCESS_SPIN_S = 0.002

@@ -8,9 +8,10 @@ after the *next* deadline is an overrun; missed ticks are skipped, not bunched u
 
 In a vehicle process (``serve``'s default) the loop is also told to hold the GIL while it spins
 (``yield_while_spinning=False``: the deadline is met by the thread that already holds it, not by
-one that waits up to ``sys.getswitchinterval()`` for it) and to ask the OS for real-time
-scheduling (``realtime_priority``: SCHED_FIFO, as PX4 runs its Linux control tasks), which a
-loaded CPU cannot delay; where the OS refuses (not root, no CAP_SYS_NICE) it says so in
+one that waits up to ``sys.getswitchinterval()`` for it; a thread that has waited that long can
+still take it over, so a vehicle process shortens the interval to 0.1 ms) and to ask the OS for
+real-time scheduling (``realtime_priority``: SCHED_FIFO, as PX4 runs its Linux control tasks),
+which a loaded CPU cannot delay; where the OS refuses (not root, no CAP_SYS_NICE) it says so in
 ``scheduling`` and runs as before.
 
 Work elsewhere in the process that holds the GIL for milliseconds without a break (libavcodec's
