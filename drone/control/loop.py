@@ -49,6 +49,19 @@ ROOM_POLL_S = 0.0002  # how often wait_for_room looks again while a tick is unde
 STEP_ALLOWANCE_S = 0.001  # room left after a tick's spin for its step (step p50 ≈ 0.1 ms)
 
 
+def thread_scheduling() -> str:
+    """The calling thread's scheduling as ControlLoop.scheduling says it: "normal" for the
+    default policy, else the policy and priority (e.g. "SCHED_RR 5", inherited from a vehicle
+    process's main thread)."""
+    try:
+        policy = os.sched_getscheduler(0)
+        priority = os.sched_getparam(0).sched_priority
+    except (OSError, AttributeError):
+        return "normal"
+    names = {os.SCHED_FIFO: "SCHED_FIFO", os.SCHED_RR: "SCHED_RR"}
+    return f"{names[policy]} {priority}" if policy in names else "normal"
+
+
 def room_wait_s(
     now: float, next_wake: float, in_tick: bool, need_s: float, spin_s: float, period_s: float
 ) -> float:
@@ -237,13 +250,14 @@ class ControlLoop:
         """SCHED_FIFO at ``realtime_priority`` for the calling (control) thread, if permitted."""
         if self.realtime_priority <= 0:
             return
+        asked = f"SCHED_FIFO {self.realtime_priority}"
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
         except (OSError, AttributeError) as exc:  # EPERM without privilege; not on macOS
-            self.scheduling = f"normal (SCHED_FIFO refused: {exc})"
-            log.info("%s: control thread keeps normal scheduling (%s)", self._name, exc)
+            self.scheduling = f"{thread_scheduling()} ({asked} refused: {exc})"
+            log.info("%s: control thread keeps %s", self._name, self.scheduling)
         else:
-            self.scheduling = f"SCHED_FIFO {self.realtime_priority}"
+            self.scheduling = asked
 
     def _run(self) -> None:
         self._enter_realtime()

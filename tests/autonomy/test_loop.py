@@ -89,7 +89,7 @@ def test_the_control_thread_asks_for_real_time_scheduling_and_says_what_it_got()
     loop = _run_a_few_ticks(realtime_priority=5, yield_while_spinning=False)
     s = loop.stats()
     assert s.scheduling == loop.scheduling
-    assert s.scheduling == "SCHED_FIFO 5" or s.scheduling.startswith("normal (SCHED_FIFO refused")
+    assert s.scheduling == "SCHED_FIFO 5" or s.scheduling.startswith("normal (SCHED_FIFO 5 refused")
     assert ControlLoop(lambda now, dt: None).stats().scheduling == "normal"  # not asked
 
 
@@ -136,7 +136,7 @@ def test_a_refused_real_time_request_keeps_the_loop_running(
 
     monkeypatch.setattr(os, "sched_setscheduler", refuse)  # what an unprivileged user gets
     loop = _run_a_few_ticks(realtime_priority=5)
-    assert loop.scheduling == "normal (SCHED_FIFO refused: [Errno 1] Operation not permitted)"
+    assert loop.scheduling == "normal (SCHED_FIFO 5 refused: [Errno 1] Operation not permitted)"
 
 
 def test_the_thread_runs_at_100_hz_with_absolute_deadlines() -> None:

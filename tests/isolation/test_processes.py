@@ -117,9 +117,11 @@ def assert_control_thread_scheduling(pid: int, controller: dict[str, Any]) -> No
         assert threads[pid] == (os.SCHED_RR, 5), threads  # the asyncio (main) thread
         others = {policy for tid, policy in threads.items() if tid != control[0]}
         assert others <= {(os.SCHED_RR, 5), (os.SCHED_OTHER, 0)}, threads
-    else:
-        assert controller["scheduling"].startswith("normal (SCHED_FIFO refused"), controller
-        assert {policy for policy, _ in threads.values()} == {os.SCHED_OTHER}, threads
+    else:  # refused: the control thread kept what it inherited from the vehicle's main thread
+        policy, priority = threads[pid]
+        kept = "normal" if policy == os.SCHED_OTHER else f"SCHED_RR {priority}"
+        assert controller["scheduling"].startswith(f"{kept} (SCHED_FIFO 10 refused"), controller
+        assert all(policy != os.SCHED_FIFO for policy, _ in threads.values()), threads
 
 
 def test_a_remote_vehicle_is_a_whole_vehicle(rig: tuple[SimThread, Served]) -> None:
