@@ -94,6 +94,18 @@ class Settings:
     recorder_idle_s: float = 30.0  # landed with no command this long: the flight session ends
     recorder_preroll_s: float = 10.0  # seconds before a session's start kept in its recording
 
+    def __post_init__(self) -> None:
+        for name in ("control_rt_priority", "vehicle_rt_priority"):
+            value = getattr(self, name)
+            if not 0 <= value <= 99:  # sched_get_priority_max(SCHED_FIFO) on Linux
+                raise SettingsError(f"{name} must be 0 (off) to 99, not {value}")
+        if 0 < self.control_rt_priority <= self.vehicle_rt_priority:
+            raise SettingsError(
+                f"control_rt_priority ({self.control_rt_priority}) must be above "
+                f"vehicle_rt_priority ({self.vehicle_rt_priority}): the vehicle's other threads "
+                "would otherwise hold the control thread off the CPU"
+            )
+
     def with_(self, **changes: Any) -> Settings:
         return replace(self, **changes)
 

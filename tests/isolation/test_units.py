@@ -343,6 +343,22 @@ def test_serve_refuses_a_bad_mavlink_entry_before_spawning_anything(
     assert "'tcp:nohost' is not a MAVLink connection string" in capsys.readouterr().err
 
 
+def test_real_time_priorities_are_checked_up_front() -> None:
+    """A priority the OS cannot take, or vehicle threads that could hold the control thread off
+    the CPU, is refused where the settings are read (``serve`` exits 2 with the message)."""
+    with pytest.raises(
+        SettingsError, match=r"control_rt_priority must be 0 \(off\) to 99, not 100"
+    ):
+        Settings(control_rt_priority=100)
+    with pytest.raises(SettingsError, match=r"vehicle_rt_priority must be 0 \(off\) to 99, not -1"):
+        Settings.from_env({"UAVC_VEHICLE_RT_PRIORITY": "-1"})
+    with pytest.raises(SettingsError, match=r"must be above vehicle_rt_priority \(5\)"):
+        Settings(control_rt_priority=5, vehicle_rt_priority=5)
+    with pytest.raises(SettingsError, match="UAVC_CONTROL_RT_PRIORITY='high' is not a valid"):
+        Settings.from_env({"UAVC_CONTROL_RT_PRIORITY": "high"})
+    assert Settings(control_rt_priority=0, vehicle_rt_priority=0).control_rt_priority == 0  # off
+
+
 def test_serve_refuses_an_unknown_vehicles_mode(tmp_path: Path) -> None:
     import os
     import subprocess
