@@ -30,18 +30,18 @@ node-deps: tests/node/node_modules/.installed
 run: $(VENV)/.installed-run
 	$(VENV)/bin/uav-console serve --host $(HOST) --port $(PORT) $(ARGS)
 
-# The whole suite is two pytest runs: every file but the browser tests in two worker processes,
-# one test file per worker at a time (pytest-xdist; fixtures that several files share take
-# loopback addresses of their worker's own, tests/loopback.py), then the browser tests alone:
-# they are CPU-bound and timed, and flaked when a second run shared the 2 cores with them.
-# Both run even if the first fails. With ARGS, one serial pytest run with those arguments.
+# The whole suite is two pytest runs: every file but the browser tests and the tests marked
+# `serial` in two worker processes, one test file per worker at a time (pytest-xdist; fixtures
+# that several files share take loopback addresses of their worker's own, tests/loopback.py),
+# then those alone: they are CPU-bound or real-time, and failed when a second run shared the
+# 2 cores with them. Both run even if the first fails. With ARGS, one serial pytest run.
 test: $(VENV)/.installed-test node-deps
 ifeq ($(strip $(ARGS)),)
 	@status=0; \
-	echo "$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/browser"; \
-	$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/browser || status=$$?; \
-	echo "$(PY) -m pytest tests/browser"; \
-	$(PY) -m pytest tests/browser || status=$$?; \
+	echo "$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/browser -m 'not serial'"; \
+	$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/browser -m 'not serial' || status=$$?; \
+	echo "$(PY) -m pytest -m 'serial or browser'"; \
+	$(PY) -m pytest -m 'serial or browser' || status=$$?; \
 	exit $$status
 else
 	$(PY) -m pytest $(ARGS)
