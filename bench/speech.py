@@ -49,7 +49,6 @@ import numpy as np  # noqa: E402
 
 from drone.control.loop import ControlLoop, LoopStats  # noqa: E402
 from drone.control.pid import PaperPID, Setpoint  # noqa: E402
-from drone.vehicle import OWN_PROCESS_SPIN_S  # noqa: E402
 from server.language.nlu import default_nlu  # noqa: E402
 from server.settings import Settings  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
@@ -285,7 +284,6 @@ class _State:
 
 def _loop_while(seconds: float, busy: Any | None, **options: Any) -> LoopStats:
     pid, sp, st = PaperPID(), Setpoint(1.0, 0.5, 1.2, 0.3), _State()
-    options.setdefault("spin_s", 0.002)
     loop = ControlLoop(lambda now, dt: pid.step(st, sp, 0.01), period_s=0.01, **options)
     stop = threading.Event()
     worker = threading.Thread(target=busy, args=(stop,)) if busy else None
@@ -309,7 +307,6 @@ def _loop_child(seconds: float, out: Any) -> None:
     stats = _loop_while(
         seconds,
         None,
-        spin_s=OWN_PROCESS_SPIN_S,
         yield_while_spinning=False,
         realtime_priority=settings.control_rt_priority,
     )

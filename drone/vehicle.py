@@ -56,13 +56,6 @@ from drone.perception.markers import FrameResult, MarkerLocaliser, PerceptionWor
 __all__ = ["Commander", "MarkerSeen", "Setpoint", "Vehicle", "VehicleMode", "VehicleSnapshot"]
 
 FLYING_STATES = (CtrlState.FLYING, CtrlState.HOVERING, CtrlState.GOTOFIX)
-# In a vehicle process the control thread wakes this long before each deadline and keeps the GIL
-# from then on (a thread that has waited a switch interval, 0.1 ms there, can still take it), so
-# the GIL is in hand when the deadline comes; the process's other threads give up ≤ 2 ms of
-# every 10 ms for it. 1 ms was too short where the GIL's holder is itself preempted on
-# a loaded CPU: p99 period error 0.96 ms against 0.17 ms with 2 ms, 3 busy processes on 2 cores
-# and a busy thread at nice -10 in the loop's process (the default in a vehicle process).
-OWN_PROCESS_SPIN_S = 0.002
 ALTITUDE_MAX_DEFAULT_MM = 3000  # control:altitude_max firmware default (ARDroneLib config_keys.h)
 
 
@@ -614,7 +607,6 @@ class Vehicle:
             on_stall=self._stalled,
             name=self.name,
             clock=self.clock.now,
-            spin_s=OWN_PROCESS_SPIN_S if own_process else 0.002,
             yield_while_spinning=not own_process,
             realtime_priority=realtime_priority,
         )

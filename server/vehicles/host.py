@@ -476,8 +476,7 @@ async def run_vehicle(settings: Settings, options: VehicleOptions, token: str) -
     """Run one vehicle process until SIGTERM/SIGINT (then land and stop)."""
     granted = raise_priority(settings.vehicle_nice, settings.vehicle_rt_priority)
     log.info("%s: vehicle threads run at %s", options.name, granted)
-    # The control thread waits at most this long for the GIL (CPython's 5 ms default is half a
-    # 100 Hz period); drone/vehicle.py's OWN_PROCESS_SPIN_S is set from it.
+    # How long another thread may keep the GIL from the control thread (see the constant).
     sys.setswitchinterval(VEHICLE_SWITCH_INTERVAL_S)
     host = VehicleHost(settings, options, token)
     stop = asyncio.Event()

@@ -89,6 +89,13 @@ class Served:
     def resume(self) -> None:
         os.kill(self.proc.pid, signal.SIGCONT)
 
+    def assert_rejoined_after_long_loss(self, pid: int) -> None:
+        """The web process is back: vehicle ``pid`` reconnected (not restarted) after hovering
+        and then landing while it heard nothing."""
+        again = self.wait_vehicle()
+        assert again["pid"] == pid, "the vehicle should reconnect, not be restarted"
+        assert self.drone()["central_loss"]["actions"][-2:] == ["hover", "land"]
+
 
 @contextlib.contextmanager
 def serve(

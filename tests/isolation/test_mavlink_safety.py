@@ -220,9 +220,7 @@ def test_stalled_web_process_px4_holds_then_lands(rig: tuple[Px4Wire, Served]) -
         assert "AUTO.LAND" in [mode for t, _, mode in wire.history if t > t0], wire.history
     finally:
         srv.resume()
-    again = srv.wait_vehicle()
-    assert again["pid"] == pid, "the vehicle should reconnect, not be restarted"
-    assert srv.drone()["central_loss"]["actions"][-2:] == ["hover", "land"]
+    srv.assert_rejoined_after_long_loss(pid)
 
 
 def test_emergency_through_the_safety_port_force_disarms_the_px4(

@@ -192,9 +192,7 @@ def test_stalled_web_process_vehicle_hovers_then_lands_then_reconnects(
         wait_for(lambda: not sim.truth.flying, "the landing after a long loss", LAND_AFTER_S + 15)
     finally:
         srv.resume()
-    again = srv.wait_vehicle()
-    assert again["pid"] == pid, "the vehicle should reconnect, not be restarted"
-    assert srv.drone()["central_loss"]["actions"][-2:] == ["hover", "land"]
+    srv.assert_rejoined_after_long_loss(pid)
 
 
 def test_emergency_reaches_the_wire_while_the_web_process_is_stalled(
