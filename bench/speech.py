@@ -5,9 +5,11 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    NLU set ``tests/data/nlu_labelled.jsonl`` are synthesised with espeak-ng in 6+ voices and
    accents at 3 speeds (130/160/190 words per minute), clean and with white noise at 20 dB and
    10 dB SNR (seeded): 36 utterances x 9 conditions = 324 clips (``--quick``: 12 x 9 = 108).
-   Each clip is recognised by the shipped tiny.en (int8, CPU) twice: grammar-guided (vocabulary
-   prompt + snapping to the grammars, the product) and unguided (the same recogniser, no prompt,
-   the raw transcript to the NLU: the baseline).
+   Each clip is recognised by the shipped tiny.en (int8, CPU) three times: grammar-guided
+   (vocabulary prompt and token constraint, 15 s encoder window, 4 beams each snapped to the
+   grammars: the product), unguided (the same recogniser, no prompt, no constraint, its first
+   transcript to the NLU: the baseline), and guided as it was before the window and the beams
+   (Whisper's 30 s window, greedy: the reference for what those two bring).
    * exact = the commands that would be executed (confidence >= 0.5, else "please repeat")
      equal the labelled ones; for a labelled non-command, nothing executed;
    * wrong = something executed that differs from the label (the dangerous outcome);
@@ -63,6 +65,7 @@ VOICES = ["en-us", "en-gb", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us+f3"
 SPEEDS = [130, 160, 190]
 NOISE: list[float | None] = [None, 20.0, 10.0]
 THRESHOLD = 0.5  # Settings.confidence_threshold
+BEFORE = "guided, 30 s window, greedy (before)"
 
 
 def pick_utterances(n: int, seed: int = 15) -> list[dict[str, Any]]:
@@ -131,6 +134,13 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
         f"\nguided / baseline exact: {ratio}; wrong executed {g['wrong']:.1f} % vs "
         f"{b['wrong']:.1f} %; latency p50 ratio {g['p50_ms'] / b['p50_ms']:.2f}"
     )
+    if BEFORE in summary:
+        o = summary[BEFORE]
+        print(
+            f"guided vs {BEFORE}: exact {g['all']:.1f} vs {o['all']:.1f} %, wrong executed "
+            f"{g['wrong']:.1f} vs {o['wrong']:.1f} %, latency p50 {g['p50_ms']:.0f} vs "
+            f"{o['p50_ms']:.0f} ms ({o['p50_ms'] / g['p50_ms']:.2f}x faster)"
+        )
     print("\n### guided, by voice and by speed (exact %)")
     by: dict[str, list[bool]] = defaultdict(list)
     for r in results["guided"]:
@@ -165,7 +175,13 @@ def bench_accuracy(recognizer: Recognizer, quick: bool) -> dict[str, Any]:
         f"{len(clips)} clips: {len(utterances)} utterances x {len(conditions)} conditions, "
         f"{len({c[2] for c in clips})} voices, synthesised in {time.perf_counter() - t0:.0f} s"
     )
-    results: dict[str, list[dict[str, Any]]] = {"guided": [], "unguided (baseline)": []}
+    before = Recognizer(recognizer.model, recognizer.nlu, reuse=False, window_s=None, beams=1)
+    runs = (
+        ("guided", recognizer, True),
+        ("unguided (baseline)", recognizer, False),
+        (BEFORE, before, True),
+    )
+    results: dict[str, list[dict[str, Any]]] = {name: [] for name, _, _ in runs}
     # Seeded shuffle: any prefix of the run (an interrupted one too) is a fair sample of all
     # utterances, voices, speeds and noise levels.
     random.Random(1).shuffle(clips)
@@ -177,9 +193,9 @@ def bench_accuracy(recognizer: Recognizer, quick: bool) -> dict[str, Any]:
             print(f"  {k}/{len(clips)} clips", file=sys.stderr, flush=True)
         samples = read_wav(path.read_bytes())
         dur = len(samples) / SAMPLE_RATE
-        for name, guided in (("guided", True), ("unguided (baseline)", False)):
+        for name, rec_by, guided in runs:
             t = time.perf_counter()
-            rec = recognizer.recognize(samples, guided=guided)
+            rec = rec_by.recognize(samples, guided=guided)
             ms = (time.perf_counter() - t) * 1000
             executed = rec.commands if rec.confidence >= THRESHOLD else []
             want = canon(row["commands"])
