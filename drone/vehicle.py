@@ -161,6 +161,10 @@ class Vehicle:
         clock: time source for ``snapshot``/ages (virtual in lockstep).
     """
 
+    # The AR.Drone's own hover holds attitude over optical flow and drifts; the position
+    # controller holds a hover at the estimate instead (server.tasks.types.HoverTask).
+    holds_position = False
+
     def __init__(
         self,
         name: str,

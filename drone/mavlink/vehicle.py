@@ -82,6 +82,11 @@ class MavlinkVehicle:
         link_timeout_s: kept for symmetry with ``Vehicle``; the protocol's watchdog decides.
     """
 
+    # The autopilot holds position by itself (PX4 AUTO.LOITER, ArduCopter LOITER), so a hover
+    # is its hold mode rather than a stream of position targets: it keeps holding if this
+    # process stops, with no offboard-loss failsafe in between (server.tasks.types.HoverTask).
+    holds_position = True
+
     def __init__(
         self,
         name: str,

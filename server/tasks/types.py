@@ -317,7 +317,9 @@ class HoverTask(Task):
     def start(self, ctx: Context, now: float) -> Outcome | None:
         super().start(ctx, now)
         s = ctx.snapshot()
-        if s.localised:
+        # A vehicle whose autopilot holds position (MAVLink) hovers in its own hold mode; the
+        # others hold the estimate with the position controller when they know where they are.
+        if s.localised and not getattr(ctx.vehicle, "holds_position", False):
             ctx.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad))
         else:
             ctx.vehicle.hover()

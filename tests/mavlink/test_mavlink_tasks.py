@@ -85,6 +85,7 @@ def test_patrol_waypoints_in_a_loop(world: Any, nlu: Any) -> None:
     assert f.tm.status.name == "patrol"
     f.tm.preempt("hover")
     f.rig.run(3.0)
+    assert f.v.protocol.telemetry.mode == "AUTO.LOITER"  # the autopilot's own hold
     here = f.at()
     f.rig.run(2.0)  # holding: the autopilot keeps the position it was given
     assert math.dist(here, f.at()) < 0.1
