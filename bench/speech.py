@@ -28,6 +28,7 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    thread where permitted, GIL held through the spin, 0.1 ms switch interval).
 
     .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop] [--skip-stream]
+        [--asr-model DIR] [--window-s 15] [--beams 4]
 """
 
 from __future__ import annotations
@@ -56,8 +57,9 @@ from server.settings import Settings  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
 from server.speech.model import default_workers, load_whisper, resolve  # noqa: E402
 from server.speech.pool import DecoderPool  # noqa: E402
-from server.speech.recognizer import Recognizer, speech_span  # noqa: E402
+from server.speech.recognizer import BEAMS, Recognizer, speech_span  # noqa: E402
 from server.speech.stream import Final, Interim, StreamSession  # noqa: E402
+from server.speech.window import MIN_S  # noqa: E402
 from server.vehicles.host import VEHICLE_SWITCH_INTERVAL_S, raise_priority  # noqa: E402
 from tests.speech.conftest import synthesise  # noqa: E402
 
@@ -414,6 +416,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="108 clips, 5 s loop rows")
     ap.add_argument("--asr-model", type=Path, default=None)
+    ap.add_argument("--window-s", type=float, default=MIN_S, help="shortest encoder window")
+    ap.add_argument("--beams", type=int, default=BEAMS, help="beam width (n-best size)")
     ap.add_argument(
         "--threads", type=int, default=1, help="threads per decoder (threads_per_worker)"
     )
@@ -431,7 +435,7 @@ def main(argv: list[str] | None = None) -> int:
             row = json.loads(line)
             results[row.pop("recogniser")].append(row)
         pairs = min(len(v) for v in results.values())
-        print(f"{pairs} clips with both recognisers (from {args.report})")
+        print(f"{pairs} clips with every recogniser (from {args.report})")
         report({k: v[:pairs] for k, v in results.items()})
         return 0
     import os
@@ -443,9 +447,10 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()
     cores = os.cpu_count()
     print(f"load average at start: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {cores} cores")
-    print(f"decoder threads: {args.threads}")
+    print(f"decoder threads: {args.threads}; window {args.window_s:g} s, {args.beams} beams")
     whisper = load_whisper(resolve(args.asr_model), workers=1, threads_per_worker=args.threads)
-    rec = Recognizer(whisper, default_nlu(), reuse=False)  # every clip decoded, none shared
+    # every clip decoded, none shared
+    rec = Recognizer(whisper, default_nlu(), reuse=False, window_s=args.window_s, beams=args.beams)
     out: dict[str, Any] = {}
     if not args.skip_accuracy:
         out["accuracy"] = bench_accuracy(rec, args.quick)

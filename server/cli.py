@@ -143,6 +143,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 sys.stdout,
                 model_dir=settings.asr_model,
                 model_sha256=settings.asr_model_sha256,
+                window_s=settings.asr_window_s,
+                beams=settings.asr_beams,
             )
         if args.command == "interpret":
             from server.language.cli import interpret_main

@@ -216,7 +216,14 @@ class Runtime:
         self.started_at = time.time()
         self.tls: TLSFiles | None = None  # set by `serve` when it serves HTTPS
         self.speech = SpeechService(
-            SpeechConfig(s.asr_model, s.asr_model_sha256, s.asr_workers, queue=s.asr_queue),
+            SpeechConfig(
+                s.asr_model,
+                s.asr_model_sha256,
+                s.asr_workers,
+                queue=s.asr_queue,
+                window_s=s.asr_window_s,
+                beams=s.asr_beams,
+            ),
             self.nlu,
         )
         # vehicle processes (``--vehicles process``) and remote vehicles: link, discovery

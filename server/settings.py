@@ -62,6 +62,11 @@ class Settings:
     asr_model_sha256: str | None = None
     asr_workers: int = 0
     asr_queue: int = 4
+    # asr_window_s: the shortest encoder window, 1-30 s, 0 = the recogniser's 15 s
+    # (server/speech/window.py; 30 = Whisper's own window, slower); asr_beams: beam width and
+    # transcripts tried against the grammars, 1-16, 0 = the recogniser's 4.
+    asr_window_s: float = 0.0
+    asr_beams: int = 0
     asr_preload: bool = False  # load the model at start (`serve` does), else on first use
     recognizer: str = "auto"  # server | browser | auto (browser where it exists and is online)
     # HTTPS on a non-loopback host (issue 15): a local CA + server certificate in data_dir
@@ -105,6 +110,13 @@ class Settings:
                 f"vehicle_rt_priority ({self.vehicle_rt_priority}): the vehicle's other threads "
                 "would otherwise hold the control thread off the CPU"
             )
+
+        if self.asr_window_s != 0 and not 1 <= self.asr_window_s <= 30:
+            raise SettingsError(
+                f"asr_window_s must be 0 (default) or 1 to 30, not {self.asr_window_s}"
+            )
+        if not 0 <= self.asr_beams <= 16:
+            raise SettingsError(f"asr_beams must be 0 (default) or 1 to 16, not {self.asr_beams}")
 
     def with_(self, **changes: Any) -> Settings:
         return replace(self, **changes)

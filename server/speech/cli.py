@@ -28,11 +28,14 @@ def interpret_audio_main(
     model_dir: Path | None = None,
     model_sha256: str | None = None,
     grammar_dir: Path | None = None,
+    window_s: float = 0.0,
+    beams: int = 0,
 ) -> int:
     """Recognise each file in turn (see the module docstring for the output)."""
     try:
         nlu = NLU(grammar_dir) if grammar_dir is not None else default_nlu()
-        service = SpeechService(SpeechConfig(model_dir, model_sha256, workers=1), nlu)
+        config = SpeechConfig(model_dir, model_sha256, workers=1, window_s=window_s, beams=beams)
+        service = SpeechService(config, nlu)
         recognizer = service.load()
     except (GrammarError, ModelError) as exc:
         print(f"uav-console interpret: {exc}", file=sys.stderr)

@@ -10,10 +10,11 @@ from pathlib import Path
 
 from server.language.nlu import NLU
 from server.speech import model as model_mod
+from server.speech import window
 from server.speech.audio import Samples, read_wav
 from server.speech.errors import ModelError, SpeechError
 from server.speech.pool import DecoderPool
-from server.speech.recognizer import Recognition, Recognizer
+from server.speech.recognizer import BEAMS, Recognition, Recognizer
 
 log = logging.getLogger("uav_console.speech")
 
@@ -28,6 +29,8 @@ class SpeechConfig:
     threads_per_worker: int = 1
     queue: int = 4  # requests that may wait for a decoder before Busy
     max_streams: int = 8  # browser streams open at once
+    window_s: float = 0.0  # shortest encoder window; 0: the recogniser's (server.speech.window)
+    beams: int = 0  # 0: the recogniser's (server.speech.recognizer.BEAMS)
 
 
 class SpeechService:
@@ -55,7 +58,12 @@ class SpeechService:
         whisper = model_mod.load_whisper(
             source, workers=self.workers, threads_per_worker=self.config.threads_per_worker
         )
-        self.recognizer = Recognizer(whisper, self.nlu)
+        self.recognizer = Recognizer(
+            whisper,
+            self.nlu,
+            window_s=self.config.window_s or window.MIN_S,
+            beams=self.config.beams or BEAMS,
+        )
         return self.recognizer
 
     async def start(self, *, preload: bool = True) -> None:

@@ -95,3 +95,19 @@ def test_with_nothing_understood_whole_the_most_confident_reading_is_kept(
     rec = choose([(garbled, 0.3), ("Take off in the hand man.", 0.6)], snapper)
     assert rec.heard == "Take off in the hand man." and rec.commands == []
     assert rec.confidence == pytest.approx(0.6 * 0.83)
+
+
+def test_window_and_beams_settings_are_checked_and_reach_the_recogniser() -> None:
+    from server.settings import Settings, SettingsError
+    from server.speech.service import SpeechConfig, SpeechService
+
+    with pytest.raises(SettingsError, match=r"asr_window_s must be 0 \(default\) or 1 to 30"):
+        Settings.from_env({"UAVC_ASR_WINDOW_S": "45"})
+    with pytest.raises(SettingsError, match=r"asr_beams must be 0 \(default\) or 1 to 16"):
+        Settings(asr_beams=17)
+    s = Settings.from_env({"UAVC_ASR_WINDOW_S": "30", "UAVC_ASR_BEAMS": "1"})
+    nlu = default_nlu()
+    chosen = SpeechService(SpeechConfig(window_s=s.asr_window_s, beams=s.asr_beams), nlu).load()
+    assert (chosen.window_s, chosen.beams) == (30.0, 1)
+    default = SpeechService(SpeechConfig(), nlu).load()
+    assert (default.window_s, default.beams) == (15.0, BEAMS)
