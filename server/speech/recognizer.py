@@ -94,16 +94,11 @@ def speech_span(samples: Samples, *, min_silence_ms: int = 300) -> tuple[int, in
     return max(0, spans[0]["start"] - pad), min(len(samples), spans[-1]["end"] + pad)
 
 
-def _suppress_list(model: Any, vocab: Vocabulary) -> list[int]:
-    """The guided ``suppress_tokens`` of a faster-whisper model: tokens outside the grammar
-    vocabulary (:mod:`server.speech.constraint`) plus the model's own non-speech symbols."""
-    from faster_whisper.tokenizer import Tokenizer
-
-    tokenizer = Tokenizer(
-        model.hf_tokenizer, model.model.is_multilingual, task="transcribe", language="en"
-    )
+def _suppress_list(tokenizer: Any, vocab: Vocabulary) -> list[int]:
+    """The guided ``suppress_tokens`` for a faster-whisper ``Tokenizer``: tokens outside the
+    grammar vocabulary (:mod:`server.speech.constraint`) plus the model's non-speech symbols."""
     return suppressed_tokens(
-        model.hf_tokenizer, vocab.words, tokenizer.eot, tokenizer.non_speech_tokens
+        tokenizer.tokenizer, vocab.words, tokenizer.eot, tokenizer.non_speech_tokens
     )
 
 
@@ -125,6 +120,7 @@ class Recognizer:
         Whisper's own 30 s windows and greedy decoding (the earlier way, bench/speech.py's
         reference row). ``beams``: beam width and transcripts tried against the grammars."""
         from faster_whisper.tokenizer import Tokenizer
+        from faster_whisper.transcribe import get_suppressed_tokens
 
         self.model = model
         self.nlu = nlu
@@ -133,11 +129,23 @@ class Recognizer:
         self.window_s = window_s
         self.beams = beams
         self._vad_lock = threading.Lock()  # Silero's ONNX session is shared; keep calls serial
-        self._suppress = _suppress_list(model, self.vocab)
         self._tokenizer = Tokenizer(
             model.hf_tokenizer, model.model.is_multilingual, task="transcribe", language="en"
         )
-        self._prompt_tokens = self._tokenizer.encode(" " + self.vocab.prompt.strip())
+        self._suppress = _suppress_list(self._tokenizer, self.vocab)
+        # What a fitted-window decode passes CTranslate2, guided (True) or not, made once: the
+        # suppress list is ~44 000 ids, and completing it cost 1.5 ms of GIL per decode.
+        prompt_tokens = self._tokenizer.encode(" " + self.vocab.prompt.strip())
+        self._prompts = {
+            g: model.get_prompt(
+                self._tokenizer, prompt_tokens if g else [], without_timestamps=True
+            )
+            for g in (True, False)
+        }
+        self._suppress_ids = {
+            True: get_suppressed_tokens(self._tokenizer, list(self._suppress)),
+            False: get_suppressed_tokens(self._tokenizer, [-1]),
+        }
         # reuse=False: every call decodes (bench/speech.py decodes one clip over and over).
         self.shared: SharedResults[Recognition] | None = SharedResults(size=8) if reuse else None
 
@@ -153,20 +161,20 @@ class Recognizer:
         content = features.shape[-1] - 1  # faster-whisper's count: the last frame is padding
         if not fits(content):
             return [self._transcribe_windows(samples, guided)]
-        return self._transcribe_fitted(features[:, :content], guided)
+        return self._transcribe_fitted(features[:, :content], guided, self.window_s)
 
-    def _transcribe_fitted(self, content: np.ndarray, guided: bool) -> list[tuple[str, float]]:
-        """One decode over a window fitted to the speech (:mod:`server.speech.window`), with
-        the options faster-whisper's ``transcribe`` would use (see the module docstring)."""
+    def _transcribe_fitted(
+        self, content: np.ndarray, guided: bool, min_s: float
+    ) -> list[tuple[str, float]]:
+        """One decode over a window of at least ``min_s`` fitted to the speech
+        (:mod:`server.speech.window`), with the options faster-whisper's ``transcribe`` would
+        use (see the module docstring)."""
         from faster_whisper.audio import pad_or_trim
-        from faster_whisper.transcribe import get_suppressed_tokens
 
-        frames = window_frames(content.shape[-1], self.window_s or 0.0)
-        encoder_output = self.model.encode(pad_or_trim(content, frames))
-        prompt = self.model.get_prompt(
-            self._tokenizer, self._prompt_tokens if guided else [], without_timestamps=True
+        encoder_output = self.model.encode(
+            pad_or_trim(content, window_frames(content.shape[-1], min_s))
         )
-        suppress = list(self._suppress) if guided else [-1]
+        prompt = self._prompts[guided]
         result = self.model.model.generate(
             encoder_output,
             [prompt],
@@ -176,7 +184,7 @@ class Recognizer:
             return_scores=True,
             return_no_speech_prob=True,
             suppress_blank=True,
-            suppress_tokens=get_suppressed_tokens(self._tokenizer, suppress),
+            suppress_tokens=self._suppress_ids[guided],
         )[0]
         out: list[tuple[str, float]] = []
         for tokens, score in zip(result.sequences_ids, result.scores, strict=True):
