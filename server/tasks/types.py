@@ -319,7 +319,7 @@ class HoverTask(Task):
         s = ctx.snapshot()
         # A vehicle whose autopilot holds position (MAVLink) hovers in its own hold mode; the
         # others hold the estimate with the position controller when they know where they are.
-        if s.localised and not getattr(ctx.vehicle, "holds_position", False):
+        if s.localised and not ctx.vehicle.holds_position:
             ctx.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad))
         else:
             ctx.vehicle.hover()
