@@ -31,6 +31,15 @@ Command = dict[str, Any]
 MAX_UTTERANCE_CHARS = 1000  # longer text is not speech; interpret() answers [] (documented)
 MAX_PIECES = 32
 MAX_WINDOW = 4  # a command spans at most this many split pieces
+# A piece no rule matches may be commands said back to back with no separator ("land take
+# off": a speech recogniser often writes no comma between them); it is split at word
+# boundaries into at most this many commands, if its words are few enough (bounded parses).
+MAX_RUN_COMMANDS = 3
+MAX_RUN_WORDS = 12
+# Grammars (rules.xml) of the questions and the dialog: their commands are not said back to
+# back with others, and "help me what you see" misheard for "tell me what you see" must not
+# split into help + describe (bench/speech.py: 4 such readings among 648 clips).
+NOT_IN_RUNS = frozenset({"assist", "control", "perception", "status"})
 DEFAULT_GRAMMAR_DIR = share_dir("grammars")
 
 _APOSTROPHES = str.maketrans({"\u2019": "'", "\u2018": "'", "`": "'", "\u00b4": "'"})
@@ -233,6 +242,51 @@ def _command(grammar: Grammar, matcher: Matcher, clause: str) -> Parsed | None:
     return Parsed(cmd, rule.id, rule.grammar, clause)
 
 
+def _run_together(grammar: Grammar, matcher: Matcher, clause: str) -> list[Parsed] | None:
+    """``clause`` read as commands said back to back ("land take off"), or None.
+
+    Only for a clause no rule matches whole (the caller's case), of at most
+    ``MAX_RUN_WORDS`` words, split into at most ``MAX_RUN_COMMANDS`` commands that each stand
+    alone (:func:`_stands_alone`). When two splits read differently ("fly forward | 2 meters
+    left" against another) the clause is ambiguous and stays not understood: the dialog asks
+    rather than guesses.
+    """
+    words = clause.split()
+    if len(words) < 2 or len(words) > MAX_RUN_WORDS:
+        return None
+    readings = {
+        tuple(repr(sorted(p.command.items())) for p in reading): reading
+        for reading in _splits(grammar, matcher, words, MAX_RUN_COMMANDS)
+    }
+    return next(iter(readings.values())) if len(readings) == 1 else None
+
+
+def _splits(grammar: Grammar, matcher: Matcher, words: list[str], parts: int) -> list[list[Parsed]]:
+    """Every way to read ``words`` as 2..``parts`` stand-alone commands in a row."""
+    out: list[list[Parsed]] = []
+    for cut in range(1, len(words)):
+        head = _command(grammar, matcher, " ".join(words[:cut]))
+        if head is None or not _stands_alone(head):
+            continue
+        tail = _command(grammar, matcher, " ".join(words[cut:]))
+        if tail is not None and _stands_alone(tail):
+            out.append([head, tail])
+        if parts > 2:
+            out.extend([head, *more] for more in _splits(grammar, matcher, words[cut:], parts - 1))
+    return out
+
+
+def _stands_alone(parsed: Parsed) -> bool:
+    """Whether a part of a run-together clause is a command in its own right: not a lone word
+    that fills a slot ("left", "up": it more likely belongs to its neighbour), nor a part that
+    starts with a number ("2 meters left" is the end of "fly forward 2 meters left"), nor a
+    question or dialog command (:data:`NOT_IN_RUNS`)."""
+    words = parsed.text.split()
+    if words[0][0].isdigit() or parsed.grammar in NOT_IN_RUNS:
+        return False
+    return len(words) > 1 or len(parsed.command) == 1
+
+
 class NLU:
     """The language understander: a grammar directory, reloadable without a restart.
 
@@ -346,7 +400,10 @@ class NLU:
                 parsed.append(hit)
                 i = end
                 continue
-            if first:
+            run = _run_together(grammar, matcher, first) if first else None
+            if run:
+                parsed.extend(run)
+            elif first:
                 unparsed.append(first)
             i += 1
         return Interpretation(text, s, tuple(parsed), tuple(unparsed))

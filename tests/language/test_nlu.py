@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from server.language.errors import UnknownStateError
-from server.language.nlu import MAX_UTTERANCE_CHARS, NLU
+from server.language.nlu import MAX_RUN_WORDS, MAX_UTTERANCE_CHARS, NLU
 from server.language.numbers import words_to_numbers
 
 DATA = Path(__file__).resolve().parent.parent / "data" / "nlu_labelled.jsonl"
@@ -294,6 +294,62 @@ def test_partly_understood_reports_the_rest(nlu: NLU) -> None:
     interp = nlu.parse("take off and do a barrel roll")
     assert interp.commands == [{"action": "takeoff"}]
     assert interp.unparsed == ("do barrel roll",)
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        # Speech recognisers often write no separator between commands said back to back.
+        ("Land take off.", [{"action": "land"}, {"action": "takeoff"}]),
+        ("take off hover", [{"action": "takeoff"}, {"action": "hover"}]),
+        (
+            "take off and hover land",
+            [{"action": "takeoff"}, {"action": "hover"}, {"action": "land"}],
+        ),
+        (
+            "take off fly forward two meters turn left",
+            [
+                {"action": "takeoff"},
+                {"action": "move", "direction": "forward", "distance": 2},
+                {"action": "turn", "direction": "left"},
+            ],
+        ),
+        (
+            "land take off and fly to marker 3",
+            [{"action": "land"}, {"action": "takeoff"}, {"action": "goto", "marker": 3}],
+        ),
+    ],
+)
+def test_commands_said_back_to_back(nlu: NLU, text: str, expected: list[dict]) -> None:
+    assert nlu.interpret(text) == expected
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "fly forward 2 meters left",  # "2 meters left" is no command of its own
+        "go up down",  # a lone "down" belongs to its neighbour
+        "land up",
+        "help me what you see",  # questions and dialog commands are not run together
+        "land land land land",  # more than MAX_RUN_COMMANDS
+        "take off land hover land",
+    ],
+)
+def test_runs_that_are_not_split(nlu: NLU, text: str) -> None:
+    interp = nlu.parse(text)
+    assert interp.commands == []
+    assert interp.unparsed == (nlu.normalise(text).strip(" ,"),)
+
+
+def test_a_run_of_too_many_words_is_not_split(nlu: NLU) -> None:
+    # The splits tried grow with the square of the words: a clause is split only up to
+    # MAX_RUN_WORDS words.
+    assert nlu.interpret("patrol markers 1 2 3 4 land") == [
+        {"action": "patrol", "markers": [1, 2, 3, 4]},
+        {"action": "land"},
+    ]
+    markers = " ".join(str(i) for i in range(1, MAX_RUN_WORDS))
+    assert nlu.interpret(f"patrol markers {markers} land") == []
 
 
 def test_per_state_grammars(nlu: NLU) -> None:
