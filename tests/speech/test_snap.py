@@ -36,6 +36,14 @@ def test_understood_transcript_is_kept_with_distance_zero(snapper: Snapper) -> N
     assert s.commands == [{"action": "takeoff"}, {"action": "goto", "marker": 3}]
 
 
+def test_commands_heard_without_a_separator_are_all_kept(snapper: Snapper) -> None:
+    # "land. take off." spoken, "Land take off." heard: the snap dropped "land" and the
+    # take-off alone was executed (bench/speech.py's second clip set, 2 of 18 clips).
+    s = snapper.snap("Land take off.")
+    assert s.complete and s.distance == 0
+    assert s.commands == [{"action": "land"}, {"action": "takeoff"}]
+
+
 @pytest.mark.parametrize(
     ("heard", "commands"),
     [
