@@ -85,6 +85,9 @@ class Rule:
     line: int
     order: int
     spans: bool = False  # the pattern contains a SPLIT word ("and", "then"): may span pieces
+    # Its grammar's chain="no": a question or dialog command, never read out of commands said
+    # back to back with no separator (server.language.nlu, "land take off").
+    chains: bool = True
 
 
 @dataclass(frozen=True)
@@ -520,10 +523,18 @@ def _load_rules(path: Path, sets: dict[str, WordSet]) -> tuple[tuple[Rule, ...],
                 f"grammar {gname} is defined twice", file=file, line=lines.get(g)
             )
         grammars.append(gname)
+        chain = g.get("chain", "yes").strip()
+        if chain not in ("yes", "no"):
+            raise GrammarSchemaError(
+                f'grammar {gname}: chain must be "yes" or "no", not {chain!r}',
+                file=file,
+                line=lines.get(g),
+            )
         for r in g:
             if r.tag != "rule":
                 raise GrammarSchemaError(f"unexpected <{r.tag}>", file=file, line=lines.get(r))
-            rules.append(_load_rule(r, gname, file, lines, sets, seen, len(rules)))
+            rule = _load_rule(r, gname, file, lines, sets, seen, len(rules))
+            rules.append(replace(rule, chains=chain == "yes"))
     rules.sort(key=lambda x: (-x.priority, x.order))
     if "SPLIT" in sets:
         split = re.compile(r"(?<![a-z])(?:" + sets["SPLIT"].regex + r")(?![a-z])")

@@ -36,10 +36,6 @@ MAX_WINDOW = 4  # a command spans at most this many split pieces
 # boundaries into at most this many commands, if its words are few enough (bounded parses).
 MAX_RUN_COMMANDS = 3
 MAX_RUN_WORDS = 12
-# Grammars (rules.xml) of the questions and the dialog: their commands are not said back to
-# back with others, and "help me what you see" misheard for "tell me what you see" must not
-# split into help + describe (bench/speech.py: 4 such readings among 648 clips).
-NOT_IN_RUNS = frozenset({"assist", "control", "perception", "status"})
 DEFAULT_GRAMMAR_DIR = share_dir("grammars")
 
 _APOSTROPHES = str.maketrans({"\u2019": "'", "\u2018": "'", "`": "'", "\u00b4": "'"})
@@ -73,6 +69,7 @@ class Parsed:
     rule: str
     grammar: str
     text: str  # the normalised clause it was read from
+    chains: bool = True  # may be read out of commands said back to back (rules.xml chain=)
 
 
 @dataclass(frozen=True)
@@ -239,7 +236,7 @@ def _command(grammar: Grammar, matcher: Matcher, clause: str) -> Parsed | None:
         return None
     if cmd.get("markers") == []:
         del cmd["markers"]
-    return Parsed(cmd, rule.id, rule.grammar, clause)
+    return Parsed(cmd, rule.id, rule.grammar, clause, rule.chains)
 
 
 def _run_together(grammar: Grammar, matcher: Matcher, clause: str) -> list[Parsed] | None:
@@ -280,9 +277,10 @@ def _stands_alone(parsed: Parsed) -> bool:
     """Whether a part of a run-together clause is a command in its own right: not a lone word
     that fills a slot ("left", "up": it more likely belongs to its neighbour), nor a part that
     starts with a number ("2 meters left" is the end of "fly forward 2 meters left"), nor a
-    question or dialog command (:data:`NOT_IN_RUNS`)."""
+    command of a grammar marked chain="no" in rules.xml (questions and dialog: "help me what
+    you see", a mishearing of "tell me what you see", is not help + describe)."""
     words = parsed.text.split()
-    if words[0][0].isdigit() or parsed.grammar in NOT_IN_RUNS:
+    if words[0][0].isdigit() or not parsed.chains:
         return False
     return len(words) > 1 or len(parsed.command) == 1
 

@@ -126,6 +126,30 @@ def test_bad_rules(
     assert str(exc.value).startswith(f"rules.xml:{line}: rule '{rule}':")
 
 
+def test_chain_attribute(tmp_path: Path) -> None:
+    rules = RULES.replace("{extra}", "").replace(
+        '<grammar name="g">',
+        '<grammar name="g">'
+        '<rule id="land" action="land"><pattern>land</pattern></rule>'
+        '<rule id="hover" action="hover"><pattern>hover</pattern></rule>',
+    )
+    rules = rules.replace(
+        "</rules>",
+        '<grammar name="q" chain="no">'
+        '<rule id="help" action="help"><pattern>help</pattern></rule></grammar></rules>',
+    )
+    (tmp_path / "rules.xml").write_text(rules)
+    (tmp_path / "states.xml").write_text(STATES)
+    (tmp_path / "mappings.xml").write_text(MAPPINGS)
+    nlu = NLU(tmp_path)
+    assert nlu.interpret("land hover") == [{"action": "land"}, {"action": "hover"}]
+    assert nlu.interpret("land help") == []  # a chain="no" grammar's command is never a part
+    assert nlu.interpret("help") == [{"action": "help"}]
+    (tmp_path / "rules.xml").write_text(rules.replace('chain="no"', 'chain="maybe"'))
+    with pytest.raises(GrammarSchemaError, match='chain must be "yes" or "no"'):
+        load_grammar(tmp_path)
+
+
 def test_malformed_xml_names_file_and_line(tmp_path: Path) -> None:
     make(tmp_path, "\n\n<rule id='x' action='a'><pattern>up</patern></rule>")
     with pytest.raises(GrammarSyntaxError) as exc:
