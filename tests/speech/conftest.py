@@ -36,15 +36,23 @@ def synthesise(
     channels: int = 1,
     seed: int = 1,
     pad_s: float = 0.3,
+    tts: str = "espeak-ng",
 ) -> Path:
-    """espeak-ng -> WAV at ``rate`` with ``channels``, white noise at ``snr_db`` (seeded), and
-    ``pad_s`` of silence either side (as a microphone would hear it)."""
+    """``tts`` -> WAV at ``rate`` with ``channels``, white noise at ``snr_db`` (seeded), and
+    ``pad_s`` of silence either side (as a microphone would hear it).
+
+    ``tts`` is espeak-ng (formant synthesis; ``voice`` one of its voices, ``speed`` in words per
+    minute) or flite (Debian's CMU Flite: less robotic voices, "slt", "rms", "awb", "kal16";
+    ``speed`` relative to 160 words per minute through its duration stretch)."""
     raw = out.with_suffix(".raw.wav")
-    subprocess.run(
-        ["espeak-ng", "-v", voice, "-s", str(speed), "-w", str(raw), text],
-        check=True,
-        capture_output=True,
-    )
+    if tts == "flite":
+        stretch = f"duration_stretch={160 / speed:.3f}"
+        command = ["flite", "-voice", voice, "--setf", stretch, "-t", text, "-o", str(raw)]
+    elif tts == "espeak-ng":
+        command = ["espeak-ng", "-v", voice, "-s", str(speed), "-w", str(raw), text]
+    else:
+        raise ValueError(f"unknown text-to-speech {tts!r} (espeak-ng or flite)")
+    subprocess.run(command, check=True, capture_output=True)
     samples = read_wav(raw.read_bytes())  # 16 kHz mono float
     pad = np.zeros(int(pad_s * 16000), np.float32)
     samples = np.concatenate([pad, samples, pad])

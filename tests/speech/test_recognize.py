@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -51,6 +52,32 @@ def test_spoken_commands_are_understood(
     rec = recognizer.recognize(read_wav(clip.read_bytes()))
     assert rec.commands == commands, rec
     assert rec.confidence >= 0.5, rec  # above the dialog's threshold: it will be executed
+
+
+@pytest.mark.skipif(shutil.which("flite") is None, reason="flite is needed (.ci/run installs it)")
+@pytest.mark.parametrize(
+    ("text", "voice", "commands"),
+    [
+        # Said back to back, heard "Land take off." (no separator): both commands, in order.
+        ("land take off", "rms", [{"action": "land"}, {"action": "takeoff"}]),
+        ("go to marker four", "kal16", [{"action": "goto", "marker": 4}]),
+    ],
+)
+def test_another_synthesiser_is_understood(
+    recognizer: Recognizer, synth: Synth, text: str, voice: str, commands: list[dict[str, object]]
+) -> None:
+    # Not only espeak-ng's formant voices: Debian's flite speaks with its own.
+    clip = synth(text, voice=voice, speed=160, tts="flite")
+    rec = recognizer.recognize(read_wav(clip.read_bytes()))
+    assert rec.commands == commands, rec
+    assert rec.confidence >= 0.5, rec
+
+
+def test_an_unknown_synthesiser_is_refused(tmp_path: Path) -> None:
+    from tests.speech.conftest import synthesise
+
+    with pytest.raises(ValueError, match="unknown text-to-speech"):
+        synthesise(tmp_path / "x.wav", "land", tts="nope")
 
 
 def test_silence_and_noise_are_not_decoded_and_mean_nothing(recognizer: Recognizer) -> None:
