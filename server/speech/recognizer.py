@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -52,6 +53,8 @@ CONSTRAINED_CONFIDENCE_SCALE = 0.83
 BEAMS = 4
 MAX_NEW_TOKENS = 64  # a spoken command is far shorter; a hallucination loop stops there
 VAD_PAD_S = 0.3  # speech kept either side of what the VAD marks (its own default is 0.4 s)
+_SENTENCE_END = re.compile(r"(?<=[.?!])\s+")
+_NOT_WORD = re.compile(r"[^\w\s]+")
 
 
 @dataclass(frozen=True)
@@ -268,6 +271,22 @@ class Recognizer:
         return Recognition(heard, asr, self.nlu.interpret(heard, state), heard, asr, 0.0)
 
 
+def unrepeated(text: str) -> str:
+    """``text`` once when it is one sentence said over and over ("Kill the motors. Kill the
+    motors."), else ``text``.
+
+    Whisper's beams often repeat a short utterance (45 of 2 592 transcripts on bench/speech.py's
+    two clip sets, 7 of the 324 flite clips' chosen readings); read as heard, the commands would
+    run twice: a move flown twice as far. Said twice on purpose, it is flown once, the safer
+    mistake.
+    """
+    sentences = [s for s in _SENTENCE_END.split(text.strip()) if s]
+    if len(sentences) < 2:
+        return text
+    words = {" ".join(_NOT_WORD.sub(" ", s).lower().split()) for s in sentences}
+    return sentences[0] if len(words) == 1 else text
+
+
 def choose(
     hypotheses: list[tuple[str, float]], snapper: Snapper, state: str | None = None
 ) -> Recognition:
@@ -286,7 +305,8 @@ def choose(
     best: Recognition | None = None
     best_whole: Recognition | None = None
     seen: set[str] = set()
-    for heard, asr in hypotheses:
+    for transcript, asr in hypotheses:
+        heard = unrepeated(transcript)
         if not heard or heard in seen:  # beams often differ only after the words end
             continue
         seen.add(heard)

@@ -7,7 +7,7 @@ import pytest
 
 from server.language.nlu import default_nlu
 from server.speech.audio import read_wav
-from server.speech.recognizer import BEAMS, Recognizer, choose
+from server.speech.recognizer import BEAMS, Recognizer, choose, unrepeated
 from server.speech.snap import Snapper
 from server.speech.vocabulary import vocabulary
 from server.speech.window import FULL_WINDOW_FRAMES, fits, window_frames
@@ -51,6 +51,18 @@ def test_the_transcript_the_grammars_accept_beats_a_likelier_garbled_one(
 def test_equal_support_keeps_the_decoders_order(snapper: Snapper) -> None:
     rec = choose([("Land.", 0.7), ("Land.", 0.7)], snapper)
     assert rec.commands == [{"action": "land"}] and rec.asr_confidence == 0.7
+
+
+def test_a_sentence_the_decoder_repeated_is_flown_once(snapper: Snapper) -> None:
+    # flite's voices, bench/speech.py: "Kill the motors. Kill the motors." ran two emergencies;
+    # a repeated move would fly twice as far.
+    rec = choose([("Fly forward 2 meters. Fly forward 2 meters.", 0.8)], snapper)
+    assert rec.commands == [{"action": "move", "direction": "forward", "distance": 2}]
+    assert rec.heard == "Fly forward 2 meters."
+    assert unrepeated("Go land. go land") == "Go land."
+    assert unrepeated("App you? App you.") == "App you?"
+    for different in ("Take off. Land.", "Take off. Take off. Land.", "Land take off.", ""):
+        assert unrepeated(different) == different
 
 
 def test_no_transcript_means_nothing_heard(snapper: Snapper) -> None:
