@@ -73,7 +73,8 @@ VOICES = ["en-us", "en-gb", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us+f3"
 FLITE_VOICES = ["slt", "rms", "awb", "kal16"]
 SPEEDS = [130, 160, 190]
 NOISE: list[float | None] = [None, 20.0, 10.0]
-THRESHOLD = 0.5  # Settings.confidence_threshold
+THRESHOLD = Settings().confidence_threshold
+CONFIRM_FLOOR = Settings().confirm_floor  # from here to THRESHOLD: "Did you say …?"
 BEFORE = "guided, 30 s window, greedy (before)"
 
 
@@ -136,6 +137,37 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
             f"| {name} | {s['clean']:.1f} % | {s['20dB']:.1f} % | {s['10dB']:.1f} % | "
             f"{s['all']:.1f} % | {s['understood']:.1f} % | {s['wrong']:.1f} % | "
             f"{s['p50_ms']:.0f} | {s['p95_ms']:.0f} | {s['rtf_p50']:.2f} |"
+        )
+    print(
+        f'\n## Read back ("Did you say …?", confidence {CONFIRM_FLOOR:g} to {THRESHOLD:g}) and '
+        'run on a "yes"'
+    )
+    print("| recogniser | right read back | other read back | exact or right after a yes: clean "
+          "| 20 dB | 10 dB | all |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    for name, rows in results.items():
+
+        def after_yes(pred: Any, rows: list[dict[str, Any]] = rows) -> float:
+            sel = [r for r in rows if pred(r)]
+            won = sum(r["exact"] or r.get("read_back_right", False) for r in sel)
+            return 100.0 * won / max(1, len(sel))
+
+        right = 100.0 * sum(r.get("read_back_right", False) for r in rows) / max(1, len(rows))
+        other = (
+            100.0
+            * sum(r.get("read_back", False) and not r.get("read_back_right", False) for r in rows)
+            / max(1, len(rows))
+        )
+        yes = {
+            "clean": after_yes(lambda r: r["snr"] is None),
+            "20dB": after_yes(lambda r: r["snr"] == 20.0),
+            "10dB": after_yes(lambda r: r["snr"] == 10.0),
+            "all": after_yes(lambda r: True),
+        }
+        summary[name] |= {"read_back_right": right, "read_back_other": other, "after_yes": yes}
+        print(
+            f"| {name} | {right:.1f} % | {other:.1f} % | {yes['clean']:.1f} % | "
+            f"{yes['20dB']:.1f} % | {yes['10dB']:.1f} % | {yes['all']:.1f} % |"
         )
     g, b = summary["guided"], summary["unguided (baseline)"]
     ratio = f"{g['all'] / b['all']:.2f}x" if b["all"] else "n/a (baseline 0 %)"
@@ -212,6 +244,12 @@ def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") 
             ms = (time.perf_counter() - t) * 1000
             executed = rec.commands if rec.confidence >= THRESHOLD else []
             want = canon(row["commands"])
+            # What the dialog reads back ("Did you say …?", server/dialog/confirm.py): speech
+            # between the floor and the threshold that the grammars understand whole.
+            read_back: list[dict[str, Any]] = []
+            if CONFIRM_FLOOR <= rec.confidence < THRESHOLD:
+                whole = rec_by.nlu.parse(rec.text)
+                read_back = whole.commands if not whole.unparsed else []
             results[name].append(
                 {
                     "text": row["text"],
@@ -222,6 +260,8 @@ def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") 
                     "exact": canon(executed) == want,
                     "understood": canon(rec.commands) == want,
                     "wrong": bool(executed) and canon(executed) != want,
+                    "read_back": bool(read_back),
+                    "read_back_right": bool(read_back) and canon(read_back) == want,
                     "ms": ms,
                     "rtf": ms / 1000 / dur,
                     "confidence": rec.confidence,

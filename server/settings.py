@@ -41,6 +41,9 @@ class Settings:
     heartbeat_timeout_s: float = 1.0  # operator lost while jogging -> hover (DESIGN §5)
     link_timeout_s: float = 0.5  # no navdata for this long -> link lost (DESIGN §5)
     confidence_threshold: float = 0.5
+    # Spoken commands from this confidence up to the threshold are read back ("Did you say …?")
+    # and run on a "yes" (server/dialog/confirm.py); at or above the threshold: never asked.
+    confirm_floor: float = 0.3
     battery_low_pct: float = 25.0
     battery_critical_pct: float = 12.0
     # None: the ceiling of the world being flown (drone/limits.py); a number can only lower it
@@ -111,6 +114,9 @@ class Settings:
                 "would otherwise hold the control thread off the CPU"
             )
 
+        for name in ("confidence_threshold", "confirm_floor"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise SettingsError(f"{name} must be 0 to 1, not {getattr(self, name)}")
         if self.asr_window_s != 0 and not 1 <= self.asr_window_s <= 30:
             raise SettingsError(
                 f"asr_window_s must be 0 (default) or 1 to 30, not {self.asr_window_s}"

@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from server.dialog import assist, clarify, replies
+from server.dialog import assist, clarify, confirm, replies
 from server.dialog.addressing import parse_address, recipients
 from server.dialog.autonomic import (
     Alarm,
@@ -88,6 +88,7 @@ class DialogParams:
     """The settings the dialog manager reads (names as in server.settings.Settings)."""
 
     confidence_threshold: float = 0.5
+    confirm_floor: float = 0.3  # speech from here up to the threshold: "Did you say …?"
     battery_low_pct: float = 25.0
     battery_critical_pct: float = 12.0
     altitude_ceiling_m: float | None = None  # None: the world's (VehiclePort.ceiling_m)
@@ -148,6 +149,7 @@ class DialogManager:
         self.interpret_service = f"{prefix}{INTERPRET}"
         self._state = State.LANDED
         self._question: clarify.Question | None = None  # "Which chair?" awaiting its answer
+        self._confirm: confirm.Pending | None = None  # "Did you say …?" awaiting a yes
         self._asked: dict[str, Any] | None = None
         self._pending: set[asyncio.Task[Any]] = set()
         self.replies: list[dict[str, Any]] = []  # every reply published (newest last), bounded
@@ -314,8 +316,19 @@ class DialogManager:
     async def _handle(
         self, text: str, confidence: float, source: str, role: str
     ) -> tuple[DialogResult, str]:
-        if source == "speech" and not confidence >= self.params.confidence_threshold:
-            return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
+        heard = source != "speech" or confidence >= self.params.confidence_threshold
+        pending, self._confirm = self._confirm, None
+        if pending is not None and pending.fresh(self.clock()):
+            said = confirm.answer(self.nlu.grammar, text)
+            if said is not None and not heard:
+                self._confirm = pending  # the answer itself was not heard well: still asking
+                return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
+            if said == "no":
+                return DialogResult(confirm.NOT_CONFIRMED, [], False), "not_confirmed"
+            if said == "yes":  # the sentence runs now, checked against the state of now
+                return await self._handle(pending.text, 1.0, "text", role)
+        if not heard:
+            return self._low_confidence(text, confidence)
         interp: Interpretation = self.nlu.parse(parse_address(text).text)
         commands = fill_defaults(interp.commands, self.vehicle.marker_ids())
         if not commands:
@@ -352,6 +365,18 @@ class DialogManager:
         elif not ok and question is not None:
             self._question = question  # an answer that fits nothing: the question stands
         return DialogResult(reply, commands, ok), "executed" if ok else "refused"
+
+    def _low_confidence(self, text: str, confidence: float) -> tuple[DialogResult, str]:
+        """Speech under the threshold: "Did you say …?" when the grammars understand all of it
+        and its confidence reaches ``confirm_floor`` (:mod:`server.dialog.confirm`), else
+        "please repeat"."""
+        if confidence >= self.params.confirm_floor:
+            interp = self.nlu.parse(parse_address(text).text)
+            if interp.commands and not interp.unparsed:
+                self._confirm = confirm.Pending(text, self.clock())
+                ask = confirm.question(interp.normalised, interp.commands)
+                return DialogResult(ask, interp.commands, False), "asked_confirm"
+        return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
 
     def _check(self, interp: Interpretation) -> str | None:
         """The reason to refuse the sentence, or None: each command in its predicted state."""
@@ -551,6 +576,7 @@ class DialogManager:
         The snapshot would tell within an ANS period; the next sentence must not wait for it
         (a typed "take off" right after EMERGENCY STOP is refused, not accepted).
         """
+        self._confirm = None  # a "yes" after a button never runs what was asked before it
         if action == "reset" and self._state is State.EMERGENCY:
             self._emergency_seen = False
             self._set_state(State.LANDED)

@@ -93,6 +93,7 @@ CHILD_SETTINGS = (
     "heartbeat_timeout_s",
     "link_timeout_s",
     "confidence_threshold",
+    "confirm_floor",
     "battery_low_pct",
     "battery_critical_pct",
     "altitude_ceiling_m",

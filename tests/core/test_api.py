@@ -136,9 +136,12 @@ async def test_command_goes_through_the_dialog_and_flies(api: httpx.AsyncClient)
     refused = (await api.post("/api/v1/command", json={"text": "move forward one meter"})).json()
     assert refused["accepted"] is False
     assert "take off" in refused["reply"].lower()
-    unsure = await api.post("/api/v1/command", json={"text": "take off", "confidence": 0.3})
-    assert unsure.json()["accepted"] is False
-    ok = (await api.post("/api/v1/command", json={"text": "take off"})).json()
+    unsure = await api.post("/api/v1/command", json={"text": "take off", "confidence": 0.2})
+    assert unsure.json()["accepted"] is False and "repeat" in unsure.json()["reply"]
+    # Heard with middling confidence: read back, and the spoken "yes" runs it.
+    asked = (await api.post("/api/v1/command", json={"text": "take off", "confidence": 0.4})).json()
+    assert asked["accepted"] is False and asked["reply"].startswith('Did you say "take off"?')
+    ok = (await api.post("/api/v1/command", json={"text": "yes", "confidence": 0.9})).json()
     assert ok["accepted"] is True
     assert ok["commands"] == [{"action": "takeoff"}]
     await wait_for(api, "/api/v1/sim/uav1/truth", lambda t: t["z"] > 0.6)

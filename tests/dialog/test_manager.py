@@ -11,7 +11,7 @@ from server.dialog.manager import DialogManager, DialogParams
 from server.dialog.states import State
 from server.graph import Graph
 from server.language.nlu import NLU
-from server.settings import Settings
+from server.settings import Settings, SettingsError
 from tests.dialog.fakes import FakeDescriber, FakeFlight, FakeStore
 
 NLU_ = NLU()
@@ -93,12 +93,93 @@ async def test_cancel_clears_the_queue() -> None:
 
 async def test_low_confidence_speech_asks_again_and_does_nothing() -> None:
     rig = Rig()
-    res = await rig.dm.handle_utterance("take off", confidence=0.3, source="speech")
+    res = await rig.dm.handle_utterance("take off", confidence=0.2, source="speech")
     assert not res.accepted and "repeat" in res.reply
     assert rig.flight.log == []
     assert rig.store.rows[-1]["action"] == "asked_repeat"
     ok = await rig.dm.handle_utterance("take off", confidence=0.9, source="speech")
     assert ok.accepted
+
+
+async def test_middling_confidence_speech_is_read_back_and_a_yes_runs_it() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("travel to point 7", confidence=0.4, source="speech")
+    assert not res.accepted and rig.flight.log == []
+    assert res.reply == (
+        'Did you say "travel to point 7"? That is: flying to marker 7. '
+        "Say yes to do it, or say the command again."
+    )
+    assert rig.store.rows[-1]["action"] == "asked_confirm"
+    await rig.dm.handle_utterance("take off")
+    rig.run(2.1)
+    res = await rig.dm.handle_utterance("fly to marker 2", confidence=0.45, source="speech")
+    assert not res.accepted and res.reply.startswith('Did you say "fly to marker 2"?')
+    rig.t += 5.0
+    res = await rig.dm.handle_utterance("Yes.", confidence=0.8, source="speech")
+    assert res.accepted and res.reply == "Flying to marker 2."
+    assert rig.flight.log[-1][1] == {"action": "goto", "marker": 2}
+    assert rig.store.rows[-1]["utterance"] == "Yes." and rig.store.rows[-1]["action"] == "executed"
+    res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
+    assert not res.accepted  # nothing is asked any more: a second yes runs nothing
+    assert rig.flight.log[-1][1] == {"action": "goto", "marker": 2} and len(rig.flight.queue) <= 1
+
+
+@pytest.mark.parametrize(
+    ("answer", "confidence", "then"),
+    [
+        ("no", 0.9, "OK, I will not do that."),
+        ("nope", 0.9, "OK, I will not do that."),
+        ("yes", 0.2, None),  # the yes itself not heard well: asked again, question kept
+    ],
+)
+async def test_a_question_that_is_not_confirmed_runs_nothing(
+    answer: str, confidence: float, then: str | None
+) -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off", confidence=0.35, source="speech")
+    res = await rig.dm.handle_utterance(answer, confidence=confidence, source="speech")
+    assert not res.accepted and rig.flight.log == []
+    if then is not None:
+        assert res.reply == then
+        res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
+        assert not res.accepted and rig.flight.log == []
+    else:
+        assert "repeat" in res.reply
+        res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
+        assert res.accepted and rig.flight.log[-1][1] == {"action": "takeoff"}
+
+
+async def test_an_old_question_another_sentence_or_a_button_drops_it() -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
+    rig.t += 15.1  # older than confirm.MAX_AGE_S
+    res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
+    assert not res.accepted and rig.flight.log == []
+    await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
+    res = await rig.dm.handle_utterance("how much battery is left")
+    res = await rig.dm.handle_utterance("yes")
+    assert not res.accepted and rig.flight.log == []
+    await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
+    rig.dm.note_direct("land")  # the operator pressed a button meanwhile
+    res = await rig.dm.handle_utterance("yes")
+    assert not res.accepted and rig.flight.log == []
+
+
+async def test_only_whole_understood_speech_is_read_back_and_observers_cannot_confirm() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("take off and dance", confidence=0.4, source="speech")
+    assert "repeat" in res.reply  # part of it not understood: nothing to read back
+    await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
+    res = await rig.dm.handle_utterance("yes", role="observer")
+    assert not res.accepted and rig.flight.log == []
+
+
+def test_confirm_floor_is_a_setting() -> None:
+    assert DialogParams.from_settings(Settings(confirm_floor=0.5)).confirm_floor == 0.5
+    assert Settings.from_env({"UAVC_CONFIRM_FLOOR": "0.4"}).confirm_floor == 0.4
+    for bad in (-0.1, 1.5):
+        with pytest.raises(SettingsError, match="confirm_floor must be 0 to 1"):
+            Settings(confirm_floor=bad)
 
 
 async def test_queries_answer_with_numbers_and_describe() -> None:
