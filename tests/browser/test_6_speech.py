@@ -187,6 +187,21 @@ def test_phone_over_https_holds_the_microphone_and_the_drone_takes_off(
         # WSS in tests/speech/test_server.py).
         page.check("#handsfree")
         page.wait_for_function("document.body.dataset.listening === 'server'")
+        # Hands-free does not hear the console's own spoken reply ("Did you say …?" from a
+        # loudspeaker): while the server's voice plays, and 0.3 s after, the microphone streams
+        # silence. Replies are muted here so that only this stand-in reply speaks.
+        page.evaluate("window.uavConsole.dialog.muted = true")
+        page.wait_for_function("window.uavConsole.serverSpeaking === 0")  # earlier replies end
+        page.wait_for_timeout(400)
+        counted = "window.uavConsole.speech.server.mutedChunks"
+        before = page.evaluate(counted)
+        page.evaluate("window.uavConsole.serverSpeaking += 1")
+        page.wait_for_function(f"{counted} > {before} + 10")
+        page.evaluate("window.uavConsole.serverSpeaking -= 1")
+        page.wait_for_timeout(600)
+        muted = page.evaluate(counted)
+        page.wait_for_timeout(600)
+        assert page.evaluate(counted) == muted  # listening again
         page.uncheck("#handsfree")
         page.wait_for_function("document.body.dataset.listening === ''")
         assert errors == []

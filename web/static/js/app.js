@@ -35,6 +35,7 @@ class Console {
     this.api = new Api("/api/v1", this.token);
     this.ros = new RosbridgeClient(rosbridgeUrl(window.location, this.token));
     this.clockOffset = 0; // server time - local time, seconds
+    this.serverSpeaking = 0; // replies the server's voice is playing now (serverSpeak)
     this.drones = [];
     this.fleet = false;
     this.drone = null;
@@ -94,6 +95,8 @@ class Console {
         lease: () => this.api.leaseHolder,
         onFinal: (text, confidence) => this.sendUtterance(text, "speech", confidence),
         onNotice: (notice) => this.notice(notice),
+        // Hands-free does not listen to the console's own spoken replies (voice.js outgoing).
+        speaking: () => this.serverSpeaking > 0 || Boolean(window.speechSynthesis?.speaking),
       },
     );
     this.controls = new Controls(document.body, {
@@ -598,12 +601,17 @@ class Console {
         src.buffer = buffer;
         src.connect(this.audioCtx.destination);
         this.spokenByServer = (this.spokenByServer || 0) + 1;
-        await new Promise((resolve) => {
-          src.onended = resolve;
-          src.start();
-          // A suspended context (no user gesture yet) never ends: do not hold the queue.
-          setTimeout(resolve, (buffer.duration + 1) * 1000);
-        });
+        this.serverSpeaking += 1;
+        try {
+          await new Promise((resolve) => {
+            src.onended = resolve;
+            src.start();
+            // A suspended context (no user gesture yet) never ends: do not hold the queue.
+            setTimeout(resolve, (buffer.duration + 1) * 1000);
+          });
+        } finally {
+          this.serverSpeaking -= 1;
+        }
       } catch {
         /* speech is a convenience: the reply is on screen */
       }

@@ -16,6 +16,9 @@ const STORE_KEY = "uavc.recognizer";
 // After "end" the server answers within its decode time (~1 s here, seconds on a busy
 // laptop); past this the operator is told to repeat instead of waiting on silence.
 const ANSWER_TIMEOUT_MS = 20000;
+// Hands-free: how long after the console stops speaking the microphone still sends silence
+// (the reply's reverberation and the loudspeaker's buffered end).
+const ECHO_TAIL_MS = 300;
 
 export function chooseEngine(setting, win = window) {
   if (setting === "server" || setting === "browser") return setting;
@@ -32,12 +35,29 @@ export function streamUrl(loc, token, mode, lease) {
 /** The server recogniser: one microphone capture + one WebSocket per listening period. */
 class ServerRecognizer {
   constructor(opts) {
-    this.opts = opts; // {token, lease(), onInterim, onFinal, onNotice, onState}
+    this.opts = opts; // {token, lease(), onInterim, onFinal, onNotice, onState, speaking()}
     this.ws = null;
     this.ctx = null;
     this.stream = null;
     this.node = null;
     this.active = false;
+    this.quietUntil = 0;
+    this.mutedChunks = 0; // hands-free audio sent as silence while the console spoke
+  }
+
+  /**
+   * The chunk to send: hands-free, while the console speaks a reply (and ECHO_TAIL_MS after),
+   * silence instead of the microphone. Echo cancellation is off (it hurts recognition), so a
+   * loudspeaker's "Did you say …?" would otherwise be heard as the operator's next sentence,
+   * and every reply would answer the one before it.
+   */
+  outgoing(chunk) {
+    if (this.mode !== "handsfree") return chunk;
+    const now = performance.now();
+    if (this.opts.speaking?.()) this.quietUntil = now + ECHO_TAIL_MS;
+    if (now >= this.quietUntil) return chunk;
+    this.mutedChunks += 1;
+    return new ArrayBuffer(chunk.byteLength); // zeros: 16-bit PCM silence
   }
 
   async start(mode) {
@@ -80,8 +100,9 @@ class ServerRecognizer {
     this.ws = ws;
     const pending = [];
     this.node.port.onmessage = (ev) => {
-      if (ws.readyState === WebSocket.OPEN) ws.send(ev.data);
-      else if (ws.readyState === WebSocket.CONNECTING) pending.push(ev.data);
+      const chunk = this.outgoing(ev.data);
+      if (ws.readyState === WebSocket.OPEN) ws.send(chunk);
+      else if (ws.readyState === WebSocket.CONNECTING) pending.push(chunk);
     };
     ws.onopen = () => {
       for (const buf of pending.splice(0)) ws.send(buf);
@@ -203,6 +224,7 @@ export class VoiceInput {
     this.server = new ServerRecognizer({
       token: opts.token,
       lease: opts.lease,
+      speaking: opts.speaking,
       onInterim: (t) => {
         els.interim.textContent = t ? `“${t}…”` : "";
       },
