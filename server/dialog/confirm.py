@@ -56,4 +56,8 @@ def answer(grammar: Grammar, text: str) -> Answer | None:
         return None
     said = " ".join(_NOT_WORD.sub(" ", text.lower().replace("'", "")).split())
     label = phrases.labels.get(said)
-    return label if label in ("yes", "no") else None  # type: ignore[return-value]
+    if label == "yes":
+        return "yes"
+    if label == "no":
+        return "no"
+    return None

@@ -149,6 +149,14 @@ async def test_a_question_that_is_not_confirmed_runs_nothing(
         assert res.accepted and rig.flight.log[-1][1] == {"action": "takeoff"}
 
 
+async def test_a_yes_may_name_its_drone() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("uav1, take off", confidence=0.4, source="speech")
+    assert res.reply.startswith('uav1: Did you say "take off"?')
+    res = await rig.dm.handle_utterance("uav1, yes", confidence=0.9, source="speech")
+    assert res.accepted and rig.flight.log[-1][1] == {"action": "takeoff"}
+
+
 async def test_an_old_question_another_sentence_or_a_button_drops_it() -> None:
     rig = Rig()
     await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
