@@ -62,6 +62,20 @@ def last_user_entry(page: Any) -> str:
     )
 
 
+def wait_understood(page: Any, said: str, timeout_ms: int = 8000) -> str:
+    """The newest operator entry once it is ``said`` and shows how the server understood it.
+
+    Waiting for the next reply instead raced: a reply to an earlier command ("Reached marker
+    2.") could arrive first, and the newest entry was still the earlier one."""
+    page.wait_for_function(
+        "s => { const e = [...document.querySelectorAll('#dialog .msg-user')].pop();"
+        " return !!e && e.textContent.includes(s) && e.dataset.pending === '0'; }",
+        arg=said,
+        timeout=timeout_ms,
+    )
+    return last_user_entry(page)
+
+
 def wait_reply(page: Any, before: int, timeout_ms: int = 8000) -> str:
     page.wait_for_function(
         "n => document.querySelectorAll('#dialog .msg-bot').length > n",
@@ -78,7 +92,7 @@ def test_low_confidence_speech_asks_to_repeat(pilot: ConsolePage, server: Server
     say(page, "take off", 0.2)  # under Settings.confirm_floor too: not even "Did you say …?"
     reply = wait_reply(page, n)
     assert REPEAT.search(reply), reply
-    entry = last_user_entry(page)
+    entry = wait_understood(page, "take off")
     assert "take off" in entry and "confidence 20 %" in entry
     assert "understood: nothing" in entry  # not executed, so nothing was taken from it
     time.sleep(1.5)  # long enough that a take-off would have left the ground
@@ -96,7 +110,7 @@ def test_typed_take_off_climbs(pilot: ConsolePage, server: ServerProcess) -> Non
     assert ok, f"still at z={position(truth)[2]:.2f} m after {took:.1f} s"
     # The dialog shows the exchange: the utterance, how it was understood, and a reply.
     wait_reply(page, n)
-    user = last_user_entry(page)
+    user = wait_understood(page, "take off")
     assert "take off" in user and "understood: takeoff" in user, user
     # The spoken reply went to speechSynthesis (unmuted by default).
     assert page.evaluate("window.__speech.spoken.length") >= 1
@@ -115,7 +129,7 @@ def test_map_go_to_marker_2(pilot: ConsolePage, server: ServerProcess) -> None:
     page.locator("#map").click(position={"x": pt["x"], "y": pt["y"]})
     page.click("#map-go")  # sends "go to marker 2" (POST /api/v1/command)
     wait_reply(page, n)
-    user = last_user_entry(page)
+    user = wait_understood(page, "go to marker 2")
     assert "go to marker 2" in user and "goto(marker=2)" in user, user
 
     # The task flies to a stand-off pose in front of the marker, facing it (about 1 m away).
@@ -141,7 +155,7 @@ def test_confident_speech_is_executed(pilot: ConsolePage, server: ServerProcess)
     n = len(bot_replies(page))
     say(page, "turn left 90 degrees", 0.9)
     wait_reply(page, n)
-    user = last_user_entry(page)
+    user = wait_understood(page, "turn left 90 degrees")
     assert "confidence 90 %" in user and "turn(" in user, user
 
     def turned(t: dict[str, Any]) -> float:
