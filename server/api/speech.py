@@ -116,20 +116,23 @@ async def speech(
         raise HTTPException(503, str(exc), headers={"Retry-After": "1"}) from exc
     except ModelError as exc:
         raise HTTPException(503, f"speech recognition unavailable: {exc}") from exc
-    reply, accepted = "", False
+    reply, accepted, commands = "", False, rec.commands
     if execute and dialog is not None:
         if not rec.text:
             reply = "I heard no speech. Please repeat."
         else:
+            # A "yes" names no command itself (it runs the one the dialog read back): an empty
+            # set needs the lease like any command.
             check_lease(request, runtime, {c["action"] for c in rec.commands})
             result = await dialog.handle_utterance(
                 rec.text, confidence=rec.confidence, source="speech", role=role
             )
-            reply, accepted = result.reply, result.accepted
+            # As POST /command: the dialog's commands ("Yes." runs the take-off it asked about).
+            reply, accepted, commands = result.reply, result.accepted, result.commands
     return SpeechResponse(
         text=rec.text,
         confidence=round(rec.confidence, 4),
-        commands=rec.commands,
+        commands=commands,
         reply=reply,
         accepted=accepted,
         heard=rec.heard,

@@ -4,29 +4,23 @@ Below ``confidence_threshold`` a spoken sentence is not flown. When its confiden
 least ``confirm_floor`` and the grammars understand all of it, the operator is asked
 ('Did you say "fly to marker 7"? That is: flying to marker 7. Say yes to do it, or say the
 command again.') instead of being asked to repeat the whole command; a sentence that is only a
-"yes" (the ``ANSWER`` set of mappings.xml) runs it, checked again against the drone's state of
-that moment. Anything else drops the question: a "no", another sentence (handled as itself), a
-button acting on the drone, or the question's age (``MAX_AGE_S``), so an old question never
-turns a later "yes" into a flight. bench/speech.py: at a floor of 0.3, the right command is
-offered for 11-15 % of the clips that were asked to repeat before.
+"yes" (``NLU.answer``: the ``ANSWER`` set of mappings.xml) runs it, checked again against the
+drone's state of that moment. Anything else drops the question: a "no", another sentence
+(handled as itself), a button acting on the drone, or the question's age (``MAX_AGE_S``), so an
+old question never turns a later "yes" into a flight. bench/speech.py: at a floor of 0.3, the
+right command is offered for 11-15 % of the clips that were asked to repeat before.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 from server.dialog import replies
-from server.language.grammar import Grammar
 
 MAX_AGE_S = 15.0  # the question is spoken (~3 s), heard, and answered
-ANSWER_SET = "ANSWER"  # mappings.xml: phrases labelled "yes" or "no"
 NOT_CONFIRMED = "OK, I will not do that."
-_NOT_WORD = re.compile(r"[^a-z0-9 ]+")
-
-Answer = Literal["yes", "no"]
 
 
 @dataclass(frozen=True)
@@ -47,17 +41,3 @@ def question(text: str, commands: Sequence[Mapping[str, Any]]) -> str:
         f'Did you say "{said}"? That is: {replies.plan(commands)[:-1].lower()}. '
         "Say yes to do it, or say the command again."
     )
-
-
-def answer(grammar: Grammar, text: str) -> Answer | None:
-    """ "yes" or "no" when the whole sentence is one of the ``ANSWER`` phrases, else None."""
-    phrases = grammar.sets.get(ANSWER_SET)
-    if phrases is None:
-        return None
-    said = " ".join(_NOT_WORD.sub(" ", text.lower().replace("'", "")).split())
-    label = phrases.labels.get(said)
-    if label == "yes":
-        return "yes"
-    if label == "no":
-        return "no"
-    return None

@@ -319,7 +319,7 @@ class DialogManager:
         heard = source != "speech" or confidence >= self.params.confidence_threshold
         pending, self._confirm = self._confirm, None
         if pending is not None and pending.fresh(self.clock()):
-            said = confirm.answer(self.nlu.grammar, parse_address(text).text)  # "uav2, yes"
+            said = self.nlu.answer(parse_address(text).text)  # also "uav2, yes"
             if said is not None and not heard:
                 self._confirm = pending  # the answer itself was not heard well: still asking
                 return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"

@@ -20,7 +20,7 @@ import re
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from drone.share import share_dir
 from server.language.errors import GrammarError
@@ -28,6 +28,7 @@ from server.language.grammar import Grammar, Matcher, Slot, load_grammar, trie_r
 from server.language.numbers import words_to_numbers
 
 Command = dict[str, Any]
+Answer = Literal["yes", "no"]
 MAX_UTTERANCE_CHARS = 1000  # longer text is not speech; interpret() answers [] (documented)
 MAX_PIECES = 32
 MAX_WINDOW = 4  # a command spans at most this many split pieces
@@ -37,6 +38,8 @@ MAX_WINDOW = 4  # a command spans at most this many split pieces
 MAX_RUN_COMMANDS = 3
 MAX_RUN_WORDS = 12
 DEFAULT_GRAMMAR_DIR = share_dir("grammars")
+ANSWER_SET = "ANSWER"  # mappings.xml: the phrases that answer a question, labelled yes or no
+_NOT_ANSWER_CHAR = re.compile(r"[^a-z0-9 ]+")
 
 _APOSTROPHES = str.maketrans({"\u2019": "'", "\u2018": "'", "`": "'", "\u00b4": "'"})
 _DIGIT_COMMA = re.compile(r"(?<=\d),(?=\d{3}\b)")  # 1,000 -> 1000
@@ -405,6 +408,22 @@ class NLU:
                 unparsed.append(first)
             i += 1
         return Interpretation(text, s, tuple(parsed), tuple(unparsed))
+
+    def answer(self, text: str) -> Answer | None:
+        """ "yes" or "no" when all of ``text`` is one of the phrases of mappings.xml's ``ANSWER``
+        set ("Yes.", "that's right", "nope"), else None: the answers to the dialog's "Did you
+        say …?" (server/dialog/confirm.py). Answers are not commands: ``parse`` reads "yes" as a
+        filler word, so "yes, take off" is a take-off."""
+        phrases = self._compiled.grammar.sets.get(ANSWER_SET)
+        if phrases is None or not isinstance(text, str) or len(text) > MAX_UTTERANCE_CHARS:
+            return None
+        said = " ".join(_NOT_ANSWER_CHAR.sub(" ", text.lower().replace("'", "")).split())
+        label = phrases.labels.get(said)
+        if label == "yes":
+            return "yes"
+        if label == "no":
+            return "no"
+        return None
 
     def interpret(self, text: str, state: str | None = None) -> list[Command]:
         """The commands of ``text`` in spoken order; ``[]`` when nothing is understood.

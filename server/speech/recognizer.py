@@ -310,14 +310,21 @@ def choose(
         if not heard or heard in seen:  # beams often differ only after the words end
             continue
         seen.add(heard)
-        snapped = snapper.snap(heard, state)
-        confidence = asr * CONSTRAINED_CONFIDENCE_SCALE * snapped.factor
-        rec = Recognition(
-            snapped.text.strip(" ,"), confidence, snapped.commands, heard, asr, snapped.distance
-        )
+        if snapper.nlu.answer(heard) is not None:
+            # "Yes." answers the dialog's "Did you say …?": handed on as heard (the NLU reads
+            # "yes" as a filler, and a snap would bend it into a command).
+            confidence = asr * CONSTRAINED_CONFIDENCE_SCALE
+            rec = Recognition(heard, confidence, [], heard, asr, 0.0)
+            whole = True
+        else:
+            snapped = snapper.snap(heard, state)
+            confidence = asr * CONSTRAINED_CONFIDENCE_SCALE * snapped.factor
+            rec = Recognition(
+                snapped.text.strip(" ,"), confidence, snapped.commands, heard, asr, snapped.distance
+            )
+            whole = snapped.complete and bool(snapped.commands)
         if best is None or confidence > best.confidence:
             best = rec
-        whole = snapped.complete and bool(snapped.commands)
         if whole and (best_whole is None or confidence > best_whole.confidence):
             best_whole = rec
     return best_whole or best or Recognition("", 0.0)

@@ -352,6 +352,30 @@ def test_a_run_of_too_many_words_is_not_split(nlu: NLU) -> None:
     assert nlu.interpret(f"patrol markers {markers} land") == []
 
 
+@pytest.mark.parametrize(
+    ("text", "answer"),
+    [
+        ("Yes.", "yes"),
+        ("yes please", "yes"),
+        ("That's right!", "yes"),
+        ("affirmative", "yes"),
+        ("No.", "no"),
+        ("nope", "no"),
+        ("yes, take off", None),  # a command, not an answer
+        ("right", None),  # a direction, never taken for a yes
+        ("", None),
+        ("yes " * 400, None),
+    ],
+)
+def test_answers(nlu: NLU, text: str, answer: str | None) -> None:
+    assert nlu.answer(text) == answer
+
+
+def test_an_answer_is_no_command(nlu: NLU) -> None:
+    assert nlu.interpret("yes") == []
+    assert nlu.interpret("yes, take off") == [{"action": "takeoff"}]
+
+
 def test_per_state_grammars(nlu: NLU) -> None:
     assert nlu.interpret("go up 1 meter", state="LANDED") == []
     assert nlu.interpret("go up 1 meter", state="AIRBORNE_IDLE") == [

@@ -65,6 +65,16 @@ def test_a_sentence_the_decoder_repeated_is_flown_once(snapper: Snapper) -> None
         assert unrepeated(different) == different
 
 
+def test_an_answer_is_handed_on_as_heard(snapper: Snapper) -> None:
+    # "Yes." answers the dialog's "Did you say …?": not snapped into a command ("Yaw." could
+    # be), not dropped as a filler word.
+    rec = choose([("Yes.", 0.7), ("Yaw.", 0.6)], snapper)
+    assert rec.text == "Yes." and rec.commands == []
+    assert rec.confidence == pytest.approx(0.7 * 0.83)
+    rec = choose([("Take off.", 0.5), ("No.", 0.7)], snapper)
+    assert rec.text == "No." and rec.commands == []
+
+
 def test_no_transcript_means_nothing_heard(snapper: Snapper) -> None:
     for hypotheses in ([], [("", 0.0)], [("", 0.0), ("", 0.0)]):
         rec = choose(hypotheses, snapper)
