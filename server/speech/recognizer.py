@@ -152,10 +152,6 @@ class Recognizer:
         # reuse=False: every call decodes (bench/speech.py decodes one clip over and over).
         self.shared: SharedResults[Recognition] | None = SharedResults(size=8) if reuse else None
 
-    def transcribe(self, samples: Samples, *, guided: bool = True) -> tuple[str, float]:
-        """(transcript, decoder confidence in 0..1) of 16 kHz mono ``samples``."""
-        return self.hypotheses(samples, guided=guided)[0]
-
     def hypotheses(self, samples: Samples, *, guided: bool = True) -> list[tuple[str, float]]:
         """The decoder's best transcripts, best first, each with its confidence in 0..1."""
         if self.window_s is None:
