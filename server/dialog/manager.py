@@ -317,9 +317,10 @@ class DialogManager:
         self, text: str, confidence: float, source: str, role: str
     ) -> tuple[DialogResult, str]:
         heard = source != "speech" or confidence >= self.params.confidence_threshold
+        sentence = parse_address(text).text  # without the drone's name: "uav2, yes" is a yes
         pending, self._confirm = self._confirm, None
         if pending is not None and pending.fresh(self.clock()):
-            said = self.nlu.answer(parse_address(text).text)  # also "uav2, yes"
+            said = self.nlu.answer(sentence)
             if said is not None and not heard:
                 self._confirm = pending  # the answer itself was not heard well: still asking
                 return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
@@ -328,8 +329,8 @@ class DialogManager:
             if said == "yes":  # the sentence runs now, checked against the state of now
                 return await self._handle(pending.text, 1.0, "text", role)
         if not heard:
-            return self._low_confidence(text, confidence)
-        interp: Interpretation = self.nlu.parse(parse_address(text).text)
+            return self._low_confidence(text, sentence, confidence)
+        interp: Interpretation = self.nlu.parse(sentence)
         commands = fill_defaults(interp.commands, self.vehicle.marker_ids())
         if not commands:
             if "minus" in interp.normalised.split():  # a signed number (nlu.py keeps the sign)
@@ -366,12 +367,14 @@ class DialogManager:
             self._question = question  # an answer that fits nothing: the question stands
         return DialogResult(reply, commands, ok), "executed" if ok else "refused"
 
-    def _low_confidence(self, text: str, confidence: float) -> tuple[DialogResult, str]:
-        """Speech under the threshold: "Did you say …?" when the grammars understand all of it
-        and its confidence reaches ``confirm_floor`` (:mod:`server.dialog.confirm`), else
-        "please repeat"."""
+    def _low_confidence(
+        self, text: str, sentence: str, confidence: float
+    ) -> tuple[DialogResult, str]:
+        """Speech under the threshold (``sentence``: ``text`` without its drone's name): "Did
+        you say …?" when the grammars understand all of it and its confidence reaches
+        ``confirm_floor`` (:mod:`server.dialog.confirm`), else "please repeat"."""
         if confidence >= self.params.confirm_floor:
-            interp = self.nlu.parse(parse_address(text).text)
+            interp = self.nlu.parse(sentence)
             if interp.commands and not interp.unparsed:
                 self._confirm = confirm.Pending(text, self.clock())
                 ask = confirm.question(interp.normalised, interp.commands)
