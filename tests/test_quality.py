@@ -27,3 +27,20 @@ def test_ruff_lint_and_format() -> None:
 def test_mypy_strict() -> None:
     out = run("mypy")
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_no_merge_conflict_markers() -> None:
+    """A conflict marker left by a merge breaks the file around it silently: in CSS the rule
+    after a stray ``=======`` is dropped (the replay bar lost its layout that way)."""
+    files = subprocess.run(
+        ["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True
+    ).stdout.split(b"\0")
+    found = []
+    for name in filter(None, files):
+        path = ROOT / name.decode()
+        if not path.is_file() or path.suffix in {".png", ".jpg", ".onnx", ".mcap", ".wav"}:
+            continue
+        for n, line in enumerate(path.read_bytes().splitlines(), 1):
+            if line.startswith((b"<<<<<<< ", b">>>>>>> ")) or line == b"=======":
+                found.append(f"{name.decode()}:{n}")
+    assert not found, f"merge conflict markers: {found}"
