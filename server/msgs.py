@@ -133,6 +133,7 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
         ("commands", "string"),
         ("drone", "string"),  # the drone that answers (fleets)
         ("alarm", "string"),  # the ANS monitor that raised it (battery, link, …), else ""
+        ("expects", "string"),  # "confirm": a yes/no question ("Did you say …?"), else ""
     ),
     "uav_console/DialogState": (
         ("header", "std_msgs/Header"),

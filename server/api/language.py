@@ -64,4 +64,5 @@ async def command(
         reply=" ".join(r.reply for r in results),
         commands=results[0].commands,
         accepted=all(r.accepted for r in results),
+        expects=results[0].expects if len(results) == 1 else "",
     )

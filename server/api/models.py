@@ -34,6 +34,9 @@ class CommandResponse(BaseModel):
     reply: str
     commands: list[dict[str, Any]]
     accepted: bool
+    expects: str = Field(
+        "", description="'confirm': the reply asks 'Did you say …?'; send yes or no next"
+    )
 
 
 class Health(BaseModel):

@@ -48,6 +48,9 @@ class SpeechResponse(BaseModel):
     accepted: bool
     heard: str = Field(description="the recogniser's own transcript")
     decode_ms: float
+    expects: str = Field(
+        "", description="'confirm': the reply asks 'Did you say …?'; say yes or no next"
+    )
 
 
 async def _read_body(request: Request) -> bytes:
@@ -116,7 +119,7 @@ async def speech(
         raise HTTPException(503, str(exc), headers={"Retry-After": "1"}) from exc
     except ModelError as exc:
         raise HTTPException(503, f"speech recognition unavailable: {exc}") from exc
-    reply, accepted, commands = "", False, rec.commands
+    reply, accepted, commands, expects = "", False, rec.commands, ""
     if execute and dialog is not None:
         if not rec.text:
             reply = "I heard no speech. Please repeat."
@@ -129,6 +132,7 @@ async def speech(
             )
             # As POST /command: the dialog's commands ("Yes." runs the take-off it asked about).
             reply, accepted, commands = result.reply, result.accepted, result.commands
+            expects = result.expects
     return SpeechResponse(
         text=rec.text,
         confidence=round(rec.confidence, 4),
@@ -137,6 +141,7 @@ async def speech(
         accepted=accepted,
         heard=rec.heard,
         decode_ms=round(rec.decode_ms, 1),
+        expects=expects,
     )
 
 

@@ -14,7 +14,7 @@ import contextlib
 import inspect
 import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 from server.dialog import assist, clarify, confirm, replies
@@ -106,6 +106,9 @@ class DialogResult:
     reply: str
     commands: list[dict[str, Any]]
     accepted: bool
+    # What the reply waits for: "confirm" when it asks "Did you say …?" (a yes runs it, a no
+    # drops it: the console shows Yes / No buttons), else "".
+    expects: str = ""
 
 
 class DialogManager:
@@ -216,6 +219,7 @@ class DialogManager:
         utterance: str = "",
         commands: list[dict[str, Any]] | None = None,
         alarm: str = "",
+        expects: str = "",
     ) -> None:
         msg = {
             "header": header(now=None),
@@ -226,6 +230,7 @@ class DialogManager:
             "commands": json.dumps(commands or []),
             "drone": self.drone,
             "alarm": alarm,
+            "expects": expects,
         }
         self.replies.append(msg)
         del self.replies[:-200]
@@ -296,12 +301,14 @@ class DialogManager:
             confidence=confidence,
         )
         result, action = await self._handle(text, confidence, source, role)
+        if self._confirm is not None:  # asked now, or a yes heard badly: still asking
+            result = replace(result, expects="confirm")
         level = "info" if result.accepted else "warn"
         said = result.reply
         if parse_address(text).addressed and not said.startswith(f"{self.drone}:"):
             said = f"{self.drone}: {said}"
-            result = DialogResult(said, result.commands, result.accepted)
-        self._reply(said, level, text, result.commands)
+            result = replace(result, reply=said)
+        self._reply(said, level, text, result.commands, expects=result.expects)
         self._log(
             utterance=text,
             commands=result.commands,

@@ -360,6 +360,7 @@ class VehicleHost:
                 "reply": result.reply,
                 "commands": result.commands,
                 "accepted": result.accepted,
+                "expects": result.expects,
             }
         raise VehicleError(f"unknown op {op!r} (direct, fault, telemetry, truth, utterance)")
 

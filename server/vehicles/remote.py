@@ -451,5 +451,8 @@ class RemoteDialog:
         except (GraphError, RemoteCallError) as exc:
             return DialogResult(f"{self.stack.name} cannot be reached now ({exc}).", [], False)
         return DialogResult(
-            str(out.get("reply", "")), list(out.get("commands") or []), bool(out.get("accepted"))
+            str(out.get("reply", "")),
+            list(out.get("commands") or []),
+            bool(out.get("accepted")),
+            str(out.get("expects") or ""),
         )

@@ -116,6 +116,38 @@ def test_typed_take_off_climbs(pilot: ConsolePage, server: ServerProcess) -> Non
     assert page.evaluate("window.__speech.spoken.length") >= 1
 
 
+def test_did_you_say_is_answered_with_the_buttons(
+    pilot: ConsolePage, server: ServerProcess
+) -> None:
+    """A spoken "land" heard at 0.4 (between Settings.confirm_floor and the threshold) is read
+    back with Yes / No buttons: No keeps the drone flying and closes the buttons, Yes lands it."""
+    page = pilot.page
+    ensure_flying(page, server)
+    n = len(bot_replies(page))
+    say(page, "land", 0.4)
+    assert wait_reply(page, n).startswith('Did you say "land"?')
+    answers = page.locator("#dialog .msg-bot").nth(n).locator(".answers button")
+    assert answers.all_text_contents() == ["Yes, do it", "No"]
+    n = len(bot_replies(page))
+    answers.nth(1).click()
+    assert wait_reply(page, n) == "OK, I will not do that."
+    assert "answered with a button" in wait_understood(page, "no")
+    assert answers.nth(0).is_disabled() and answers.nth(1).is_disabled()
+    time.sleep(1.0)
+    assert is_flying(server.truth()) and position(server.truth())[2] > 0.5
+
+    n = len(bot_replies(page))
+    say(page, "land", 0.4)
+    assert wait_reply(page, n).startswith('Did you say "land"?')
+    asked = page.locator("#dialog .msg-bot").nth(n)
+    asked.locator(".answers button").first.click()
+    wait_reply(page, n + 1)
+    assert "understood: land" in wait_understood(page, "yes")
+    ok, truth, took = wait_until(server.truth, lambda t: not is_flying(t), timeout_s=15)
+    assert ok, f"still flying {took:.0f} s after the yes: {truth}"
+    assert asked.locator(".answers button").first.is_disabled()
+
+
 def test_map_go_to_marker_2(pilot: ConsolePage, server: ServerProcess) -> None:
     """Clicking marker 2 on the map offers "go there"; taking it flies the drone in front of it."""
     page = pilot.page

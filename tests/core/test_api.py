@@ -141,8 +141,9 @@ async def test_command_goes_through_the_dialog_and_flies(api: httpx.AsyncClient)
     # Heard with middling confidence: read back, and the spoken "yes" runs it.
     asked = (await api.post("/api/v1/command", json={"text": "take off", "confidence": 0.4})).json()
     assert asked["accepted"] is False and asked["reply"].startswith('Did you say "take off"?')
+    assert asked["expects"] == "confirm" and unsure.json()["expects"] == ""
     ok = (await api.post("/api/v1/command", json={"text": "yes", "confidence": 0.9})).json()
-    assert ok["accepted"] is True
+    assert ok["accepted"] is True and ok["expects"] == ""
     assert ok["commands"] == [{"action": "takeoff"}]
     await wait_for(api, "/api/v1/sim/uav1/truth", lambda t: t["z"] > 0.6)
     obs = {"Authorization": f"Bearer {OBSERVER}"}

@@ -110,6 +110,8 @@ async def test_middling_confidence_speech_is_read_back_and_a_yes_runs_it() -> No
         "Say yes to do it, or say the command again."
     )
     assert rig.store.rows[-1]["action"] == "asked_confirm"
+    # The reply says it waits for a yes or a no (the console shows Yes / No buttons).
+    assert res.expects == "confirm" and rig.replies[-1]["expects"] == "confirm"
     await rig.dm.handle_utterance("take off")
     rig.run(2.1)
     res = await rig.dm.handle_utterance("fly to marker 2", confidence=0.45, source="speech")
@@ -117,6 +119,7 @@ async def test_middling_confidence_speech_is_read_back_and_a_yes_runs_it() -> No
     rig.t += 5.0
     res = await rig.dm.handle_utterance("Yes.", confidence=0.8, source="speech")
     assert res.accepted and res.reply == "Flying to marker 2."
+    assert res.expects == "" and rig.replies[-1]["expects"] == ""
     assert rig.flight.log[-1][1] == {"action": "goto", "marker": 2}
     assert rig.store.rows[-1]["utterance"] == "Yes." and rig.store.rows[-1]["action"] == "executed"
     res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
@@ -144,9 +147,22 @@ async def test_a_question_that_is_not_confirmed_runs_nothing(
         res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
         assert not res.accepted and rig.flight.log == []
     else:
-        assert "repeat" in res.reply
+        assert "repeat" in res.reply and res.expects == "confirm"  # the buttons stay
         res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
         assert res.accepted and rig.flight.log[-1][1] == {"action": "takeoff"}
+
+
+async def test_the_console_answer_buttons_send_yes_and_no() -> None:
+    """The page's Yes / No buttons send "yes" / "no" with source "button" (web/static/js/
+    dialog.js): confident text, audited as the button's."""
+    rig = Rig()
+    await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
+    res = await rig.dm.handle_utterance("no", source="button")
+    assert res.reply == "OK, I will not do that." and res.expects == ""
+    await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
+    res = await rig.dm.handle_utterance("yes", source="button")
+    assert res.accepted and rig.flight.log[-1][1] == {"action": "takeoff"}
+    assert rig.store.rows[-1]["source"] == "button" and rig.store.rows[-1]["action"] == "executed"
 
 
 async def test_a_yes_may_name_its_drone() -> None:

@@ -179,6 +179,7 @@ def test_a_command_heard_with_middling_confidence_flies_after_a_spoken_yes(
     r = served.speak(served.clip("get airborne", voice="en-029", speed=160)).json()
     assert r["accepted"] is False, r
     assert r["reply"].startswith('Did you say "get airborne"? That is: taking off.'), r
+    assert r["expects"] == "confirm", r
     assert not served.truth()["flying"]
     r = served.speak(served.clip("yes", voice="en-us", speed=160)).json()
     assert r["text"] == "Yes." and r["accepted"] is True, r

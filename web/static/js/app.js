@@ -80,7 +80,11 @@ class Console {
       state: $("dialog-state"),
       voiceNote: $("voice-note"),
       lastReply: $("last-reply"),
-    }, { serverSpeak: (text) => this.serverSpeak(text) });
+    }, {
+      serverSpeak: (text) => this.serverSpeak(text),
+      // "Did you say …?" answered by a button: to the drone that asked (dialog.js addAnswers).
+      onAnswer: (answer, drone) => this.sendUtterance(answer, "button", 1, drone || this.drone),
+    });
     // Speech (issue 15): server (offline) or browser recogniser, push-to-talk, hands-free.
     this.speech = new VoiceInput(
       {
@@ -468,8 +472,8 @@ class Console {
 
   // ---- commands ----------------------------------------------------------------------------
   /** Publish what the operator said/typed to /console/utterance; false if it could not be sent. */
-  sendUtterance(text, source, confidence) {
-    const msg = { text, confidence, source, drone: this.drone || "" };
+  sendUtterance(text, source, confidence, drone = this.drone) {
+    const msg = { text, confidence, source, drone: drone || "" };
     const id = this.ros.publish("/console/utterance", TOPIC_TYPES["/console/utterance"], msg);
     if (!id) {
       this.flash("Not connected: the command was not sent.", "alert");

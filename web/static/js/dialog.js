@@ -3,6 +3,9 @@
 // assertively for screen readers.
 
 const MAX_ENTRIES = 200;
+// How long the Yes / No buttons of "Did you say …?" stay usable: the server drops the question
+// after 15 s (server/dialog/confirm.py MAX_AGE_S), and a later yes would run nothing.
+export const ANSWER_TTL_MS = 15000;
 
 /** A short human reading of a command list (DESIGN §4 commands). */
 export function describeCommands(commands) {
@@ -33,13 +36,15 @@ export class DialogPanel {
    * @param {{log: HTMLElement, alerts: HTMLElement, mute: HTMLButtonElement, state: HTMLElement,
    *          voiceNote?: HTMLElement}} els
    * @param {{speechSynthesis?: SpeechSynthesis, storage?: Storage,
-   *          serverSpeak?: (text: string) => Promise<boolean>}} env
+   *          serverSpeak?: (text: string) => Promise<boolean>,
+   *          onAnswer?: (answer: "yes" | "no", drone: string) => boolean}} env
    */
   constructor(els, env = {}) {
     this.els = els;
     this.synth = env.speechSynthesis ?? window.speechSynthesis ?? null;
     this.storage = env.storage ?? window.localStorage;
     this.serverSpeak = env.serverSpeak ?? null;
+    this.onAnswer = env.onAnswer ?? null;
     this.muted = this.storage?.getItem("uavc.muted") === "1";
     // "browser" (speechSynthesis has voices), "server" (replies spoken by the server's
     // espeak-ng), "none" (shown, not spoken), or "unknown" until checked.
@@ -126,7 +131,9 @@ export class DialogPanel {
         ? `spoken · confidence ${Math.round(confidence * 100)} %`
         : source === "map"
           ? "from the map"
-          : "typed";
+          : source === "button"
+            ? "answered with a button"
+            : "typed";
     const li = this.add("user", text, { meta });
     li.dataset.utterance = text;
     li.dataset.pending = "1";
@@ -137,13 +144,16 @@ export class DialogPanel {
     return this.add("system", text);
   }
 
-  /** uav_console/Reply: text, level, speak, utterance, commands (JSON string). */
+  /** uav_console/Reply: text, level, speak, utterance, commands (JSON string), expects. */
   onReply(msg) {
     const level = msg.level || "info";
     const commands = parseCommands(msg.commands);
     if (msg.utterance) this.annotate(msg.utterance, commands);
+    // Any later reply of the same drone settles (or replaces) the question it asked.
+    if (msg.utterance || msg.expects) this.closeQuestions(msg.drone || "");
     const li = this.add("bot", msg.text || "", { level });
     li.dataset.level = level;
+    if (msg.expects === "confirm" && this.onAnswer) this.addAnswers(li, msg.drone || "");
     if (this.els.lastReply) {
       this.els.lastReply.textContent = msg.text || "";
       this.els.lastReply.dataset.level = level;
@@ -155,6 +165,42 @@ export class DialogPanel {
     }
     if (msg.speak !== false && msg.text) this.speak(msg.text, level);
     return li;
+  }
+
+  /** Yes / No buttons under a "Did you say …?" reply: the answer goes to the drone that
+   *  asked, whichever drone is selected now; usable once, and for ``ANSWER_TTL_MS``. */
+  addAnswers(li, drone) {
+    const row = document.createElement("span");
+    row.className = "answers";
+    row.setAttribute("role", "group");
+    row.setAttribute("aria-label", "Answer the question");
+    row.dataset.drone = drone;
+    for (const answer of ["yes", "no"]) {
+      const b = document.createElement("button");
+      b.type = "button";
+      b.className = "btn btn-small";
+      b.dataset.answer = answer;
+      b.textContent = answer === "yes" ? "Yes, do it" : "No";
+      b.addEventListener("click", () => {
+        if (this.onAnswer(answer, drone)) this.closeAnswers(row);
+      });
+      row.append(b);
+    }
+    li.append(row);
+    row.timer = setTimeout(() => this.closeAnswers(row), ANSWER_TTL_MS);
+  }
+
+  closeAnswers(row) {
+    clearTimeout(row.timer);
+    for (const b of row.querySelectorAll("button")) b.disabled = true;
+    row.dataset.closed = "1";
+  }
+
+  /** Disable the open Yes / No buttons of ``drone``'s questions. */
+  closeQuestions(drone) {
+    for (const row of this.els.log.querySelectorAll(".answers:not([data-closed])")) {
+      if (row.dataset.drone === drone) this.closeAnswers(row);
+    }
   }
 
   /** Attach "understood as …" to the newest pending entry with this text (or add one). */
