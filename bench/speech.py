@@ -56,6 +56,7 @@ import numpy as np  # noqa: E402
 
 from drone.control.loop import ControlLoop, LoopStats  # noqa: E402
 from drone.control.pid import PaperPID, Setpoint  # noqa: E402
+from server.dialog.confirm import to_read_back  # noqa: E402
 from server.language.nlu import default_nlu  # noqa: E402
 from server.settings import Settings  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
@@ -246,10 +247,8 @@ def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") 
             want = canon(row["commands"])
             # What the dialog reads back ("Did you say …?", server/dialog/confirm.py): speech
             # between the floor and the threshold that the grammars understand whole.
-            read_back: list[dict[str, Any]] = []
-            if CONFIRM_FLOOR <= rec.confidence < THRESHOLD:
-                whole = rec_by.nlu.parse(rec.text)
-                read_back = whole.commands if not whole.unparsed else []
+            offered = to_read_back(rec_by.nlu, rec.text, rec.confidence, THRESHOLD, CONFIRM_FLOOR)
+            read_back = offered.commands if offered is not None else []
             results[name].append(
                 {
                     "text": row["text"],

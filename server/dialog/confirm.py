@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from server.dialog import replies
+from server.language.nlu import NLU, Interpretation
 
 MAX_AGE_S = 15.0  # the question is spoken (~3 s), heard, and answered
 NOT_CONFIRMED = "OK, I will not do that."
@@ -32,6 +33,18 @@ class Pending:
 
     def fresh(self, now: float, max_age_s: float = MAX_AGE_S) -> bool:
         return 0.0 <= now - self.asked_t <= max_age_s
+
+
+def to_read_back(
+    nlu: NLU, sentence: str, confidence: float, threshold: float, floor: float
+) -> Interpretation | None:
+    """What "Did you say …?" offers for speech heard at ``confidence``, or None: only from
+    ``floor`` up to (not including) ``threshold``, and only a sentence the grammars understand
+    whole. bench/speech.py counts its read-backs with this too."""
+    if not floor <= confidence < threshold:
+        return None
+    interp = nlu.parse(sentence)
+    return interp if interp.commands and not interp.unparsed else None
 
 
 def question(text: str, commands: Sequence[Mapping[str, Any]]) -> str:

@@ -380,12 +380,14 @@ class DialogManager:
         """Speech under the threshold (``sentence``: ``text`` without its drone's name): "Did
         you say …?" when the grammars understand all of it and its confidence reaches
         ``confirm_floor`` (:mod:`server.dialog.confirm`), else "please repeat"."""
-        if confidence >= self.params.confirm_floor:
-            interp = self.nlu.parse(sentence)
-            if interp.commands and not interp.unparsed:
-                self._confirm = confirm.Pending(text, self.clock())
-                ask = confirm.question(interp.normalised, interp.commands)
-                return DialogResult(ask, interp.commands, False), "asked_confirm"
+        p = self.params
+        interp = confirm.to_read_back(
+            self.nlu, sentence, confidence, p.confidence_threshold, p.confirm_floor
+        )
+        if interp is not None:
+            self._confirm = confirm.Pending(text, self.clock())
+            ask = confirm.question(interp.normalised, interp.commands)
+            return DialogResult(ask, interp.commands, False), "asked_confirm"
         return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
 
     def _check(self, interp: Interpretation) -> str | None:

@@ -417,7 +417,9 @@ class NLU:
         phrases = self._compiled.grammar.sets.get(ANSWER_SET)
         if phrases is None or not isinstance(text, str) or len(text) > MAX_UTTERANCE_CHARS:
             return None
-        said = " ".join(_NOT_ANSWER_CHAR.sub(" ", text.lower().replace("'", "")).split())
+        # A phone keyboard types "That’s right" with a curly apostrophe: read as the NLU does.
+        plain = text.lower().translate(_APOSTROPHES).replace("'", "")
+        said = " ".join(_NOT_ANSWER_CHAR.sub(" ", plain).split())
         label = phrases.labels.get(said)
         if label == "yes":
             return "yes"

@@ -7,6 +7,7 @@ from typing import Any
 
 import pytest
 
+from server.dialog.confirm import to_read_back
 from server.dialog.manager import DialogManager, DialogParams
 from server.dialog.states import State
 from server.graph import Graph
@@ -150,6 +151,24 @@ async def test_a_question_that_is_not_confirmed_runs_nothing(
         assert "repeat" in res.reply and res.expects == "confirm"  # the buttons stay
         res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
         assert res.accepted and rig.flight.log[-1][1] == {"action": "takeoff"}
+
+
+@pytest.mark.parametrize(
+    ("sentence", "confidence", "offered"),
+    [
+        ("take off", 0.3, True),  # the floor itself is read back
+        ("take off", 0.49, True),
+        ("take off", 0.5, False),  # at the threshold it is flown, not asked
+        ("take off", 0.29, False),  # under the floor: "please repeat"
+        ("take off and dance", 0.4, False),  # not understood whole
+        ("", 0.4, False),
+    ],
+)
+def test_what_is_read_back(sentence: str, confidence: float, offered: bool) -> None:
+    interp = to_read_back(NLU_, sentence, confidence, threshold=0.5, floor=0.3)
+    assert (interp is not None) is offered
+    if interp is not None:
+        assert interp.commands == [{"action": "takeoff"}]
 
 
 async def test_the_console_answer_buttons_send_yes_and_no() -> None:

@@ -358,6 +358,7 @@ def test_a_run_of_too_many_words_is_not_split(nlu: NLU) -> None:
         ("Yes.", "yes"),
         ("yes please", "yes"),
         ("That's right!", "yes"),
+        ("That\u2019s right", "yes"),  # a phone keyboard's curly apostrophe
         ("affirmative", "yes"),
         ("No.", "no"),
         ("nope", "no"),
