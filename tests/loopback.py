@@ -10,6 +10,7 @@ different address in each. Worker ``gwN`` moves ``127.0.c.d`` to ``127.N.c.d`` (
 from __future__ import annotations
 
 import os
+import socket
 
 
 def worker_index() -> int:
@@ -24,3 +25,10 @@ def for_worker(addr: str) -> str:
     if a != "127" or b != "0":
         raise ValueError(f"{addr!r} is not a 127.0.c.d loopback address")
     return f"127.{worker_index()}.{c}.{d}"
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on ``host`` now (the OS's pick; another process may take it before use)."""
+    with socket.socket() as sock:
+        sock.bind((host, 0))
+        return int(sock.getsockname()[1])

@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import sysconfig
@@ -22,6 +21,8 @@ from pathlib import Path
 
 import httpx
 import pytest
+
+from tests.loopback import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ("grammars", "worlds", "web", "models/captioner")
@@ -135,12 +136,6 @@ def test_installed_package_finds_its_data_outside_the_checkout(venv: Path, tmp_p
         share / "worlds",
         share / "web",
     ]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture

@@ -11,7 +11,8 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.browser.conftest import ROOT, free_port, open_console
+from tests.browser.conftest import ROOT, open_console
+from tests.loopback import free_port
 from tests.recorder.synthetic import write_flight
 
 pytestmark = pytest.mark.browser

@@ -28,8 +28,9 @@ import pytest
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 
-from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS, OBSERVER, PILOT, ROOT, free_port
+from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS, OBSERVER, PILOT, ROOT
 from tests.browser.helpers import wait_until
+from tests.loopback import free_port
 from tests.speech.conftest import HAVE_TTS, synthesise
 
 SIM_ADDR = "127.0.15.4"

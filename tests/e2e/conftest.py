@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -25,7 +24,8 @@ import httpx
 import pytest
 import roslibpy
 
-from tests.loopback import for_worker
+from tests.loopback import for_worker, free_port
+from tests.polling import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "e2e-pilot-token"
@@ -33,12 +33,6 @@ OBSERVER = "e2e-observer-token"
 SIM_ADDR = for_worker("127.0.0.120")
 SIM_SPEED = "1"
 TIMEOUT = 10.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass
@@ -85,17 +79,6 @@ class Server:
         if t["flying"] or t["z"] > 0.05:
             self.http.post("/api/v1/drones/uav1/land")
         self.wait_truth(lambda t: not t["flying"] and t["z"] < 0.05, 20.0, "landed")
-
-
-def wait_for(get: Callable[[], Any], pred: Callable[[Any], bool], timeout: float, what: str) -> Any:
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        last = get()
-        if pred(last):
-            return last
-        time.sleep(0.05)
-    raise AssertionError(f"{what}: condition not met in {timeout} s; last: {last!r}")
 
 
 @pytest.fixture(scope="session")

@@ -17,8 +17,9 @@ import numpy as np
 import roslibpy
 
 from tests.inbox import Inbox
+from tests.polling import wait_for
 
-from .conftest import TIMEOUT, Server, wait_for
+from .conftest import TIMEOUT, Server
 
 LANDED, FLYING, HOVERING, TAKEOFF, LANDING = 2, 3, 4, 6, 8
 

@@ -15,7 +15,9 @@ from typing import Any
 import roslibpy
 import websockets
 
-from .conftest import OBSERVER, Server, wait_for
+from tests.polling import wait_for
+
+from .conftest import OBSERVER, Server
 
 JOG = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-import socket
 import subprocess
 import sys
 import threading
@@ -41,15 +40,10 @@ from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
 from server.security import Security, TokenStore
 from server.settings import ROOT, Settings
+from tests.loopback import free_port
 
 pytestmark = pytest.mark.timeout(60)
 WORLD = load_world("outdoor")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass

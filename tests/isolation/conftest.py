@@ -8,7 +8,6 @@ import contextlib
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -19,15 +18,11 @@ from typing import Any
 
 import httpx
 
+from tests.loopback import free_port
+
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "isolation-pilot-token"
 HOST = "127.0.13.1"
-
-
-def free_port(host: str = HOST) -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
 
 
 def wait_for(fn: Callable[[], Any], what: str, timeout: float = 20.0, period: float = 0.1) -> Any:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-import socket
 import subprocess
 import sys
 import threading
@@ -31,20 +30,15 @@ from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
 from server.security import Security, TokenStore
 from server.settings import ROOT, Settings
+from tests.loopback import free_port
 
 pytestmark = pytest.mark.timeout(90)
 WORLD = load_world("outdoor")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.16.1", 0))
-        return int(s.getsockname()[1])
-
-
 @contextlib.contextmanager
 def _central(tmp: Path) -> Iterator[tuple[str, CentralTaskManager, str]]:
-    port = _free_port()
+    port = free_port("127.0.16.1")
     settings = Settings(host="127.0.16.1", port=port, data_dir=tmp, world="outdoor")
     graph = Graph()
     tokens = TokenStore(tmp)

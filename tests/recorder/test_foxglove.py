@@ -17,12 +17,11 @@ import contextlib
 import json
 import os
 import shutil
-import socket
 import sqlite3
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -33,29 +32,14 @@ import pytest
 from server.cli import main as cli_main
 from server.recorder.mcapfile import read_recording
 from server.ros1 import codec_for
+from tests.loopback import free_port
+from tests.polling import wait_for
 from tests.rosbridge.wsclient import RawClient
 
 ROOT = Path(__file__).resolve().parents[2]
 NODE_DIR = ROOT / "tests" / "node"
 PILOT, OBSERVER = "fox-pilot", "fox-observer"
 SIM_ADDR = "127.0.17.2"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def wait_for(get: Callable[[], Any], pred: Callable[[Any], bool], timeout: float, what: str) -> Any:
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        last = get()
-        if pred(last):
-            return last
-        time.sleep(0.05)
-    raise AssertionError(f"{what}: not within {timeout} s; last: {last!r}")
 
 
 def node_exe() -> str:

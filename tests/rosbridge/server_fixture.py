@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import socket
 import threading
 import time
 from collections.abc import AsyncIterator, Coroutine, Iterator
@@ -21,14 +20,9 @@ from server.rosbridge.endpoint import make_router
 from server.security import Security, TokenStore
 from server.settings import Settings
 from server.ws_guard import preauth_capped_ws
+from tests.loopback import free_port
 
 T = TypeVar("T")
-
-
-def free_port(host: str = "127.0.0.1") -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass

@@ -17,8 +17,8 @@ from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge_port
 from server.security import LeaseHeld, PilotLease, Role, Security, TokenStore, require_role
 from server.settings import Settings
+from tests.loopback import free_port
 
-from .server_fixture import free_port
 from .wsclient import RawClient
 
 

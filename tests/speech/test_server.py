@@ -13,7 +13,6 @@ import asyncio
 import contextlib
 import json
 import os
-import socket
 import ssl
 import stat
 import subprocess
@@ -32,6 +31,7 @@ from websockets.exceptions import ConnectionClosed
 
 from server.speech.audio import read_wav, to_wav
 from server.tls import fingerprint
+from tests.loopback import free_port
 from tests.speech.conftest import HAVE_TTS, synthesise
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -40,12 +40,6 @@ OBSERVER = "speech-observer-token"
 SIM_ADDR = "127.0.15.2"
 
 pytestmark = pytest.mark.skipif(not HAVE_TTS, reason="espeak-ng and sox are needed")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass
