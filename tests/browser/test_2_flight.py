@@ -128,6 +128,8 @@ def test_did_you_say_is_answered_with_the_buttons(
     assert wait_reply(page, n).startswith('Did you say "land"?')
     answers = page.locator("#dialog .msg-bot").nth(n).locator(".answers button")
     assert answers.all_text_contents() == ["Yes, do it", "No"]
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.locator(".panel-dialog").screenshot(path=str(SCREENSHOTS / "did-you-say.png"))
     n = len(bot_replies(page))
     answers.nth(1).click()
     assert wait_reply(page, n) == "OK, I will not do that."
