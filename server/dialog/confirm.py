@@ -7,8 +7,10 @@ command again.') instead of being asked to repeat the whole command; a sentence 
 "yes" (``NLU.answer``: the ``ANSWER`` set of mappings.xml) runs it, checked again against the
 drone's state of that moment. Anything else drops the question: a "no", another sentence
 (handled as itself), a button acting on the drone, or the question's age (``MAX_AGE_S``), so an
-old question never turns a later "yes" into a flight. bench/speech.py: at a floor of 0.3, the
-right command is offered for 11-15 % of the clips that were asked to repeat before.
+old question never turns a later "yes" into a flight; a yes or no with no question waiting is
+told so (``NOTHING_ASKED``, ``EXPIRED``) rather than "I did not understand". bench/speech.py:
+at a floor of 0.3, the right command is offered for 11-15 % of the clips that were asked to
+repeat before.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ from server.language.nlu import NLU, Interpretation
 
 MAX_AGE_S = 15.0  # the question is spoken (~3 s), heard, and answered
 NOT_CONFIRMED = "OK, I will not do that."
+NOTHING_ASKED = "No question is waiting for an answer. Please say the command itself."
+EXPIRED = "That question has expired. Please say the command again."
 
 
 @dataclass(frozen=True)

@@ -335,6 +335,9 @@ class DialogManager:
                 return DialogResult(confirm.NOT_CONFIRMED, [], False), "not_confirmed"
             if said == "yes":  # the sentence runs now, checked against the state of now
                 return await self._handle(pending.text, 1.0, "text", role)
+        elif heard and self.nlu.answer(sentence) is not None:  # a yes or no, and nothing asked
+            why = confirm.EXPIRED if pending is not None else confirm.NOTHING_ASKED
+            return DialogResult(why, [], False), "not_understood"
         if not heard:
             return self._low_confidence(text, sentence, confidence)
         interp: Interpretation = self.nlu.parse(sentence)

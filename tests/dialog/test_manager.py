@@ -198,6 +198,7 @@ async def test_an_old_question_another_sentence_or_a_button_drops_it() -> None:
     rig.t += 15.1  # older than confirm.MAX_AGE_S
     res = await rig.dm.handle_utterance("yes", confidence=0.9, source="speech")
     assert not res.accepted and rig.flight.log == []
+    assert res.reply == "That question has expired. Please say the command again."
     await rig.dm.handle_utterance("take off", confidence=0.4, source="speech")
     res = await rig.dm.handle_utterance("how much battery is left")
     res = await rig.dm.handle_utterance("yes")
@@ -206,6 +207,8 @@ async def test_an_old_question_another_sentence_or_a_button_drops_it() -> None:
     rig.dm.note_direct("land")  # the operator pressed a button meanwhile
     res = await rig.dm.handle_utterance("yes")
     assert not res.accepted and rig.flight.log == []
+    assert res.reply == "No question is waiting for an answer. Please say the command itself."
+    assert (await rig.dm.handle_utterance("no")).reply == res.reply
 
 
 async def test_only_whole_understood_speech_is_read_back_and_observers_cannot_confirm() -> None:

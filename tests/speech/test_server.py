@@ -181,6 +181,7 @@ def test_a_command_heard_with_middling_confidence_flies_after_a_spoken_yes(
     served.wait(lambda t: t["flying"] and t["z"] > 0.5, 20, "climbs after the spoken yes")
     r = served.speak(served.clip("yes", voice="en-gb", speed=150)).json()
     assert r["accepted"] is False and r["commands"] == [], r  # nothing is asked any more
+    assert r["reply"].startswith("No question is waiting for an answer."), r
     land = served.http.post("/api/v1/command", json={"text": "land"}).json()
     assert land["accepted"] is True, land
     served.wait(lambda t: not t["flying"], 20, "lands")
