@@ -28,11 +28,12 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    thread where permitted, GIL held through the spin, 0.1 ms switch interval).
 
     .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop] [--skip-stream]
-        [--asr-model DIR] [--window-s 15] [--beams 4] [--tts espeak-ng|flite]
+        [--asr-model DIR] [--window-s 15] [--beams 4] [--tts espeak-ng|flite|hibari]
 
 ``--tts flite`` synthesises section 1's clips with Debian's flite voices instead (slt, rms, awb,
-kal16; same utterances, speeds and noise): espeak-ng's formant voices are harder for Whisper
-than recorded or less robotic speech, and this row says by how much.
+kal16; same utterances, speeds and noise), ``--tts hibari`` with hibari-tts's neural voice
+(distilled from Kokoro-82M; the one voice its wheel holds): espeak-ng's formant voices are
+harder for Whisper than recorded or less robotic speech, and these rows say by how much.
 """
 
 from __future__ import annotations
@@ -66,12 +67,13 @@ from server.speech.recognizer import BEAMS, Recognizer, speech_span  # noqa: E40
 from server.speech.stream import Final, Interim, StreamSession  # noqa: E402
 from server.speech.window import MIN_S  # noqa: E402
 from server.vehicles.host import VEHICLE_SWITCH_INTERVAL_S, raise_priority  # noqa: E402
-from tests.speech.conftest import synthesise  # noqa: E402
+from tests.speech.conftest import HIBARI_VOICES, synthesise  # noqa: E402
 
 VOICES = ["en-us", "en-gb", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us+f3", "en-us-nyc"]
 # --tts flite: Debian's CMU Flite, whose voices are less robotic than espeak-ng's formant
 # synthesis (the issue's set is espeak-ng's; this one tells what the voices cost).
 FLITE_VOICES = ["slt", "rms", "awb", "kal16"]
+TTS_VOICES = {"espeak-ng": VOICES, "flite": FLITE_VOICES, "hibari": list(HIBARI_VOICES)}
 SPEEDS = [130, 160, 190]
 NOISE: list[float | None] = [None, 20.0, 10.0]
 THRESHOLD = Settings().confidence_threshold
@@ -203,7 +205,7 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
 
 def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") -> dict[str, Any]:
     utterances = pick_utterances(12 if quick else 36)
-    voices = FLITE_VOICES if tts == "flite" else VOICES
+    voices = TTS_VOICES[tts]
     conditions = [(s, n) for n in NOISE for s in SPEEDS]
     work = Path(tempfile.mkdtemp(prefix="uavc-speech-bench-"))
     clips: list[tuple[Path, dict[str, Any], str, int, float | None]] = []
@@ -473,9 +475,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--tts",
-        choices=["espeak-ng", "flite"],
+        choices=list(TTS_VOICES),
         default="espeak-ng",
-        help="voices of the accuracy clips: espeak-ng's (the issue's set) or flite's",
+        help="voices of the accuracy clips: espeak-ng's (the issue's set), flite's or hibari's",
     )
     ap.add_argument("--json", type=Path)
     ap.add_argument("--skip-loop", action="store_true")

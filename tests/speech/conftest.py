@@ -1,15 +1,18 @@
-"""Speech tests: utterances synthesised at run time with espeak-ng (voices, speeds) and sox
-(noise at a chosen SNR, other rates, stereo), and one Whisper model loaded per session.
+"""Speech tests: utterances synthesised at run time with espeak-ng, flite or hibari (voices,
+speeds) and sox (noise at a chosen SNR, other rates, stereo), and one Whisper model loaded per
+session.
 
 Keep real decodes few: tiny.en takes ~0.3-1.5 s per clip on the 2-core machine.
 """
 
 from __future__ import annotations
 
+import functools
 import shutil
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,6 +26,16 @@ HAVE_TTS = shutil.which("espeak-ng") is not None and shutil.which("sox") is not 
 needs_tts = pytest.mark.skipif(not HAVE_TTS, reason="espeak-ng and sox are needed (.ci/run)")
 
 Synth = Callable[..., Path]
+# hibari-tts (PyPI, Apache-2.0): a neural voice distilled from Kokoro-82M; its "heart" voice is
+# in the wheel (the others download on first use, so they are never asked for here).
+HIBARI_VOICES = ("heart",)
+
+
+@functools.cache
+def _hibari() -> Any:
+    from hibari import Hibari
+
+    return Hibari(voice="heart", threads=1)
 
 
 def synthesise(
@@ -42,17 +55,24 @@ def synthesise(
     ``pad_s`` of silence either side (as a microphone would hear it).
 
     ``tts`` is espeak-ng (formant synthesis; ``voice`` one of its voices, ``speed`` in words per
-    minute) or flite (Debian's CMU Flite: less robotic voices, "slt", "rms", "awb", "kal16";
-    ``speed`` relative to 160 words per minute through its duration stretch)."""
+    minute), flite (Debian's CMU Flite: less robotic voices, "slt", "rms", "awb", "kal16";
+    ``speed`` relative to 160 words per minute through its duration stretch) or hibari (a neural
+    voice, "heart"; ``speed`` relative to 160 words per minute, its noise seeded by ``seed``)."""
     raw = out.with_suffix(".raw.wav")
-    if tts == "flite":
+    if tts == "hibari":
+        if voice not in HIBARI_VOICES:
+            raise ValueError(f"hibari voice {voice!r} is not in the package (only {HIBARI_VOICES})")
+        _hibari().save(text, str(raw), speed=speed / 160, seed=seed)
+        command: list[str] = []
+    elif tts == "flite":
         stretch = f"duration_stretch={160 / speed:.3f}"
         command = ["flite", "-voice", voice, "--setf", stretch, "-t", text, "-o", str(raw)]
     elif tts == "espeak-ng":
         command = ["espeak-ng", "-v", voice, "-s", str(speed), "-w", str(raw), text]
     else:
-        raise ValueError(f"unknown text-to-speech {tts!r} (espeak-ng or flite)")
-    subprocess.run(command, check=True, capture_output=True)
+        raise ValueError(f"unknown text-to-speech {tts!r} (espeak-ng, flite or hibari)")
+    if command:
+        subprocess.run(command, check=True, capture_output=True)
     samples = read_wav(raw.read_bytes())  # 16 kHz mono float
     pad = np.zeros(int(pad_s * 16000), np.float32)
     samples = np.concatenate([pad, samples, pad])

@@ -73,11 +73,48 @@ def test_another_synthesiser_is_understood(
     assert rec.confidence >= 0.5, rec
 
 
-def test_an_unknown_synthesiser_is_refused(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("text", "wpm", "snr", "commands"),
+    [
+        (
+            "take off and go to marker two then land",
+            190,
+            10.0,
+            [{"action": "takeoff"}, {"action": "goto", "marker": 2}, {"action": "land"}],
+        ),
+        (
+            "patrol markers one, four and seven",
+            130,
+            None,
+            [{"action": "patrol", "markers": [1, 4, 7]}],
+        ),
+    ],
+)
+def test_a_neural_voice_is_understood(
+    recognizer: Recognizer,
+    synth: Synth,
+    text: str,
+    wpm: int,
+    snr: float | None,
+    commands: list[dict[str, object]],
+) -> None:
+    # hibari's voice (distilled from Kokoro-82M) is near a recorded one: bench/speech.py --tts
+    # hibari reads it far better than espeak-ng's, noise included.
+    pytest.importorskip("hibari")
+    clip = synth(text, voice="heart", speed=wpm, snr_db=snr, tts="hibari")
+    rec = recognizer.recognize(read_wav(clip.read_bytes()))
+    assert rec.commands == commands, rec
+    assert rec.confidence >= 0.5, rec
+
+
+def test_an_unknown_synthesiser_or_voice_is_refused(tmp_path: Path) -> None:
     from tests.speech.conftest import synthesise
 
     with pytest.raises(ValueError, match="unknown text-to-speech"):
         synthesise(tmp_path / "x.wav", "land", tts="nope")
+    # hibari's other voices download on first use: never asked for (no network in tests).
+    with pytest.raises(ValueError, match="not in the package"):
+        synthesise(tmp_path / "y.wav", "land", voice="emma", tts="hibari")
 
 
 def test_silence_and_noise_are_not_decoded_and_mean_nothing(recognizer: Recognizer) -> None:
