@@ -123,6 +123,9 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
         ("confidence", "float64"),
         ("source", "string"),
         ("drone", "string"),
+        # The drone whose "Did you say …?" the console has open while another drone is
+        # selected: a bare yes or no goes to it (server/dialog/manager.py), else "".
+        ("asked_by", "string"),
     ),
     "uav_console/Reply": (
         ("header", "std_msgs/Header"),

@@ -254,7 +254,17 @@ class DialogManager:
         drone = str(msg.get("drone") or "")
         text = str(msg.get("text", ""))
         address = parse_address(text)
-        if address.addressed:
+        asked_by = str(msg.get("asked_by") or "")
+        if (
+            not address.addressed
+            and asked_by in self.drones()
+            and self.nlu.answer(address.text) is not None
+        ):
+            # A bare yes or no answers the drone whose question the console has open, whichever
+            # drone is selected: only that one takes it.
+            if asked_by != self.drone:
+                return
+        elif address.addressed:
             selected = drone or self.drone
             targets = recipients(address, selected, self.drones())
             if self.drone not in targets:

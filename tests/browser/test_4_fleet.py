@@ -1,4 +1,5 @@
-"""A fleet: the drone selector picks which drone's topics the panels show and the jog drives."""
+"""A fleet: the drone selector picks which drone's topics the panels show and the jog drives;
+a bare answer goes to the drone that asked."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from typing import Any
 import pytest
 
 from tests.browser.conftest import ServerProcess, open_console
+from tests.browser.helpers import SPEECH_STANDIN, is_flying, position, wait_until
 
 pytestmark = pytest.mark.browser
 
@@ -52,5 +54,41 @@ def test_drone_selector_switches_topics(browser: Any, fleet_server: ServerProces
         page.wait_for_selector("#conn[data-state='open']", timeout=10_000)
         page.wait_for_function("document.body.dataset.drone === 'uav2'", timeout=10_000)
         assert page.input_value("#drone-select") == "uav2"
+    finally:
+        ctx.close()
+
+
+def test_a_typed_yes_answers_the_drone_that_asked(
+    browser: Any, fleet_server: ServerProcess
+) -> None:
+    """uav2 is selected; "uav1, take off" heard at 0.4 is read back by uav1; a typed "yes"
+    (no drone named) goes to uav1, which asked, and uav1 takes off; uav2 stays down."""
+    ctx, cp = open_console(browser, fleet_server.url(), init_script=SPEECH_STANDIN)
+    try:
+        page = cp.page
+        page.wait_for_selector("#drone-select-wrap:not([hidden])", timeout=10_000)
+        page.select_option("#drone-select", "uav2")
+        page.wait_for_function("uavConsole.haveLease === true", timeout=5000)
+        n = page.locator("#dialog .msg-bot").count()
+        page.evaluate("window.__speech.next = {text: 'uav1, take off', confidence: 0.4}")
+        page.click("#mic")
+        asked = page.locator("#dialog .msg-bot").nth(n)
+        asked.wait_for(timeout=8000)
+        assert asked.locator(".text").text_content().startswith('uav1: Did you say "take off"?')
+        assert asked.locator(".answers").get_attribute("data-drone") == "uav1"
+        page.fill("#text-input", "yes")
+        page.press("#text-input", "Enter")
+        ok, truth, took = wait_until(
+            lambda: fleet_server.truth("uav1"), lambda t: position(t)[2] > 0.5, timeout_s=20
+        )
+        assert ok, f"uav1 did not take off on the yes ({took:.0f} s): {truth}"
+        assert not is_flying(fleet_server.truth("uav2"))
+        assert asked.locator(".answers button").first.is_disabled()  # answered
+        page.fill("#text-input", "uav1, land")
+        page.press("#text-input", "Enter")
+        ok, truth, _ = wait_until(
+            lambda: fleet_server.truth("uav1"), lambda t: not is_flying(t), timeout_s=20
+        )
+        assert ok, truth
     finally:
         ctx.close()

@@ -3,6 +3,7 @@ filled-in turns and patrols, and marker ids in descriptions from the detector.""
 
 from __future__ import annotations
 
+import asyncio
 from dataclasses import replace
 
 import pytest
@@ -181,6 +182,36 @@ async def test_addressed_utterances_reach_only_their_drone() -> None:
     assert rig.replies[-1]["text"] == "There is no drone uav5. Drones here: uav1, uav2."
     res = await rig.dm.handle_utterance("uav1, take off")
     assert res.accepted and res.reply == "uav1: Taking off."
+
+
+async def test_a_bare_answer_goes_to_the_drone_that_asked() -> None:
+    """The console names the drone whose "Did you say …?" is open (``asked_by``) when another
+    drone is selected: only the asker takes a bare yes or no; other sentences, and answers
+    that name their drone, are routed as usual."""
+
+    async def say(rig: Rig, msg: dict[str, object]) -> None:
+        rig.graph.publish("/console/utterance", {"confidence": 0.9, "source": "speech", **msg})
+        while rig.dm._pending:
+            await asyncio.gather(*rig.dm._pending)
+
+    asker = Rig()  # uav1 asked; the console has uav2 selected
+    asker.dm.drones = lambda: ["uav1", "uav2"]
+    await asker.dm.handle_utterance("take off", confidence=0.4, source="speech")
+    await say(asker, {"text": "Yes.", "drone": "uav2", "asked_by": "uav1"})
+    assert asker.flight.log[-1][1] == {"action": "takeoff"}
+    assert asker.replies[-1]["text"] == "Taking off."
+
+    other = Rig()  # this drone (uav1) is selected but uav2 asked: the yes is not for it
+    other.dm.drones = lambda: ["uav1", "uav2"]
+    n = len(other.replies)
+    await say(other, {"text": "yes", "drone": "uav1", "asked_by": "uav2"})
+    assert len(other.replies) == n and other.flight.log == []
+    await say(other, {"text": "take off", "drone": "uav1", "asked_by": "uav2"})  # not an answer
+    assert other.flight.log[-1][1] == {"action": "takeoff"}
+    await say(other, {"text": "uav1, yes", "drone": "uav1", "asked_by": "uav2"})  # named: its own
+    assert other.replies[-1]["text"].startswith("uav1: No question is waiting")
+    await say(other, {"text": "no", "drone": "uav1", "asked_by": "uav9"})  # no such drone
+    assert other.replies[-1]["text"].startswith("No question is waiting")
 
 
 # ---- scene descriptions -------------------------------------------------------------------

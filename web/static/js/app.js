@@ -473,7 +473,9 @@ class Console {
   // ---- commands ----------------------------------------------------------------------------
   /** Publish what the operator said/typed to /console/utterance; false if it could not be sent. */
   sendUtterance(text, source, confidence, drone = this.drone) {
-    const msg = { text, confidence, source, drone: drone || "" };
+    // asked_by: a bare yes or no answers the drone that asked, whichever is selected.
+    const askedBy = this.dialog.askedBy(drone || "");
+    const msg = { text, confidence, source, drone: drone || "", asked_by: askedBy };
     const id = this.ros.publish("/console/utterance", TOPIC_TYPES["/console/utterance"], msg);
     if (!id) {
       this.flash("Not connected: the command was not sent.", "alert");

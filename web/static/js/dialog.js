@@ -196,6 +196,14 @@ export class DialogPanel {
     row.dataset.closed = "1";
   }
 
+  /** The drone whose "Did you say …?" is open when ``selected`` has none open (the newest), else
+   *  "": a bare yes or no said or typed now answers it (Utterance.asked_by). */
+  askedBy(selected) {
+    const open = [...this.els.log.querySelectorAll(".answers:not([data-closed])")];
+    if (open.some((row) => row.dataset.drone === selected)) return "";
+    return open.length ? open[open.length - 1].dataset.drone : "";
+  }
+
   /** Disable the open Yes / No buttons of ``drone``'s questions. */
   closeQuestions(drone) {
     for (const row of this.els.log.querySelectorAll(".answers:not([data-closed])")) {
