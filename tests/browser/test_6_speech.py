@@ -198,11 +198,41 @@ def test_phone_over_https_holds_the_microphone_and_the_drone_takes_off(
         before = page.evaluate(counted)
         page.evaluate("window.uavConsole.serverSpeaking += 1")
         page.wait_for_function(f"{counted} > {before} + 10")
+        # The page says it is not listening, and how to talk over the reply.
+        assert page.evaluate("document.body.dataset.speechPaused") == "1"
+        assert "press the microphone" in page.inner_text("#interim")
+        # Pressing the microphone interrupts: the console's voice stops (hush) and the
+        # microphone is heard again at once, still hands-free, while that reply lasts.
+        page.click("#mic")
+        assert page.evaluate("document.body.dataset.listening") == "server"
+        assert page.evaluate("typeof window.uavConsole.hushedAt") == "number"
+        page.wait_for_function("document.body.dataset.speechPaused === ''")
+        heard = page.evaluate(counted)
+        page.wait_for_timeout(600)
+        assert page.evaluate(counted) == heard
+        page.evaluate("window.uavConsole.serverSpeaking -= 1")
+        page.wait_for_timeout(300)
+        # The next reply mutes the microphone again; its end and 0.3 s after, it listens.
+        before = page.evaluate(counted)
+        page.evaluate("window.uavConsole.serverSpeaking += 1")
+        page.wait_for_function(f"{counted} > {before} + 10")
         page.evaluate("window.uavConsole.serverSpeaking -= 1")
         page.wait_for_timeout(600)
         muted = page.evaluate(counted)
         page.wait_for_timeout(600)
         assert page.evaluate(counted) == muted  # listening again
+        assert page.evaluate("document.body.dataset.speechPaused") == ""
+        # The same with a real spoken reply (the server's voice: this Chromium has none): the
+        # press stops it playing.
+        page.evaluate("window.uavConsole.dialog.muted = false")
+        page.fill("#text-input", "help")
+        page.press("#text-input", "Enter")
+        page.wait_for_function("window.uavConsole.serverSpeaking > 0", timeout=15_000)
+        page.wait_for_function("document.body.dataset.speechPaused === '1'")
+        page.click("#mic")
+        page.wait_for_function("window.uavConsole.serverSpeaking === 0", timeout=3000)
+        page.wait_for_function("document.body.dataset.speechPaused === ''")
+        assert page.evaluate("document.body.dataset.listening") == "server"
         page.uncheck("#handsfree")
         page.wait_for_function("document.body.dataset.listening === ''")
         assert errors == []

@@ -101,6 +101,7 @@ class Console {
         onNotice: (notice) => this.notice(notice),
         // Hands-free does not listen to the console's own spoken replies (voice.js outgoing).
         speaking: () => this.serverSpeaking > 0 || Boolean(window.speechSynthesis?.speaking),
+        hush: () => this.hush(),
       },
     );
     this.controls = new Controls(document.body, {
@@ -587,9 +588,23 @@ class Console {
     }
   }
 
+  /** Stop the console's voice now: the reply playing and those queued behind it (the operator
+   *  interrupts it to speak: voice.js interrupt). They stay on screen. */
+  hush() {
+    this.hushedAt = performance.now();
+    window.speechSynthesis?.cancel();
+    try {
+      this.voiceSource?.stop();
+    } catch {
+      /* not started, or already ended */
+    }
+  }
+
   /** Play ``text`` spoken by the server (GET /api/v1/tts), one reply after another. */
   serverSpeak(text) {
+    const queuedAt = performance.now();
     this.speechQueue = (this.speechQueue || Promise.resolve()).then(async () => {
+      if (queuedAt < (this.hushedAt ?? -1)) return; // interrupted before its turn
       try {
         const r = await fetch(`/api/v1/tts?text=${encodeURIComponent(text.slice(0, 400))}`, {
           headers: { Authorization: `Bearer ${this.token}` },
@@ -603,9 +618,11 @@ class Console {
         this.audioCtx = this.audioCtx || new Ctx();
         if (this.audioCtx.state === "suspended") await this.audioCtx.resume().catch(() => {});
         const buffer = await this.audioCtx.decodeAudioData(await r.arrayBuffer());
+        if (queuedAt < (this.hushedAt ?? -1)) return;
         const src = this.audioCtx.createBufferSource();
         src.buffer = buffer;
         src.connect(this.audioCtx.destination);
+        this.voiceSource = src;
         this.spokenByServer = (this.spokenByServer || 0) + 1;
         this.serverSpeaking += 1;
         try {

@@ -19,6 +19,7 @@ const ANSWER_TIMEOUT_MS = 20000;
 // Hands-free: how long after the console stops speaking the microphone still sends silence
 // (the reply's reverberation and the loudspeaker's buffered end).
 const ECHO_TAIL_MS = 300;
+const PAUSED = "Paused while the console speaks: press the microphone (M) to interrupt.";
 
 export function chooseEngine(setting, win = window) {
   if (setting === "server" || setting === "browser") return setting;
@@ -43,21 +44,40 @@ class ServerRecognizer {
     this.active = false;
     this.quietUntil = 0;
     this.mutedChunks = 0; // hands-free audio sent as silence while the console spoke
+    this.muted = false; // hands-free: not listening now, the console is speaking
+    this.interrupted = false; // the operator talks over the reply now playing (interrupt)
   }
 
   /**
    * The chunk to send: hands-free, while the console speaks a reply (and ECHO_TAIL_MS after),
    * silence instead of the microphone. Echo cancellation is off (it hurts recognition), so a
    * loudspeaker's "Did you say …?" would otherwise be heard as the operator's next sentence,
-   * and every reply would answer the one before it.
+   * and every reply would answer the one before it. After ``interrupt`` the microphone is
+   * heard again until the reply playing then has ended.
    */
   outgoing(chunk) {
     if (this.mode !== "handsfree") return chunk;
     const now = performance.now();
-    if (this.opts.speaking?.()) this.quietUntil = now + ECHO_TAIL_MS;
-    if (now >= this.quietUntil) return chunk;
+    const speaking = Boolean(this.opts.speaking?.());
+    if (this.interrupted && !speaking) this.interrupted = false; // the next reply mutes again
+    if (speaking && !this.interrupted) this.quietUntil = now + ECHO_TAIL_MS;
+    this.setMuted(now < this.quietUntil);
+    if (!this.muted) return chunk;
     this.mutedChunks += 1;
     return new ArrayBuffer(chunk.byteLength); // zeros: 16-bit PCM silence
+  }
+
+  /** The operator pressed the microphone while the console spoke: listen again at once. */
+  interrupt() {
+    this.interrupted = true;
+    this.quietUntil = 0;
+    this.setMuted(false);
+  }
+
+  setMuted(on) {
+    if (on === this.muted) return;
+    this.muted = on;
+    this.opts.onMuted?.(on);
   }
 
   async start(mode) {
@@ -231,6 +251,12 @@ export class VoiceInput {
       onFinal: opts.onFinal,
       onNotice: opts.onNotice,
       onState: (on) => this.setListening(on),
+      // Hands-free is deaf while the console speaks: the page says so, and how to interrupt.
+      onMuted: (on) => {
+        document.body.dataset.speechPaused = on ? "1" : "";
+        if (on) els.interim.textContent = PAUSED;
+        else if (els.interim.textContent === PAUSED) els.interim.textContent = "";
+      },
     });
     const btn = els.button;
     btn.addEventListener("pointerdown", (ev) => {
@@ -290,8 +316,15 @@ export class VoiceInput {
     if (ca) ca.hidden = this.win.location.protocol !== "https:";
   }
 
-  /** Button down or M down: start; a long hold is push-to-talk, a tap toggles. */
+  /** Button down or M down: start; a long hold is push-to-talk, a tap toggles. Hands-free,
+   *  while the console speaks, it interrupts the reply instead (barge-in by intent). */
   press() {
+    if (this.listening && this.engine === "server" && this.server.muted) {
+      this.pressedAt = 0;
+      this.opts.hush?.(); // the console stops speaking
+      this.server.interrupt();
+      return;
+    }
     if (this.listening) {
       this.pressedAt = 0;
       this.stop();
