@@ -11,7 +11,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.browser.conftest import ROOT, open_console
+from tests.browser.conftest import ROOT, SCREENSHOTS, open_console
 from tests.loopback import free_port
 from tests.recorder.synthetic import write_flight
 
@@ -69,6 +69,13 @@ def test_replay_shows_the_recorded_flight_with_a_timeline(browser: Any, tmp_path
             page.wait_for_function("uavConsole.map.drones.size > 0", timeout=10_000)
             trail = page.evaluate("[...uavConsole.map.drones.values()][0].trail.length")
             assert trail > 0
+            # The timeline is one row: play, seek, time (console.css .replay-bar, a flex row;
+            # a stray merge marker once dropped that rule and stacked them).
+            assert page.eval_on_selector("#replay-bar", "e => getComputedStyle(e).display") == (
+                "flex"
+            )
+            SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(SCREENSHOTS / "replay.png"))
             page.click("#replay-play")  # pause
             page.wait_for_function(
                 "document.querySelector('#replay-play').textContent === 'Play'", timeout=5_000
