@@ -155,6 +155,7 @@ def test_observer_controls_disabled_and_publishes_refused(
             "#btn-emergency",
             "#send",
             "#mic",
+            "#handsfree",
             "#text-input",
             "[data-jog='forward']",
             "#map-go",

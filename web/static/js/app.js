@@ -276,10 +276,11 @@ class Console {
     // the drone (the server decides); observers cannot command at all.
     $("btn-emergency").disabled = observer;
     this.controls.setEnabled(can);
+    this.speech?.setAllowed(can); // hands-free too: the server refuses an observer's speech
     $("takeover").hidden = !lostLease;
     document.body.dataset.role = this.role || "";
     document.body.dataset.connected = String(connected);
-    if (observer) $("text-input").placeholder = "Observers can watch but not command";
+    if (observer) $("text-input").placeholder = "Observers watch only";
   }
 
   /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over. */

@@ -220,6 +220,7 @@ export class VoiceInput {
     this.browserFailed = false;
     this.pressedAt = 0;
     this.listening = false;
+    this.allowed = true; // false for observers and pilots without the lease (setAllowed)
     this.browser = new SpeechInput(
       { button: document.createElement("button"), interim: els.interim },
       opts.onFinal,
@@ -310,10 +311,17 @@ export class VoiceInput {
       this.els.label.textContent =
         engine === "server" ? "Speech: this console (offline)" : "Speech: the browser's (online)";
     }
-    if (this.els.handsfree) this.els.handsfree.disabled = engine !== "server";
+    if (this.els.handsfree) this.els.handsfree.disabled = engine !== "server" || !this.allowed;
     // Over HTTPS with the console's own CA, offer its certificate so a phone can trust it once.
     const ca = document.getElementById("ca-download");
     if (ca) ca.hidden = this.win.location.protocol !== "https:";
+  }
+
+  /** Whether this console may speak commands now; hands-free stops when it may not. */
+  setAllowed(allowed) {
+    this.allowed = allowed;
+    if (!allowed && this.listening) this.stop();
+    this.showEngine();
   }
 
   /** Button down or M down: start; a long hold is push-to-talk, a tap toggles. Hands-free,
