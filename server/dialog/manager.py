@@ -335,9 +335,9 @@ class DialogManager:
     ) -> tuple[DialogResult, str]:
         heard = source != "speech" or confidence >= self.params.confidence_threshold
         sentence = parse_address(text).text  # without the drone's name: "uav2, yes" is a yes
+        said = self.nlu.answer(sentence)  # "yes", "no" or None: not an answer
         pending, self._confirm = self._confirm, None
         if pending is not None and pending.fresh(self.clock()):
-            said = self.nlu.answer(sentence)
             if said is not None and not heard:
                 self._confirm = pending  # the answer itself was not heard well: still asking
                 return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
@@ -345,7 +345,7 @@ class DialogManager:
                 return DialogResult(confirm.NOT_CONFIRMED, [], False), "not_confirmed"
             if said == "yes":  # the sentence runs now, checked against the state of now
                 return await self._handle(pending.text, 1.0, "text", role)
-        elif heard and self.nlu.answer(sentence) is not None:  # a yes or no, and nothing asked
+        elif heard and said is not None:  # a yes or no, and nothing asked
             why = confirm.EXPIRED if pending is not None else confirm.NOTHING_ASKED
             return DialogResult(why, [], False), "not_understood"
         if not heard:
