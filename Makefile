@@ -12,7 +12,7 @@ ARGS   ?=
 $(VENV)/.installed-run: pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e .
+	$(PY) -m pip install -q -e '.[speech,captioner]'
 	touch $@
 
 $(VENV)/.installed-test: pyproject.toml

@@ -13,16 +13,17 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-import onnxruntime as ort
-
 from server.captioner.errors import BadFrame, CaptionerUnavailable
 from server.captioner.search import Hypothesis, beam_search, greedy
 from server.captioner.vocab import Vocab, detokenize
+
+if TYPE_CHECKING:
+    import onnxruntime as ort
 
 ENCODER_FILE = "encoder.onnx"
 DECODER_FILE = "decoder.onnx"
@@ -77,6 +78,12 @@ class Captioner:
             if not (root / name).is_file():
                 raise CaptionerUnavailable(f"{name} is missing from {root}")
         vocab = Vocab.load(root / VOCAB_FILE)
+        try:
+            import onnxruntime as ort
+        except ImportError as exc:
+            raise CaptionerUnavailable(
+                "onnxruntime is not installed: pip install 'uav-console[captioner]'"
+            ) from exc
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
@@ -229,6 +236,8 @@ def as_bgr(frame: Any) -> npt.NDArray[np.uint8]:
 
 
 def _session(path: Path, options: ort.SessionOptions) -> ort.InferenceSession:
+    import onnxruntime as ort
+
     try:
         return ort.InferenceSession(
             str(path), sess_options=options, providers=["CPUExecutionProvider"]

@@ -213,8 +213,17 @@ class PatrolReport:
         return "\n".join(lines)
 
     def plot(self, path: Path) -> None:
-        """Tracks (map frame, route and stations) and batteries over time, as a PNG."""
-        import matplotlib
+        """Tracks (map frame, route and stations) and batteries over time, as a PNG.
+
+        Raises:
+            RuntimeError: matplotlib (the ``report`` extra) is not installed.
+        """
+        try:
+            import matplotlib
+        except ImportError as exc:
+            raise RuntimeError(
+                "the patrol plot needs matplotlib: pip install 'uav-console[report]'"
+            ) from exc
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt

@@ -85,3 +85,19 @@ def test_shipped_model_is_small(model_dir: Path) -> None:
         (model_dir / n).stat().st_size for n in ("encoder.onnx", "decoder.onnx", "vocab.json")
     )
     assert total <= 10 * 1024 * 1024
+
+
+def test_without_onnxruntime_the_reason_names_the_extra(model_dir: Path) -> None:
+    """onnxruntime is the ``captioner`` extra: a console installed without it still starts and
+    says how to get scene description."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; sys.modules['onnxruntime'] = None\n"
+        "from server.captioner import load_captioner\n"
+        f"print(load_captioner({str(model_dir)!r}).reason)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert "uav-console[captioner]" in out.stdout
