@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 import numpy.typing as npt
+
 from server.captioner.errors import BadFrame, CaptionerUnavailable
 from server.captioner.search import Hypothesis, beam_search, greedy
 from server.captioner.vocab import Vocab, detokenize
