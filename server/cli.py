@@ -51,6 +51,18 @@ def _parser() -> argparse.ArgumentParser:
         "(process, the default) or in the web process (inline); env UAVC_VEHICLES",
     )
 
+    s.add_argument(
+        "--bus-listen",
+        action="append",
+        default=None,
+        help="endpoint the bus router listens on (repeatable; default tcp/127.0.0.1:7447 or the "
+        "next free port)",
+    )
+    s.add_argument(
+        "--bus-connect", action="append", default=None, help="another bus router (repeatable)"
+    )
+    s.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
+
     sim = sub.add_parser("sim", help="the simulator alone, behind the AR.Drone protocol")
     sim.add_argument(
         "--addr", default=None, help="default 127.0.0.2 (AR.Drone), 127.0.0.9 (MAVLink)"
@@ -198,6 +210,9 @@ def _serve(args: argparse.Namespace) -> int:
         tls=False if args.no_tls else None,
         asr_preload=True,
         vehicles=serve_vehicles(args.vehicles, os.environ),
+        bus_listen=tuple(args.bus_listen) if args.bus_listen else None,
+        bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
+        fleet_name=args.fleet_name,
     )
     if settings.recognizer not in ("server", "browser", "auto"):
         raise SettingsError(

@@ -404,6 +404,10 @@ class Runtime:
             f"  observer (watch only): {base}?token={self.tokens.observer_token}",
         ]
         lines.append(f"  flight stacks: {self.vehicles.flight_stacks()}")
+        bus = self.vehicles.bus
+        if bus is not None:
+            endpoints = ", ".join(bus.listen)
+            lines.append(f"  bus: {endpoints} · Zenoh client configuration: {bus.client_file}")
         if self.tls is not None:
             lines.append(f"  certificate SHA-256: {self.tls.fingerprint}")
             if self.tls.ca is not None:

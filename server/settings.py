@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import BeforeValidator, Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, EnvSettingsSource, NoDecode, SettingsConfigDict
 
 from drone.share import SOURCE_ROOT, share_dir
@@ -20,7 +20,15 @@ from drone.share import SOURCE_ROOT, share_dir
 ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
 ENV_PREFIX = "UAVC_"
 
-CommaList = Annotated[tuple[str, ...], NoDecode]  # "a,b" in the environment, not JSON
+
+def _split_commas(value: Any) -> Any:
+    if isinstance(value, str):
+        return tuple(s.strip() for s in value.split(",") if s.strip())
+    return value
+
+
+CommaList = Annotated[tuple[str, ...], NoDecode, BeforeValidator(_split_commas)]
+"""A list: ``a,b`` in the environment (not JSON)."""
 
 
 class SettingsError(ValueError):
@@ -138,6 +146,20 @@ class Settings(BaseSettings):
         description="MAVLink 2 signing secret, 64 hex digits: sign everything, accept only "
         "signed frames.",
     )
+    # -- the bus (Zenoh; docs/bus.md) ---------------------------------------------------------
+    bus_listen: CommaList = Field(
+        (),
+        description="Endpoints the console's bus router listens on; unset: tcp/127.0.0.1:7447, "
+        "or the next free port.",
+    )
+    bus_connect: CommaList = Field(
+        (), description="Other bus routers to join (consoles on other hosts, zenohd)."
+    )
+    fleet_name: str = Field("default", description="The fleet's name on the bus (its keys).")
+    bus_user: str | None = Field(
+        None, description="A vehicle process's bus user (given by serve to its vehicles)."
+    )
+    bus_password: str | None = Field(None, description="That user's bus password.")
     # -- vehicle processes ---------------------------------------------------------------------
     vehicles: Literal["inline", "process"] = Field(
         "inline",
@@ -188,13 +210,6 @@ class Settings(BaseSettings):
     @classmethod
     def _expand_recordings(cls, value: Path | None) -> Path | None:
         return value.expanduser() if value is not None else None
-
-    @field_validator("allow_origins", "allow_hosts", mode="before")
-    @classmethod
-    def _comma_list(cls, value: Any) -> Any:
-        if isinstance(value, str):
-            return tuple(s.strip() for s in value.split(",") if s.strip())
-        return value
 
     @model_validator(mode="after")
     def _check(self) -> Settings:

@@ -39,11 +39,20 @@ class CommandResponse(BaseModel):
     )
 
 
+class BusHealth(BaseModel):
+    endpoints: list[str] = Field(description="where the router listens")
+    alive: list[str] = Field(description="vehicles whose liveliness token is on the bus")
+    client_config: str = Field(description="the observer's Zenoh client configuration file")
+
+
 class Health(BaseModel):
     status: Literal["ok", "degraded"]
     version: str
     drones: dict[str, bool] = Field(description="drone name -> link up")
     captioner: str = Field(description="'ready' or why scene description is unavailable")
+    bus: BusHealth | None = Field(
+        default=None, description="the console's bus router (docs/bus.md); null: none runs"
+    )
 
 
 class FaultRequest(StrictBody):

@@ -8,7 +8,7 @@ from fastapi import APIRouter
 
 from server import __version__
 from server.api.deps import RoleDep, RuntimeDep
-from server.api.models import Health
+from server.api.models import BusHealth, Health
 
 router = APIRouter(tags=["system"])
 
@@ -19,8 +19,15 @@ def health(runtime: RuntimeDep) -> Health:
     links = {name: stack.link_ok() for name, stack in runtime.drones.items()}
     captioner = runtime.captioner_status()
     ok = all(links.values()) and captioner == "ready"
+    bus = runtime.vehicles.bus
     return Health(
-        status="ok" if ok else "degraded", version=__version__, drones=links, captioner=captioner
+        status="ok" if ok else "degraded",
+        version=__version__,
+        drones=links,
+        captioner=captioner,
+        bus=None
+        if bus is None
+        else BusHealth(endpoints=bus.listen, alive=bus.alive(), client_config=str(bus.client_file)),
     )
 
 

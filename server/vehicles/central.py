@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING, Any
 
 from fastapi import APIRouter, WebSocket
 
+from drone.bus.console import ConsoleBus
+from drone.bus.errors import BusError
 from server.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.msgs import header
 from server.rosbridge.context import BridgeContext
@@ -185,6 +187,7 @@ class VehicleCentral:
         self._stopping = False
         self._recording_sent: str | None = None
         self._utterances: Any = None
+        self.bus: ConsoleBus | None = None
 
     def router(self) -> APIRouter:
         router = APIRouter()
@@ -229,6 +232,7 @@ class VehicleCentral:
         if tls is not None:
             safety += ["--safety-cert", str(tls.cert), "--safety-key", str(tls.key)]
         env = child_env(s, self.runtime.tokens.pilot_token)
+        self.bus = self._open_bus([f"uav{index + 1}" for index in range(count)])
         for index in range(count):
             name = f"uav{index + 1}"
             prefix = "" if count == 1 else f"/{name}"
@@ -238,10 +242,36 @@ class VehicleCentral:
             argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
             if tls is not None:  # our own certificate, pinned (whatever names it carries)
                 argv += ["--fingerprint", tls.fingerprint]
-            self.processes[name] = VehicleProcess(argv, env, name)
+            self.processes[name] = VehicleProcess(argv, {**env, **self._bus_env(name)}, name)
             self._register(name, prefix, simulated=kind in ("sim", SIM_MAVLINK))
             self._expect(name)
         self._tasks.append(asyncio.create_task(self._launch(), name="vehicles-launch"))
+
+    def _open_bus(self, vehicles: list[str]) -> ConsoleBus | None:
+        """The console's embedded bus router (docs/bus.md); None, said in the log, when it
+        cannot start: the vehicles still reach the console over /vehicle-link."""
+        s = self.runtime.settings
+        bus = ConsoleBus(
+            s.data_dir / "bus", s.fleet_name, vehicles, listen=s.bus_listen, connect=s.bus_connect
+        )
+        try:
+            bus.start()
+        except BusError as exc:
+            log.error("the bus did not start: %s", exc)
+            self.alerts.append(f"the bus did not start: {exc}")
+            return None
+        return bus
+
+    def _bus_env(self, name: str) -> dict[str, str]:
+        if self.bus is None:
+            return {}
+        cred = self.bus.vehicle_credential(name)
+        return {
+            "UAVC_BUS_CONNECT": ",".join(cred.connect),
+            "UAVC_BUS_USER": cred.user,
+            "UAVC_BUS_PASSWORD": cred.password,
+            "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
+        }
 
     async def _launch(self) -> None:
         orphans = await self._orphans(set(self.processes))
@@ -308,6 +338,9 @@ class VehicleCentral:
                 await t
         for vp in self.processes.values():
             await _terminate(vp)
+        if self.bus is not None:
+            self.bus.close()
+            self.bus = None
 
     # ------------------------------------------------------------------ drones
     def _register(self, name: str, prefix: str, *, simulated: bool) -> None:

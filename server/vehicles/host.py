@@ -31,6 +31,8 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
+from drone.bus.errors import BusError
+from drone.bus.vehicle import VehicleBus
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
 from server.tls import TLSError, server_context
@@ -172,6 +174,7 @@ class VehicleHost:
             max(settings.central_loss_land_s, settings.heartbeat_timeout_s + 0.1),
         )
         self.loss_actions: list[str] = []
+        self.bus: VehicleBus | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self._started = time.monotonic()
         self.stop_requested = asyncio.Event()
@@ -276,6 +279,7 @@ class VehicleHost:
             tls=tls,
         )
         await self.safety.start()
+        self.bus = join_bus(s, self.name)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         self._tasks = [
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
@@ -376,6 +380,8 @@ class VehicleHost:
                     self._on_loss(action, now - heard)
                 if now >= next_telemetry:
                     next_telemetry = now + TELEMETRY_PERIOD_S
+                    if self.bus is not None:
+                        self.bus.publish(self.stack.vehicle.snapshot())
                     self.graph.publish(
                         names.telemetry_topic(self.name), {"data": json.dumps(self.telemetry())}
                     )
@@ -430,6 +436,8 @@ class VehicleHost:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await t
         await self.safety.stop()
+        if self.bus is not None:
+            self.bus.close()
         self._fleet_sub.close()
         self._recording_sub.close()
         self.ltm.close()
@@ -471,6 +479,24 @@ def raise_priority(nice: int, rt_priority: int = 0) -> str:
     except OSError as exc:
         log.info("vehicle priority unchanged (nice %d not permitted: %s)", nice, exc)
     return f"nice {os.getpriority(os.PRIO_PROCESS, 0)}"
+
+
+def join_bus(settings: Settings, name: str) -> VehicleBus | None:
+    """This vehicle on the fleet's bus (docs/bus.md) when ``serve`` gave it a credential;
+    None when it did not, or the router cannot be reached (said in the log: the vehicle flies
+    on, its console link carries everything the bus does)."""
+    if not settings.bus_connect or not settings.bus_user or not settings.bus_password:
+        return None
+    bus = VehicleBus(
+        settings.bus_connect, settings.bus_user, settings.bus_password, settings.fleet_name, name
+    )
+    try:
+        bus.start()
+    except BusError as exc:
+        log.error("%s: not on the bus: %s", name, exc)
+        return None
+    log.info("%s: on the bus at %s", name, ", ".join(settings.bus_connect))
+    return bus
 
 
 async def run_vehicle(settings: Settings, options: VehicleOptions, token: str) -> None:

@@ -1,0 +1,124 @@
+"""Zenoh configurations as plain dicts (JSON is JSON5): the console's router, its clients, and the
+access control that lets each credential do only its own part.
+
+Roles on the bus (``transport/auth/usrpwd`` user names):
+- ``console``: the router's own user, and consoles joining it; may do everything in its fleet.
+- ``observer``: subscribes and queries liveliness; publishes and commands nothing.
+- ``pilot``: an observer that may also send commands (queries on ``…/cmd``); the vehicle judges
+  each one by its lease.
+- ``vehicle-<name>``: publishes, declares liveliness and answers queries under its own
+  ``uavc/<fleet>/<name>/`` only.
+Access control is the router's (Zenoh 1.x ``access_control``, default deny); a message it refuses
+never leaves the router.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from drone.bus import keys
+
+CONSOLE_USER = "console"
+OBSERVER_USER = "observer"
+PILOT_USER = "pilot"
+VEHICLE_PREFIX = "vehicle-"
+
+_EVERYTHING = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+]
+_WATCH = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
+_OWN = ["put", "delete", "liveliness_token", "declare_queryable", "reply"]
+
+
+def vehicle_user(name: str) -> str:
+    return VEHICLE_PREFIX + keys.segment(name)
+
+
+def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
+    """The router's ACL for ``fleet`` and these vehicle names (ACLs are fixed at start)."""
+    root = f"{keys.ROOT}/{keys.segment(fleet)}"
+    rules: list[dict[str, Any]] = [
+        _rule("deliver", ["egress"], _EVERYTHING, [f"{keys.ROOT}/**"]),
+        _rule("watch", ["ingress"], _WATCH, [f"{root}/**"]),
+        _rule("command", ["ingress"], ["query"], [f"{root}/*/cmd"]),
+        _rule("console", ["ingress"], _EVERYTHING, [f"{root}/**"]),
+    ]
+    subjects: list[dict[str, Any]] = [
+        {"id": "everyone"},
+        {"id": "commanders", "usernames": [PILOT_USER, CONSOLE_USER]},
+        {"id": "consoles", "usernames": [CONSOLE_USER]},
+    ]
+    policies: list[dict[str, Any]] = [
+        {"id": "all-watch", "rules": ["deliver", "watch"], "subjects": ["everyone"]},
+        {"id": "pilots-command", "rules": ["command"], "subjects": ["commanders"]},
+        {"id": "consoles-all", "rules": ["console"], "subjects": ["consoles"]},
+    ]
+    for name in sorted(set(vehicles)):
+        rid = f"own-{name}"
+        rules.append(_rule(rid, ["ingress"], _OWN, [f"{root}/{keys.segment(name)}/**"]))
+        subjects.append({"id": f"vehicle-{name}", "usernames": [vehicle_user(name)]})
+        policies.append({"id": rid, "rules": [rid], "subjects": [f"vehicle-{name}"]})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def _rule(rid: str, flows: list[str], messages: list[str], key_exprs: list[str]) -> dict[str, Any]:
+    return {
+        "id": rid,
+        "permission": "allow",
+        "flows": flows,
+        "messages": messages,
+        "key_exprs": key_exprs,
+    }
+
+
+def router_config(
+    *,
+    listen: list[str],
+    connect: list[str],
+    password: str,
+    dictionary_file: str,
+    acl: dict[str, Any],
+) -> dict[str, Any]:
+    """The console's embedded router: listens where told, joins only the routers named (no
+    multicast scouting: a second console on the same machine must not join this fleet)."""
+    return {
+        "mode": "router",
+        "listen": {"endpoints": listen},
+        "connect": {"endpoints": connect},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {
+            "auth": {
+                "usrpwd": {
+                    "user": CONSOLE_USER,
+                    "password": password,
+                    "dictionary_file": dictionary_file,
+                }
+            }
+        },
+        "access_control": acl,
+    }
+
+
+def client_config(*, connect: list[str], user: str, password: str) -> dict[str, Any]:
+    """A client of the router: what ``client.json5`` holds for a third-party script."""
+    return {
+        "mode": "client",
+        "connect": {"endpoints": connect},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {"auth": {"usrpwd": {"user": user, "password": password}}},
+    }

@@ -1,0 +1,69 @@
+"""The bus's user/password dictionary: one random password per user, kept 0600 in the data
+directory (``<data dir>/bus/credentials.txt``, Zenoh's ``dictionary_file`` format,
+``user:password`` per line)."""
+
+from __future__ import annotations
+
+import os
+import secrets
+from collections.abc import Iterable
+from pathlib import Path
+
+from drone.bus.config import CONSOLE_USER, OBSERVER_USER, PILOT_USER, vehicle_user
+from drone.bus.errors import BusConfigError
+
+FILE_NAME = "credentials.txt"
+
+
+class Credentials:
+    """Users and passwords of one console's bus."""
+
+    def __init__(self, path: Path, users: dict[str, str]) -> None:
+        self.path = path
+        self.users = users
+
+    def password(self, user: str) -> str:
+        try:
+            return self.users[user]
+        except KeyError:
+            raise BusConfigError(f"no bus credential for {user!r} in {self.path}") from None
+
+    def vehicles(self) -> list[str]:
+        """Names of the vehicles that have a credential."""
+        return sorted(u.removeprefix("vehicle-") for u in self.users if u.startswith("vehicle-"))
+
+    @classmethod
+    def load_or_create(cls, directory: Path, vehicles: Iterable[str]) -> Credentials:
+        """Read the dictionary, adding the roles and any of ``vehicles`` it lacks.
+
+        Raises:
+            BusConfigError: a line of the file is not ``user:password``.
+        """
+        directory.mkdir(parents=True, exist_ok=True)
+        os.chmod(directory, 0o700)
+        path = directory / FILE_NAME
+        users: dict[str, str] = {}
+        if path.exists():
+            for n, line in enumerate(path.read_text().splitlines(), 1):
+                if not line.strip():
+                    continue
+                user, sep, password = line.partition(":")
+                if not sep or not user or not password:
+                    raise BusConfigError(f"{path}:{n}: not user:password")
+                users[user] = password
+        wanted = [CONSOLE_USER, OBSERVER_USER, PILOT_USER, *(vehicle_user(v) for v in vehicles)]
+        missing = [u for u in wanted if u not in users]
+        for user in missing:
+            users[user] = secrets.token_urlsafe(24)
+        if missing or not path.exists():
+            write_private(path, "".join(f"{u}:{p}\n" for u, p in users.items()))
+        return cls(path, users)
+
+
+def write_private(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` readable by its owner only, atomically."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)

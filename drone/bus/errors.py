@@ -1,0 +1,25 @@
+"""Errors of the bus.
+
+BusError
+├── KeySegmentError  a fleet or drone name that cannot be one segment of a key
+├── PayloadError     bytes that are not a valid payload of the key's schema
+└── BusConfigError   an endpoint or credential that cannot be used
+"""
+
+from __future__ import annotations
+
+
+class BusError(Exception):
+    """Base of the bus's errors."""
+
+
+class KeySegmentError(BusError, ValueError):
+    """A fleet or drone name that cannot be one segment of a key (``/``, ``*``, ``$``…)."""
+
+
+class PayloadError(BusError, ValueError):
+    """A payload that does not decode to its key's schema; the message says why."""
+
+
+class BusConfigError(BusError, ValueError):
+    """An endpoint or credential that cannot be used; the message names it."""

@@ -1,0 +1,75 @@
+"""The key space (``docs/bus.md``): ``uavc/<fleet>/<drone>/<topic>`` and the central's keys.
+
+| key | what |
+|---|---|
+| ``uavc/<fleet>/<drone>/telemetry`` | :class:`~drone.bus.payloads.Telemetry`, JSON, ≥ 5 Hz |
+| ``uavc/<fleet>/<drone>/alive`` | liveliness token of the vehicle process |
+| ``uavc/<fleet>/<drone>/cmd`` | commands: queries answered by the vehicle |
+| ``uavc/<fleet>/central/alive`` | liveliness of the console holding the central role |
+| ``uavc/<fleet>/central/missions`` | the JSON of ``GET /api/v1/patrol`` |
+"""
+
+from __future__ import annotations
+
+import re
+
+from drone.bus.errors import KeySegmentError
+
+ROOT = "uavc"
+DEFAULT_FLEET = "default"
+CENTRAL = "central"  # not a drone name: the central role's own keys
+SEGMENT = re.compile(r"[A-Za-z0-9_-]{1,64}")
+
+
+def segment(name: str) -> str:
+    """``name`` as one key segment.
+
+    Raises:
+        KeySegmentError: empty, too long, or holding a character with a meaning in key
+            expressions (``/``, ``*``, ``$``, ``?``, ``#``) or outside ``[A-Za-z0-9_-]``.
+    """
+    if not SEGMENT.fullmatch(name):
+        raise KeySegmentError(f"{name!r} cannot name a fleet or drone on the bus ([A-Za-z0-9_-])")
+    return name
+
+
+def drone_key(fleet: str, drone: str, topic: str) -> str:
+    if drone == CENTRAL:
+        raise KeySegmentError(f"{CENTRAL!r} is the central role's, not a drone's name")
+    return f"{ROOT}/{segment(fleet)}/{segment(drone)}/{topic}"
+
+
+def telemetry(fleet: str, drone: str) -> str:
+    return drone_key(fleet, drone, "telemetry")
+
+
+def alive(fleet: str, drone: str) -> str:
+    return drone_key(fleet, drone, "alive")
+
+
+def command(fleet: str, drone: str) -> str:
+    return drone_key(fleet, drone, "cmd")
+
+
+def all_telemetry(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/*/telemetry"
+
+
+def all_alive(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/*/alive"
+
+
+def central_alive(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/{CENTRAL}/alive"
+
+
+def central_missions(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/{CENTRAL}/missions"
+
+
+def drone_of(key: str) -> str | None:
+    """The drone a ``uavc/<fleet>/<drone>/…`` key names (None for other keys)."""
+    parts = key.split("/")
+    if len(parts) < 4 or parts[0] != ROOT or parts[2] == CENTRAL:
+        return None
+    return parts[2]

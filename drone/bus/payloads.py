@@ -1,0 +1,62 @@
+"""Payloads on the bus: versioned JSON, decoded into frozen models or refused with a reason."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+
+from drone.bus.errors import PayloadError
+
+MAX_PAYLOAD_BYTES = 64 * 1024
+
+
+class Telemetry(BaseModel):
+    """``uavc/<fleet>/<drone>/telemetry`` (schema 1): where a drone is and how it fares."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    v: Literal[1] = 1
+    drone: str
+    stamp: float  # Unix seconds, the vehicle's clock
+    x: float  # metres, map frame (docs/CONVENTIONS.md)
+    y: float
+    z: float
+    yaw_deg: float
+    battery_pct: float
+    state: str  # the vehicle's flight state (LANDED, FLYING, HOVERING, …)
+    link_ok: bool = True
+    flying: bool = False
+
+    @field_validator("stamp", "x", "y", "z", "yaw_deg", "battery_pct")
+    @classmethod
+    def _finite(cls, value: float) -> float:
+        if not math.isfinite(value):
+            raise ValueError("must be a finite number")
+        return value
+
+
+def encode(message: BaseModel) -> bytes:
+    return message.model_dump_json().encode()
+
+
+def decode_telemetry(data: bytes) -> Telemetry:
+    """Decode one telemetry payload.
+
+    Raises:
+        PayloadError: over 64 KB, not JSON, or not the schema (the reason names the field).
+    """
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise PayloadError(f"telemetry payload of {len(data)} bytes (at most {MAX_PAYLOAD_BYTES})")
+    try:
+        raw = json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PayloadError(f"telemetry is not JSON: {exc}") from exc
+    try:
+        return Telemetry.model_validate(raw)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "payload"
+        raise PayloadError(f"telemetry {where}: {first['msg']}") from exc

@@ -1,0 +1,113 @@
+"""The bus's key space and payloads: sans-I/O, every input parses or is refused with a reason."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from drone.bus import keys
+from drone.bus.config import access_control, client_config, vehicle_user
+from drone.bus.errors import KeySegmentError, PayloadError
+from drone.bus.payloads import Telemetry, decode_telemetry, encode
+
+
+def test_documented_keys() -> None:
+    assert keys.telemetry("default", "uav1") == "uavc/default/uav1/telemetry"
+    assert keys.alive("default", "uav2") == "uavc/default/uav2/alive"
+    assert keys.command("site-b", "uav7") == "uavc/site-b/uav7/cmd"
+    assert keys.central_alive("default") == "uavc/default/central/alive"
+    assert keys.central_missions("default") == "uavc/default/central/missions"
+    assert keys.drone_of("uavc/default/uav3/telemetry") == "uav3"
+    assert keys.drone_of("uavc/default/central/alive") is None
+
+
+@pytest.mark.parametrize("name", ["", "a/b", "*", "**", "uav$1", "a b", "x" * 65, "é"])
+def test_names_that_cannot_be_a_segment_are_refused(name: str) -> None:
+    with pytest.raises(KeySegmentError):
+        keys.telemetry("default", name)
+
+
+def test_central_is_not_a_drone_name() -> None:
+    with pytest.raises(KeySegmentError, match="central"):
+        keys.telemetry("default", "central")
+
+
+@given(st.text(max_size=80))
+def test_any_name_is_a_segment_or_refused(name: str) -> None:
+    try:
+        key = keys.alive("default", name)
+    except KeySegmentError:
+        return
+    assert key.split("/") == ["uavc", "default", name, "alive"]
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=32)
+
+
+@given(
+    st.builds(
+        Telemetry,
+        drone=st.from_regex(keys.SEGMENT, fullmatch=True),
+        stamp=finite,
+        x=finite,
+        y=finite,
+        z=finite,
+        yaw_deg=finite,
+        battery_pct=finite,
+        state=st.sampled_from(["LANDED", "FLYING", "HOVERING"]),
+        link_ok=st.booleans(),
+        flying=st.booleans(),
+    )
+)
+def test_telemetry_round_trip(message: Telemetry) -> None:
+    assert decode_telemetry(encode(message)) == message
+
+
+@given(st.binary(max_size=300))
+def test_garbage_telemetry_is_refused(data: bytes) -> None:
+    try:
+        decode_telemetry(data)
+    except PayloadError:
+        pass
+
+
+@pytest.mark.parametrize(
+    ("payload", "reason"),
+    [
+        (b"{", "not JSON"),
+        (b"[]", "payload"),
+        (json.dumps({"drone": "uav1"}).encode(), "stamp"),
+        (b'{"v": 2, "drone": "uav1"}', "v"),
+        (b"x" * 70000, "bytes"),
+    ],
+)
+def test_bad_telemetry_says_why(payload: bytes, reason: str) -> None:
+    with pytest.raises(PayloadError, match=reason):
+        decode_telemetry(payload)
+
+
+def test_non_finite_telemetry_is_refused() -> None:
+    good = Telemetry(drone="uav1", stamp=1.0, x=0, y=0, z=0, yaw_deg=0, battery_pct=50, state="X")
+    raw = json.loads(encode(good))
+    raw["x"] = math.inf
+    with pytest.raises(PayloadError, match="x"):
+        decode_telemetry(json.dumps(raw).encode())
+
+
+def test_acl_gives_each_vehicle_its_own_keys_only() -> None:
+    acl = access_control("default", ["uav1", "uav2"])
+    assert acl["default_permission"] == "deny"
+    own = {r["id"]: r["key_exprs"] for r in acl["rules"] if r["id"].startswith("own-")}
+    assert own == {"own-uav1": ["uavc/default/uav1/**"], "own-uav2": ["uavc/default/uav2/**"]}
+    subjects = {s["id"]: s.get("usernames") for s in acl["subjects"]}
+    assert subjects["vehicle-uav1"] == [vehicle_user("uav1")]
+
+
+def test_client_configuration_never_scouts() -> None:
+    cfg = client_config(connect=["tcp/127.0.0.1:7447"], user="observer", password="p")
+    assert cfg["scouting"]["multicast"]["enabled"] is False
+    assert cfg["mode"] == "client"

@@ -1,0 +1,64 @@
+"""``serve`` opens the bus and its vehicle processes join it: a third-party Zenoh script, given
+only the client configuration ``serve`` wrote, watches a drone's telemetry and liveliness."""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+from tests.isolation.conftest import serve, wait_for
+from tests.loopback import for_worker, free_port
+
+SCRIPT = textwrap.dedent(
+    """
+    import json, sys, threading, zenoh
+    conf = zenoh.Config.from_file(sys.argv[1])
+    samples, done = [], threading.Event()
+    def on_sample(sample):
+        samples.append(json.loads(sample.payload.to_string()))
+        if len(samples) >= 12:
+            done.set()
+    with zenoh.open(conf) as session:
+        alive = [str(r.ok.key_expr) for r in session.liveliness().get("uavc/default/*/alive")]
+        sub = session.declare_subscriber("uavc/default/uav1/telemetry", on_sample)
+        done.wait(30)
+        print(json.dumps({"alive": alive, "samples": samples}))
+    """
+)
+
+
+def test_a_third_party_script_watches_a_served_drone(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    env = {"UAVC_SIM_BASE_ADDR": for_worker("127.0.41.2")}
+    extra = ("--vehicles", "process", "--bus-listen", endpoint)
+    with serve(tmp_path, "sim", extra=extra, env=env) as srv:
+        srv.wait_vehicle()
+        health = wait_for(
+            lambda: (h := srv.http.get("/api/v1/health").json())["bus"]["alive"] and h,
+            "uav1 alive on the bus",
+        )
+        assert health["bus"]["endpoints"] == [endpoint]
+        client_file = Path(health["bus"]["client_config"])
+        assert client_file == tmp_path / "data" / "bus" / "client.json5"
+        assert client_file.stat().st_mode & 0o077 == 0
+        assert str(client_file) in srv.log()  # serve says where it is
+        out = subprocess.run(
+            [sys.executable, "-c", SCRIPT, str(client_file)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    assert result["alive"] == ["uavc/default/uav1/alive"]
+    samples = result["samples"]
+    assert len(samples) >= 12
+    for field in ("stamp", "x", "y", "z", "yaw_deg", "battery_pct", "state"):
+        assert field in samples[-1], field
+    assert samples[-1]["drone"] == "uav1" and samples[-1]["state"] == "LANDED"
+    periods = [b["stamp"] - a["stamp"] for a, b in zip(samples, samples[1:], strict=False)]
+    assert statistics.median(periods) <= 0.2  # at least 5 Hz, as the vehicle stamps them
