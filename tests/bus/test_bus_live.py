@@ -165,7 +165,7 @@ def test_client_files_are_private_and_a_plain_script_watches_with_them(
         while proc.poll() is None:
             uav1._publisher.put(encode(telemetry("uav1", 42.0)))
             try:
-                out, err = proc.communicate(timeout=0.1)
+                out, _err = proc.communicate(timeout=0.1)
             except subprocess.TimeoutExpired:
                 continue
         out = out or ""

@@ -3,6 +3,7 @@ only the client configuration ``serve`` wrote, watches a drone's telemetry and l
 
 from __future__ import annotations
 
+import itertools
 import json
 import statistics
 import subprocess
@@ -60,5 +61,5 @@ def test_a_third_party_script_watches_a_served_drone(tmp_path: Path) -> None:
     for field in ("stamp", "x", "y", "z", "yaw_deg", "battery_pct", "state"):
         assert field in samples[-1], field
     assert samples[-1]["drone"] == "uav1" and samples[-1]["state"] == "LANDED"
-    periods = [b["stamp"] - a["stamp"] for a, b in zip(samples, samples[1:], strict=False)]
+    periods = [b["stamp"] - a["stamp"] for a, b in itertools.pairwise(samples)]
     assert statistics.median(periods) <= 0.2  # at least 5 Hz, as the vehicle stamps them
