@@ -112,29 +112,32 @@ DOUBT_TEXT = "Navdata inconsistent: sensor fault or spoofing"
 @dataclass
 class NavdataMonitor:
     """The driver doubts the navdata: alert, hover while flying, ask the operator; tell when the
-    stream is consistent again (the drone stays where it is until the operator says)."""
+    stream is consistent again (the drone stays where it is until the operator says). Told once
+    per episode, and once more if the drone takes off while the doubt lasts."""
 
     period_s: float = 0.25
     name: str = "navdata"
-    _told: bool = False
+    _told: str = ""  # "", "ground" (told, not flying) or "air" (told and hovered)
 
     def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
         doubt = snap.navdata_doubt
+        flying = state in FLYING and snap.flying
+        if doubt and flying and self._told != "air":
+            self._told = "air"
+            return Alarm(
+                self.name,
+                "alert",
+                f"{DOUBT_TEXT}: {doubt}. I am hovering and will not act on these readings. "
+                "Say land to bring me down here, or tell me what to do.",
+                {"action": "hover"},
+            )
         if doubt and not self._told:
-            self._told = True
-            if state in FLYING and snap.flying:
-                return Alarm(
-                    self.name,
-                    "alert",
-                    f"{DOUBT_TEXT}: {doubt}. I am hovering and will not act on these readings. "
-                    "Say land to bring me down here, or tell me what to do.",
-                    {"action": "hover"},
-                )
+            self._told = "ground"
             return Alarm(
                 self.name, "alert", f"{DOUBT_TEXT}: {doubt}. Check the drone before flying."
             )
         if not doubt and self._told:
-            self._told = False
+            self._told = ""
             return Alarm(self.name, "info", "The navdata is consistent again.")
         return None
 

@@ -152,6 +152,20 @@ def test_a_forged_restart_claiming_the_drones_restart_bits_is_dropped_too() -> N
     assert proto.state is LinkState.READY and proto.handshake_done  # no redone handshake
 
 
+def test_a_forger_racing_ahead_of_the_numbering_is_noticed() -> None:
+    """Forged packets one ahead of the drone's, plausible battery and all, make the drone's own
+    packets look stale: two senders on one address, so the stream is doubted."""
+    proto, t, seq = streaming()
+    events = []
+    for k in range(1, 16):
+        now = t + k * PERIOD
+        events += proto.receive_navdata(pkt(seq + 1, battery=99), now)  # the forger, first
+        seq += 1
+        events += proto.receive_navdata(pkt(seq, battery=100), now + 0.002)  # the drone
+    doubts = [e for e in events if isinstance(e, NavdataDoubt)]
+    assert len(doubts) == 1 and "sequence" in doubts[0].reason
+
+
 def test_a_watchdog_restart_is_followed_once_the_old_stream_is_silent() -> None:
     """ARDroneLib resets its sequence on the COM watchdog bit; here only once the old stream
     has been silent for resync_quiet_s and the new numbering continues: well before the link

@@ -76,6 +76,10 @@ def test_the_navdata_monitor_hovers_and_asks_once_per_episode() -> None:
     assert back is not None and back.level == "info" and back.action is None
     grounded = m.check(snap(navdata_doubt=doubt, flying=False), State.LANDED, 4)
     assert grounded is not None and grounded.action is None  # on the ground: tell only
+    assert m.check(snap(navdata_doubt=doubt, flying=False), State.LANDED, 5) is None
+    # took off while the doubt lasts: hover and ask then
+    up = m.check(snap(navdata_doubt=doubt), State.AIRBORNE_IDLE, 6)
+    assert up is not None and up.action == {"action": "hover"}
 
 
 def test_altitude_ceiling_descends_under_it() -> None:
