@@ -77,7 +77,7 @@ async def test_forged_restart_from_the_drones_address_is_dropped_and_the_drone_i
             assert drv.latest_navdata is not None
             seqs.append(drv.latest_navdata.sequence)
 
-        assert lowest >= real_battery - 2, "the forged 3 % reached the driver's navdata"
+        assert lowest >= real_battery - 5, "the forged 3 % reached the driver's navdata"
         assert min(seqs) > UP_FOR, "the forged sequence was taken as a restart"
         assert seqs[-1] > seqs[0] + 20, "the drone's own packets stopped being accepted"
         assert drv.link_up
