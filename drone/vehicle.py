@@ -140,6 +140,7 @@ class VehicleSnapshot:
     estimator_disagreement: tuple[str, ...] = ()  # Estimate.disagreement
     estimator_reinits: int = 0  # EkfStats.navdata_reinits
     jog_limit: str = ""  # why the jog is being slowed/stopped near a limit ("" when it is not)
+    navdata_doubt: str = ""  # why the driver doubts the navdata ("" while it trusts it)
 
     @property
     def yaw_deg(self) -> float:
@@ -192,6 +193,7 @@ class Vehicle:
             limits_of(world) if world is not None and hasattr(world, "bounds") else None
         )
         self._jog_limit = ""
+        self._navdata_doubt = ""  # the driver's NavdataDoubt reason until NavdataTrusted
         self._lock = threading.RLock()  # commands vs. the control thread
         self._mode = VehicleMode.IDLE
         self._setpoint: Setpoint | None = None
@@ -324,6 +326,10 @@ class Vehicle:
             self.on_navdata(event.navdata, event.now)
         elif kind == "LinkLost":
             self._link_ok = False
+        elif kind == "NavdataDoubt":
+            self._navdata_doubt = str(event.reason)
+        elif kind == "NavdataTrusted":
+            self._navdata_doubt = ""
         elif kind in ("LinkRestored", "HandshakeDone"):
             self._link_ok = True
             if kind == "HandshakeDone":
@@ -543,6 +549,7 @@ class Vehicle:
             estimator_disagreement=est.disagreement,
             estimator_reinits=self.ekf.stats.navdata_reinits,
             jog_limit=self._jog_limit if self._mode is VehicleMode.MANUAL else "",
+            navdata_doubt=self._navdata_doubt,
         )
 
     def overlay(self, lines: tuple[str, ...] = ()) -> np.ndarray | None:

@@ -14,7 +14,11 @@
 * ``emergency`` and ``land`` jump the queue: the next datagram is due at once and starts with the
   ``AT*REF`` that carries them, before any queued one-shot command (DESIGN §5);
 * link loss when no navdata arrives for ``link_timeout_s`` (``LinkLost``), re-init datagrams
-  while lost, ``LinkRestored`` (and a fresh handshake if the drone came back in bootstrap).
+  while lost, ``LinkRestored`` (and a fresh handshake if the drone came back in bootstrap);
+* plausibility of the unauthenticated navdata (``drone/ardrone/plausibility.py``): packets off
+  the drone's numbering are dropped, an implausible battery reading is not believed, and the
+  driver says when it doubts the stream (``NavdataDoubt``) and when it trusts it again
+  (``NavdataTrusted``).
 
 :class:`ARDroneDriver` pumps those bytes over UDP 5554/5556 and reads video from TCP 5555.
 """
@@ -106,7 +110,31 @@ class NavdataRejected:
     error: str
 
 
-DriverEvent = NavdataReceived | HandshakeDone | LinkLost | LinkRestored | NavdataRejected
+@dataclass(frozen=True)
+class NavdataDoubt:
+    """The navdata stream is no longer trusted: packets off the drone's numbering or battery
+    readings no discharge explains keep coming (a sensor fault, or someone else sending)."""
+
+    now: float
+    reason: str
+
+
+@dataclass(frozen=True)
+class NavdataTrusted:
+    """The stream is consistent again (nothing suspicious for ``trust_again_s``)."""
+
+    now: float
+
+
+DriverEvent = (
+    NavdataReceived
+    | HandshakeDone
+    | LinkLost
+    | LinkRestored
+    | NavdataRejected
+    | NavdataDoubt
+    | NavdataTrusted
+)
 
 
 def _fraction(name: str, value: float) -> float:
@@ -365,9 +393,11 @@ class DriverProtocol:
     def receive_navdata(self, data: bytes, now: float) -> list[DriverEvent]:
         """Feed one datagram from UDP 5554; returns the events it (and elapsed time) caused.
 
-        Bad datagrams give a :class:`NavdataRejected` event and are otherwise ignored; stale
-        ones (sequence not above the last, unless the drone restarted at 1 or the link was lost)
-        are dropped silently, as ARDroneLib does.
+        Bad datagrams give a :class:`NavdataRejected` event and are otherwise ignored. Packets
+        off the followed numbering (a lower or repeated sequence, a far jump) are dropped with a
+        :class:`NavdataRejected`, unless the drone's own evidence says its numbering restarted
+        (``drone/ardrone/plausibility.py``); after a lost link the next stream is followed
+        whatever its numbering. Enough suspicious packets give :class:`NavdataDoubt`.
         """
         events = self._drain(now)
         if self.state is LinkState.IDLE:
@@ -377,21 +407,19 @@ class DriverProtocol:
         except NavdataError as exc:
             events.append(NavdataRejected(now, str(exc)))
             return events
-        prev = self.latest
-        if (
-            prev is not None
-            and self.state is not LinkState.LOST
-            and nav.sequence <= prev.sequence
-            and nav.sequence > 1
-        ):
-            return events
-        if prev is None or self.state is LinkState.LOST or nav.sequence <= 1:
-            self.plausibility.accept_sequence(nav.sequence, now)  # (re)start of a stream
-        # Navdata is unauthenticated: a forged packet must neither hijack the sequence nor
-        # fake a battery collapse (drone/ardrone/plausibility.py, issue 14).
+        if self.latest is None or self.state is LinkState.LOST:
+            # the first stream, or one after a silence longer than the link timeout
+            self.plausibility.reset()
+        # Navdata is unauthenticated: a forged packet must neither take the stream's place nor
+        # fake a battery collapse (drone/ardrone/plausibility.py).
+        doubted = self.plausibility.doubt
         verdict = self.plausibility.check(nav, now)
-        if verdict.reason is not None:
+        if verdict.reason is not None and (verdict.suspicious or verdict.navdata is None):
             events.append(NavdataRejected(now, verdict.reason))
+        elif verdict.reason is not None:
+            log.info("navdata: %s", verdict.reason)
+        if self.plausibility.doubt and not doubted:
+            events.append(NavdataDoubt(now, self.plausibility.doubt))
         if verdict.navdata is None:
             return events
         nav = verdict.navdata
@@ -443,6 +471,10 @@ class DriverProtocol:
 
     def _drain(self, now: float) -> list[DriverEvent]:
         self._check_link(now)
+        doubted = self.plausibility.doubt
+        self.plausibility.poll(now)
+        if doubted and not self.plausibility.doubt:
+            self._events.append(NavdataTrusted(now))
         events, self._events = self._events, []
         return events
 
@@ -681,6 +713,10 @@ class ARDroneDriver:
                 )
             elif isinstance(e, LinkRestored):
                 log.warning("AR.Drone %s: link restored", self.host)
+            elif isinstance(e, NavdataDoubt):
+                log.warning("AR.Drone %s: navdata in doubt: %s", self.host, e.reason)
+            elif isinstance(e, NavdataTrusted):
+                log.warning("AR.Drone %s: navdata consistent again", self.host)
             if self.events.full():
                 self.events.get_nowait()
             self.events.put_nowait(e)

@@ -350,7 +350,7 @@ class SimDrone:
         major = CtrlState.DEFAULT if ph.emergency else ph.ctrl
         return Demo(
             ctrl_state=int(major) << 16,
-            battery_pct=round(ph.battery.pct),
+            battery_pct=round(ph.battery.reading_pct),
             theta_mdeg=-math.degrees(b.pitch_rad + n_att[0]) * 1000.0,
             phi_mdeg=math.degrees(b.roll_rad + n_att[1]) * 1000.0,
             psi_mdeg=psi,

@@ -99,6 +99,7 @@ class VehiclePort:
             estimator_disagreement=tuple(getattr(s, "estimator_disagreement", ())),
             estimator_reinits=int(getattr(s, "estimator_reinits", 0)),
             jog_limit=str(getattr(s, "jog_limit", "")),
+            navdata_doubt=str(getattr(s, "navdata_doubt", "")),
         )
 
     def marker_ids(self) -> frozenset[int]:

@@ -1,4 +1,4 @@
-"""Two more ANS monitors (issue 18): the geofence of the world and estimator trouble.
+"""More ANS monitors: the geofence of the world, estimator trouble, and navdata in doubt.
 
 They follow :mod:`server.dialog.autonomic`'s contract (``name``, ``period_s``,
 ``check(snap, state, now) -> Alarm | None``, latched: told once when the condition starts and
@@ -9,6 +9,14 @@ once when it clears) and are added to every dialog manager's ANS by :func:`extra
   drone inside; a breach means drift, e.g. wind, and the safe reaction is to stop).
 * Estimator: flying without a position fix for ``lost_after_s``, or with a position standard
   deviation above ``max_sigma_m`` -> warn (marker tasks cannot be trusted; say so).
+* Navdata (DESIGN §5: "implausible sensor data raises an alarm and hovers; it never lands a
+  drone blind"): the driver doubts the navdata stream (``drone/ardrone/plausibility.py``:
+  packets off the drone's numbering, battery readings no discharge explains) -> alert, hover,
+  and ask the operator. Hover because it needs none of the doubted data: with PCMD's
+  progressive flag cleared the AR.Drone holds its position with its own onboard sensors
+  (Developer Guide §6.6), while the console's position loop, a return home or a landing
+  decided on a battery reading would all act on data that may be forged. The operator, who can
+  see the drone, decides; the drone's own firmware still guards its battery.
 """
 
 from __future__ import annotations
@@ -98,9 +106,45 @@ class EstimatorMonitor:
         return None
 
 
+DOUBT_TEXT = "Navdata inconsistent: sensor fault or spoofing"
+
+
+@dataclass
+class NavdataMonitor:
+    """The driver doubts the navdata: alert, hover while flying, ask the operator; tell when the
+    stream is consistent again (the drone stays where it is until the operator says). Told once
+    per episode, and once more if the drone takes off while the doubt lasts."""
+
+    period_s: float = 0.25
+    name: str = "navdata"
+    _told: str = ""  # "", "ground" (told, not flying) or "air" (told and hovered)
+
+    def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
+        doubt = snap.navdata_doubt
+        flying = state in FLYING and snap.flying
+        if doubt and flying and self._told != "air":
+            self._told = "air"
+            return Alarm(
+                self.name,
+                "alert",
+                f"{DOUBT_TEXT}: {doubt}. I am hovering and will not act on these readings. "
+                "Say land to bring me down here, or tell me what to do.",
+                {"action": "hover"},
+            )
+        if doubt and not self._told:
+            self._told = "ground"
+            return Alarm(
+                self.name, "alert", f"{DOUBT_TEXT}: {doubt}. Check the drone before flying."
+            )
+        if not doubt and self._told:
+            self._told = ""
+            return Alarm(self.name, "info", "The navdata is consistent again.")
+        return None
+
+
 def extra_monitors(vehicle_port: Any, period_s: float) -> list[Any]:
     """The monitors above for a drone (the geofence only when its world has bounds)."""
-    out: list[Any] = [EstimatorMonitor(period_s=period_s)]
+    out: list[Any] = [EstimatorMonitor(period_s=period_s), NavdataMonitor(min(period_s, 0.25))]
     b = getattr(vehicle_port, "bounds", None)
     if b is not None:
         out.append(

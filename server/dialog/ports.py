@@ -36,6 +36,7 @@ class VehicleSnapshot:
     estimator_disagreement: tuple[str, ...] = ()  # navdata parts the EKF keeps rejecting
     estimator_reinits: int = 0  # parts of the EKF state restarted from navdata so far
     jog_limit: str = ""  # why the manual jog is being slowed or stopped ("" when it is not)
+    navdata_doubt: str = ""  # why the driver doubts the navdata ("" while it trusts it)
 
 
 @dataclass(frozen=True)

@@ -183,16 +183,20 @@ def test_bad_and_stale_navdata() -> None:
     t = handshake(proto)
     events = proto.receive_navdata(b"garbage", t + 0.01)
     assert [type(e) for e in events] == [NavdataRejected]
-    assert proto.receive_navdata(nav(4, DroneState.NAVDATA_DEMO), t + 0.02) == []  # stale seq
+    stale = proto.receive_navdata(nav(4, DroneState.NAVDATA_DEMO), t + 0.02)
+    assert [type(e) for e in stale] == [NavdataRejected] and "stale" in stale[0].error
     assert proto.latest is not None and proto.latest.sequence == 5
 
 
 def test_drone_reboot_in_bootstrap_redoes_the_handshake() -> None:
+    """A drone whose numbering restarts in bootstrap while its old stream has gone silent is
+    followed after three packets (drone/ardrone/plausibility.py), and the handshake is redone."""
     proto = DriverProtocol()
     t = handshake(proto)
-    proto.receive_navdata(nav(1, DroneState.NAVDATA_BOOTSTRAP, demo=False), t + 0.1)
+    for k in (1, 2, 3):
+        proto.receive_navdata(nav(k, DroneState.NAVDATA_BOOTSTRAP, demo=False), t + 0.3 + 0.05 * k)
     assert proto.state is LinkState.CONFIGURING and not proto.handshake_done
-    assert at.Config("general:navdata_demo", "TRUE") in [p.command for p in sent(proto, t + 0.2)]
+    assert at.Config("general:navdata_demo", "TRUE") in [p.command for p in sent(proto, t + 0.46)]
 
 
 @settings(deadline=None)  # shared, loaded CI machine: no per-example deadline

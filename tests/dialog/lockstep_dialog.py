@@ -26,7 +26,11 @@ class DialogRig:
     replies: list[dict[str, Any]] = field(default_factory=list)
 
 
-def dialog_rig(seed: int, start: tuple[float, float, float] = (4.0, 2.0, 0.0)) -> DialogRig:
+def dialog_rig(
+    seed: int,
+    start: tuple[float, float, float] = (4.0, 2.0, 0.0),
+    settings: Settings | None = None,
+) -> DialogRig:
     """The indoor world with the drone landed at ``start``; every part stepped by the rig."""
     world = load_world("indoor")
     rig = LockstepRig(world, seed=seed, camera=False, starts=[start])
@@ -38,7 +42,7 @@ def dialog_rig(seed: int, start: tuple[float, float, float] = (4.0, 2.0, 0.0)) -
     audit = AuditLog(":memory:", clock=rig.clock.now)
     dm = DialogManager(
         graph,
-        Settings(),
+        settings or Settings(),
         TaskManagerPort(tm),
         VehiclePort(rig.vehicle, world),
         None,

@@ -12,6 +12,7 @@ from server.dialog.autonomic import (
     MarkersLostMonitor,
 )
 from server.dialog.errors import IllegalTransition
+from server.dialog.monitors import NavdataMonitor
 from server.dialog.ports import VehicleSnapshot
 from server.dialog.states import TRANSITIONS, State, next_state
 from server.language.nlu import NLU
@@ -36,6 +37,49 @@ def test_battery_low_then_critical_fire_once_each() -> None:
     assert m.check(snap(battery_pct=90, flying=False), State.LANDED, 5) is None
     again = m.check(snap(battery_pct=20, flying=False), State.LANDED, 6)
     assert again is not None and again.action is None  # on the ground: tell, do not fly home
+
+
+def test_a_doubted_stream_defers_the_battery_action_until_it_is_trusted() -> None:
+    """Readings the driver may not trust: tell, hover (the navdata monitor), act once trusted."""
+    m = BatteryMonitor(25, 12)
+    doubt = "packets that do not follow the drone's navdata sequence"
+    low = m.check(snap(battery_pct=24, navdata_doubt=doubt), State.AIRBORNE_IDLE, 0)
+    assert low is not None and low.action is None and "doubt" in low.text
+    crit = m.check(snap(battery_pct=11, navdata_doubt=doubt), State.AIRBORNE_IDLE, 1)
+    assert crit is not None and crit.action is None and crit.level == "alert"
+    assert "land" in crit.text.lower()  # the operator is asked
+    assert m.check(snap(battery_pct=11, navdata_doubt=doubt), State.AIRBORNE_IDLE, 2) is None
+    trusted = m.check(snap(battery_pct=11), State.AIRBORNE_IDLE, 3)
+    assert trusted is not None and trusted.action == {"action": "land"}
+    assert m.check(snap(battery_pct=11), State.LANDING, 4) is None
+    # deferred low, trusted again while still low: home
+    m2 = BatteryMonitor(25, 12)
+    assert m2.check(snap(battery_pct=24, navdata_doubt=doubt), State.EXECUTING, 0) is not None
+    home = m2.check(snap(battery_pct=24), State.AIRBORNE_IDLE, 1)
+    assert home is not None and home.action == {"action": "return_home"}
+    # deferred, then landed by the operator: nothing more to do
+    m3 = BatteryMonitor(25, 12)
+    assert m3.check(snap(battery_pct=11, navdata_doubt=doubt), State.AIRBORNE_IDLE, 0)
+    assert m3.check(snap(battery_pct=11, flying=False), State.LANDED, 1) is None
+
+
+def test_the_navdata_monitor_hovers_and_asks_once_per_episode() -> None:
+    m = NavdataMonitor()
+    doubt = "battery readings that no discharge or sag explains"
+    assert m.check(snap(), State.EXECUTING, 0) is None
+    a = m.check(snap(navdata_doubt=doubt), State.EXECUTING, 1)
+    assert a is not None and a.level == "alert" and a.action == {"action": "hover"}
+    assert a.text.startswith("Navdata inconsistent: sensor fault or spoofing: " + doubt)
+    assert "say land" in a.text.lower()
+    assert m.check(snap(navdata_doubt=doubt), State.AIRBORNE_IDLE, 2) is None  # latched
+    back = m.check(snap(), State.AIRBORNE_IDLE, 3)
+    assert back is not None and back.level == "info" and back.action is None
+    grounded = m.check(snap(navdata_doubt=doubt, flying=False), State.LANDED, 4)
+    assert grounded is not None and grounded.action is None  # on the ground: tell only
+    assert m.check(snap(navdata_doubt=doubt, flying=False), State.LANDED, 5) is None
+    # took off while the doubt lasts: hover and ask then
+    up = m.check(snap(navdata_doubt=doubt), State.AIRBORNE_IDLE, 6)
+    assert up is not None and up.action == {"action": "hover"}
 
 
 def test_altitude_ceiling_descends_under_it() -> None:

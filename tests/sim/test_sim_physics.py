@@ -7,7 +7,7 @@ import math
 import pytest
 
 from drone.ardrone.navdata import CtrlState
-from drone.sim.battery import Battery
+from drone.sim.battery import MAX_SAG_PCT_AT_HOVER, Battery
 from drone.sim.errors import SimConfigError
 from drone.sim.physics import Body, FlightParams, Physics, as_box
 
@@ -162,6 +162,24 @@ def test_battery_twelve_minutes_climb_costs_more_low_refuses_takeoff() -> None:
     ph.battery.drain_to(0.0)
     run(ph, 0.05)
     assert ph.ctrl is CtrlState.LANDING  # the firmware lands on an empty battery
+
+
+def test_a_worn_pack_reads_lower_under_load_and_recovers_when_it_falls() -> None:
+    healthy = Battery(pct=50.0)
+    healthy.step(0.01, True, 1.0)
+    assert healthy.reading_pct == pytest.approx(healthy.pct)  # the paper's model: no sag
+    worn = Battery(pct=30.0)
+    worn.wear(10.0)
+    worn.step(0.01, False)
+    assert worn.reading_pct == pytest.approx(worn.pct)  # motors off: no current, no sag
+    worn.step(0.01, True, 0.0)
+    assert worn.pct - worn.reading_pct == pytest.approx(10.0)  # hover
+    worn.step(0.01, True, 1.0)
+    assert worn.pct - worn.reading_pct == pytest.approx(15.0)  # full climb: 1.5 x the current
+    worn.step(0.01, True, 0.0)
+    assert worn.pct - worn.reading_pct == pytest.approx(10.0)  # back at hover: recovered
+    worn.wear(99.0)
+    assert worn.sag_pct_at_hover == MAX_SAG_PCT_AT_HOVER  # the most the model allows
 
 
 @pytest.mark.parametrize(
