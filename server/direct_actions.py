@@ -44,6 +44,7 @@ def drone_facts(stack: Any) -> DroneFacts:
             bool(snap.link_ok),
             bool(snap.flying),
             bool(getattr(snap, "battery_known", True)),
+            str(getattr(snap, "navdata_doubt", "")),
         )
     t = stack.telemetry()
     return DroneFacts(
@@ -52,6 +53,7 @@ def drone_facts(stack: Any) -> DroneFacts:
         bool(t.get("link_ok", False)),
         bool(t.get("flying", False)),
         bool(t.get("battery_known", True)),
+        str(t.get("navdata_doubt", "")),
     )
 
 

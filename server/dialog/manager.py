@@ -409,7 +409,12 @@ class DialogManager:
         known = self.vehicle.marker_ids()
         snap = self.vehicle.snapshot()
         facts = DroneFacts(
-            snap.emergency, snap.battery_pct, snap.link_ok, snap.flying, snap.battery_known
+            snap.emergency,
+            snap.battery_pct,
+            snap.link_ok,
+            snap.flying,
+            snap.battery_known,
+            snap.navdata_doubt,
         )
         for p in interp.parsed:
             cmd = p.command

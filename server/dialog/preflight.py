@@ -24,6 +24,9 @@ class DroneFacts:
     # False until navdata has carried a battery reading: the 0 % before it is no reading, and
     # the drone refuses a take-off on a low battery itself (the VBAT_LOW state bit).
     battery_known: bool = True
+    # Why the driver doubts the navdata ("" while it trusts it): a drone whose battery and
+    # state may be forged does not take off (docs/navdata-trust.md).
+    navdata_doubt: str = ""
 
 
 def refusal(action: str, facts: DroneFacts, battery_low_pct: float) -> str | None:
@@ -40,6 +43,12 @@ def refusal(action: str, facts: DroneFacts, battery_low_pct: float) -> str | Non
             return (
                 "I cannot take off: there is no link to the drone. "
                 "Check the drone's Wi-Fi and that it is switched on."
+            )
+        if facts.navdata_doubt:
+            return (
+                "I cannot take off: the drone's navdata is inconsistent (sensor fault or "
+                f"spoofing: {facts.navdata_doubt}). Check the drone and its network; I take off "
+                "again once its data is consistent for a few seconds."
             )
         if facts.emergency:
             return (

@@ -289,3 +289,10 @@ async def test_task_manager_messages_reach_the_operator_in_plain_words() -> None
     plain = assist.operator_words("'turn' needs 'direction' left or right; got None")
     assert "None" not in plain and "“turn left 90 degrees”" in plain
     assert assist.operator_words("There is no marker 9.") == "There is no marker 9."
+
+
+def test_no_takeoff_while_the_navdata_is_doubted() -> None:
+    why = refusal("takeoff", replace(OK, navdata_doubt="packets off the numbering"), 25.0)
+    assert why is not None and "inconsistent" in why and "packets off the numbering" in why
+    for stop in ("land", "hover", "emergency"):
+        assert refusal(stop, replace(OK, navdata_doubt="x", flying=True), 25.0) is None
