@@ -134,8 +134,16 @@ class VehicleLinkSecurity(Security):
     def refusal(self, role: Role | None, action: str, name: str, who: str | None = None) -> str:
         text = super().refusal(role, action, name, who)
         if role is Role.VEHICLE and who is not None:
-            p = self.prefix_of(who)
-            text += f": a vehicle {action} only its own drone's names ({p or '/'}…, /{who}/…)"
+            scope = self.scope(who)
+            if action == "call":
+                text += f": a vehicle calls only {', '.join(sorted(scope.calls))}"
+            elif action.startswith("provide"):
+                text += f": a vehicle provides only its own, {', '.join(sorted(scope.services))}"
+            else:
+                where = (
+                    f"{scope.prefix}/… and /{who}/…" if scope.prefix != f"/{who}" else f"/{who}/…"
+                )
+                text += f": a vehicle publishes only its own drone's topics ({where})"
         else:
             text += ": /vehicle-link takes only a vehicle key (uav-console vehicle-key NAME)"
         if len(self.refused) > MAX_COUNTED:  # names are the client's: keep the count bounded

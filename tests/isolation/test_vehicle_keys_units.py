@@ -206,8 +206,18 @@ def test_vehicle_link_security_grants_only_keys_and_only_the_scope(tmp_path: Pat
     assert sec.can_call(v, "/fleet/patrol", "uav1")
     assert not sec.can_call(v, "/uav2/vehicle/control", "uav1")
     assert not sec.can_call(v, "/console/lease", "uav1")
-    text = sec.refusal(v, "publish to", "/console/reply", "uav1")
-    assert text.startswith("vehicle uav1 may not publish to /console/reply: ")
+    assert sec.refusal(v, "publish to", "/console/reply", "uav1") == (
+        "vehicle uav1 may not publish to /console/reply: "
+        "a vehicle publishes only its own drone's topics (/uav1/…)"
+    )
+    assert sec.refusal(v, "call", "/uav2/vehicle/control", "uav1").endswith(
+        "a vehicle calls only /console/describe, /fleet/patrol"
+    )
+    single = VehicleLinkSecurity(Settings(data_dir=tmp_path), tokens, keys, prefix_of=lambda n: "")
+    assert single.refusal(v, "publish to", "/x", "uav1").endswith("(/… and /uav1/…)")
+    assert sec.refusal(Role.PILOT, "publish to", "/x").endswith(
+        "/vehicle-link takes only a vehicle key (uav-console vehicle-key NAME)"
+    )
 
 
 def test_pilots_may_not_speak_or_answer_as_a_vehicle(tmp_path: Path) -> None:
