@@ -292,6 +292,48 @@ def test_a_vehicle_key_publishes_only_its_own_drones_topics(srv: Served) -> None
                  "the relay's refusal in the log")  # fmt: skip
 
 
+def test_a_vehicle_from_elsewhere_joins_with_a_key_made_while_serve_runs(srv: Served) -> None:
+    """``uav-console vehicle-key uav3`` on the console's computer, then uav3 joins (here a bare
+    rosbridge client in its place): announced under its own prefix it becomes a drone; one that
+    claims another drone's prefix is not registered, and the log says why."""
+    from server.cli import main as cli_main
+
+    assert cli_main(["vehicle-key", "uav3", "uav4", "--data-dir", str(data_dir(srv))]) == 0
+
+    def info(name: str, prefix: str) -> dict[str, Any]:
+        data = {"name": name, "prefix": prefix, "simulated": True, "safety_url": "", "pid": 1}
+        return {
+            "op": "publish",
+            "topic": f"/{name}/vehicle/info",
+            "msg": {"data": json.dumps(data)},
+        }
+
+    def registered(name: str) -> bool:  # a drone of the console (503 until it reports), or 404
+        return srv.http.get(f"/api/v1/drones/{name}").status_code != 404
+
+    with (
+        client(rosbridge(srv), OBSERVER) as obs,
+        client(link(srv), key_of(srv, "uav4")) as uav4,
+    ):
+        obs.send({"op": "subscribe", "topic": "/rosout"})
+        obs.call("/rosapi/topics")
+        uav4.send({"op": "advertise", "topic": "/uav4/vehicle/info", "type": "std_msgs/String",
+                   "latch": True})  # fmt: skip
+        assert not uav4.errors_of(info("uav4", "/uav1"))  # its own topic, a stolen prefix
+        wait_for(
+            lambda: [f for f in list(obs.frames) if f.get("topic") == "/rosout"
+                     and "vehicle uav4 announced itself" in f["msg"]["msg"]],
+            "the refusal in the log",
+        )  # fmt: skip
+        assert not registered("uav4")
+        with client(link(srv), key_of(srv, "uav3")) as uav3:
+            uav3.send({"op": "advertise", "topic": "/uav3/vehicle/info",
+                       "type": "std_msgs/String", "latch": True})  # fmt: skip
+            assert not uav3.errors_of(info("uav3", "/uav3"))
+            wait_for(lambda: registered("uav3"), "uav3 to be registered")
+        assert not registered("uav4")
+
+
 def test_every_door_judges_a_pilot_without_the_lease_alike(srv: Served) -> None:
     """rosbridge (topics, utterances, services), REST (actions, commands, the patrol, faults):
     a pilot who does not hold the lease may land, hover and stop, and nothing else."""
