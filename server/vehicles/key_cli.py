@@ -35,8 +35,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def vehicle_key_main(
-    args: argparse.Namespace, out: TextIO = sys.stdout, err: TextIO = sys.stderr
+    args: argparse.Namespace, out: TextIO | None = None, err: TextIO | None = None
 ) -> int:
+    out = out or sys.stdout  # looked up now: a default bound at import would keep a stale one
+    err = err or sys.stderr
     settings = Settings.from_env(data_dir=args.data_dir)
     keys = VehicleKeys(settings.data_dir)
     if args.print_key and len(args.names) != 1:
