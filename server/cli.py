@@ -1,4 +1,4 @@
-"""The ``uav-console`` command: serve, sim, vehicle, interpret, patrol, bench, replay.
+"""The ``uav-console`` command: serve, sim, vehicle, vehicle-key, interpret, patrol, bench, replay.
 
 Each subcommand imports what it needs lazily, so ``interpret`` stays quick to start.
 """
@@ -80,7 +80,18 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--central", required=True, help="ws://HOST:8000/rosbridge")
     v.add_argument("--name", required=True)
     v.add_argument("--drone", default="sim")
-    v.add_argument("--token", default=None)
+    v.add_argument(
+        "--token",
+        default=None,
+        help="rosbridge central: the pilot token; /vehicle-link: only what the safety port checks",
+    )
+    v.add_argument(
+        "--key-file",
+        type=Path,
+        default=None,
+        help="/vehicle-link: this vehicle's own key (uav-console vehicle-key NAME on the console; "
+        "else UAVC_VEHICLE_KEY)",
+    )
     v.add_argument("--world", default="outdoor")
     v.add_argument("--ca", type=Path, default=None, help="CA file for a wss:// central")
     v.add_argument("--fingerprint", default=None, help="pinned SHA-256 of the central's cert")
@@ -91,6 +102,10 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--safety-cert", type=Path, default=None, help="HTTPS safety port: its cert")
     v.add_argument("--safety-key", type=Path, default=None, help="HTTPS safety port: its key")
     v.add_argument("--parent-pid", type=int, default=None, help=argparse.SUPPRESS)
+
+    from server.vehicles.key_cli import add_parser as add_vehicle_key
+
+    add_vehicle_key(sub)
 
     i = sub.add_parser("interpret", help="NLU only: text -> JSON commands")
     i.add_argument("text", nargs="*")
@@ -146,6 +161,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from server.fleet.client import vehicle_main
 
             return vehicle_main(args)
+        if args.command == "vehicle-key":
+            from server.vehicles.key_cli import vehicle_key_main
+
+            return vehicle_key_main(args)
         if args.command == "interpret" and args.audio:
             from server.speech.cli import interpret_audio_main
 

@@ -28,6 +28,7 @@ from server.captioner import BadFrame, Captioner, CaptionerUnavailable, describe
 from server.captioner.grounding import SeenMarker, ground_marker_ids, seen_markers
 from server.captioner.service import NOTHING, load_captioner, unavailable_text
 from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+from server.dialog.addressing import parse_address
 from server.dialog.manager import DialogManager
 from server.fleet.service import FleetService
 from server.graph import Graph
@@ -209,6 +210,7 @@ class Runtime:
         self.trail = AuditTrail(self.audit)  # intent/outcome rows of direct actions (issue 14)
         self.bridge.audit = self.trail
         self.security.lease.on_change = self._lease_changed
+        self.security.actions_of = self.actions_of  # lease judged by what an utterance asks
         self._routers: list[APIRouter] = [make_router(self.bridge)]
         self.fleet = FleetService(self.graph, self.world)
         self._tasks: list[asyncio.Task[Any]] = []
@@ -370,6 +372,11 @@ class Runtime:
     def interpret(self, text: str, state: str | None) -> list[dict[str, Any]]:
         """NLU only (raises ``UnknownStateError``, a ``KeyError``, for an unknown state)."""
         return self.nlu.interpret(text, state or None)
+
+    def actions_of(self, text: str) -> set[str]:
+        """The actions an operator's sentence asks ("uav2 land" → {"land"}), as ``POST
+        /command`` judges it against the lease."""
+        return {str(c["action"]) for c in self.interpret(parse_address(text).text, None)}
 
     async def describe(self, drone: str) -> tuple[str, float | None]:
         """Caption ``drone``'s latest camera frame: (sentence, ms), or (why not, None).

@@ -10,6 +10,12 @@
   an observer could read).
 - Only the server publishes ``/console/*`` and ``/fleet/*`` (replies, state, fleet status), but
   for ``/console/utterance``, which a pilot sends; a fake "battery critical" reply is refused.
+- A third role, ``vehicle``, exists only on ``/vehicle-link``: a vehicle process authenticated by
+  its own key (``server.vehicles.keys``), which may publish only its own drone's topics
+  (``server.vehicles.access``). Checks take ``who`` (the vehicle's name) for that.
+- The lease judges what a pilot sends, not where it enters: land, a zero ``/cmd_vel`` (hover) and
+  an utterance that asks only land, hover or emergency need no lease (:meth:`Security.
+  lease_exempt`), as at REST (``server.api.deps.check_lease``).
 - Origin: a browser always sends ``Origin``; a WebSocket whose Origin is neither the served
   origin (the request's ``Host``) nor in ``allow_origins`` is refused (cross-site WebSocket
   hijacking). Clients that send no Origin (roslibpy, Node) are not browsers and pass.
@@ -44,8 +50,15 @@ CONTROL_TOPIC_RE = re.compile(r"^(/uav\d+)?(/cmd_vel|/ardrone/.+|/console/uttera
 # (A remote vehicle publishes its own ``/NAME/fleet/ltm_status``: that one stays open to pilots.)
 SERVER_TOPIC_RE = re.compile(r"^(/fleet(/.*)?|(/[^/]+)?/console(/.*)?)$")
 PILOT_CONSOLE_TOPIC_RE = re.compile(r"^(/[^/]+)?/console/utterance$")
+# A vehicle process's own names (server.vehicles.names: info, telemetry, reply, state, control,
+# interpret): only that vehicle publishes or provides them, over /vehicle-link, never a client
+# here (a pilot's "reply" there would be re-published on /console/reply as the drone's).
+VEHICLE_NAME_RE = re.compile(r"^/[^/]+/vehicle(/.*)?$")
 # Safety commands any pilot may publish without the lease (DESIGN §5: any pilot may land).
 ANY_PILOT_TOPIC_RE = re.compile(r"^(/uav\d+)?/ardrone/land$")
+CMD_VEL_RE = re.compile(r"^(/uav\d+)?/cmd_vel$")
+# What any pilot may ask, lease or not (DESIGN §5), whatever door it comes through.
+SAFETY_ACTIONS = frozenset({"land", "emergency", "hover"})
 TOKEN_COOKIE = "uavc_token"  # set on the first load of the console (tokens out of URLs)
 # Services an observer may call: introspection and ones that change nothing.
 READ_ONLY_SERVICE_RE = re.compile(
@@ -58,6 +71,7 @@ LEASE_SERVICE = "/console/lease"
 class Role(enum.StrEnum):
     PILOT = "pilot"
     OBSERVER = "observer"
+    VEHICLE = "vehicle"  # a vehicle process on /vehicle-link, never a token of TokenStore
 
 
 def _canonical(name: str) -> str:
@@ -141,6 +155,24 @@ def write_private_atomically(path: Path, text: str) -> None:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def is_zero_twist(msg: Any) -> bool:
+    """Whether ``msg`` is an all-zero ``geometry_msgs/Twist`` (missing fields count as 0):
+    a hover, in ardrone_autonomy's semantics of ``/cmd_vel``."""
+    if not isinstance(msg, Mapping):
+        return False
+    for part in ("linear", "angular"):
+        vec = msg.get(part, {})
+        if vec is None:
+            continue
+        if not isinstance(vec, Mapping):
+            return False
+        for axis in ("x", "y", "z"):
+            v = vec.get(axis, 0)
+            if isinstance(v, bool) or not isinstance(v, int | float) or v != 0:
+                return False
+    return True
 
 
 class LeaseHeld(Exception):
@@ -238,9 +270,16 @@ class Security:
         self.settings = settings
         self.tokens = tokens
         self.lease = PilotLease()
+        # The actions a typed or spoken text asks (the runtime sets it to its NLU), so an
+        # utterance that asks only land, hover or emergency needs no lease at any door.
+        self.actions_of: Callable[[str], set[str]] | None = None
 
     def role_for(self, token: str | None) -> Role | None:
         return self.tokens.role_for(token)
+
+    def identify(self, token: str | None) -> str | None:
+        """Who holds ``token`` beyond its role (a vehicle's name); None here: tokens are roles."""
+        return None
 
     @staticmethod
     def is_control_topic(topic: str) -> bool:
@@ -250,17 +289,25 @@ class Security:
     def is_read_only_service(service: str) -> bool:
         return bool(READ_ONLY_SERVICE_RE.match(_canonical(service)))
 
-    def can_publish(self, role: Role | None, topic: str) -> bool:
-        """Pilots publish, but not on the server's own ``/console/*`` and ``/fleet/*``."""
+    def can_publish(self, role: Role | None, topic: str, who: str | None = None) -> bool:
+        """Pilots publish, but not on the server's own ``/console/*`` and ``/fleet/*``, nor
+        on a vehicle's own ``/NAME/vehicle/*``."""
         name = _canonical(topic)
         if SERVER_TOPIC_RE.match(name) and not PILOT_CONSOLE_TOPIC_RE.match(name):
             return False
+        if VEHICLE_NAME_RE.match(name):
+            return False
         return role is Role.PILOT
 
-    def can_call(self, role: Role | None, service: str) -> bool:
+    def can_call(self, role: Role | None, service: str, who: str | None = None) -> bool:
         if role is Role.PILOT:
             return True
         return role is Role.OBSERVER and self.is_read_only_service(service)
+
+    def can_provide(self, role: Role | None, service: str, who: str | None = None) -> bool:
+        """Whether a client may provide ``service`` (``advertise_service``): pilots only, and
+        not a vehicle's own ``/NAME/vehicle/*`` (the console's commands to the drone go there)."""
+        return role is Role.PILOT and not VEHICLE_NAME_RE.match(_canonical(service))
 
     def needs_lease(self, service_or_topic: str, *, service: bool) -> bool:
         """Whether a pilot must hold the lease for this (control topics, non-read-only calls)."""
@@ -271,11 +318,28 @@ class Security:
             return False  # any pilot may land (DESIGN §5), lease or not
         return self.is_control_topic(service_or_topic)
 
-    @staticmethod
-    def refusal(role: Role | None, action: str, name: str) -> str:
-        """The message for a refused action, naming the role ("observer may not publish to …")."""
-        who = role.value if role is not None else "an unauthenticated client"
-        return f"{who} may not {action} {name}"
+    def lease_exempt(self, topic: str, msg: Any) -> bool:
+        """Whether this message on a control topic needs no lease though its topic does: any
+        pilot may land or hover (DESIGN §5). A zero ``/cmd_vel`` is a hover (ardrone_autonomy:
+        all zeros hover); an utterance is judged by what it asks, as ``POST /command`` is."""
+        name = _canonical(topic)
+        if CMD_VEL_RE.match(name):
+            return is_zero_twist(msg)
+        if PILOT_CONSOLE_TOPIC_RE.match(name) and self.actions_of is not None:
+            text = msg.get("text") if isinstance(msg, Mapping) else None
+            if not isinstance(text, str):
+                return False
+            actions = self.actions_of(text)
+            return bool(actions) and actions <= SAFETY_ACTIONS
+        return False
+
+    def refusal(self, role: Role | None, action: str, name: str, who: str | None = None) -> str:
+        """The message for a refused action, naming the role ("observer may not publish to …")
+        and, for a vehicle, its name ("vehicle uav1 may not publish to …")."""
+        party = role.value if role is not None else "an unauthenticated client"
+        if who:
+            party = f"{party} {who}"
+        return f"{party} may not {action} {name}"
 
     def origin_allowed(self, origin: str | None, host_header: str | None) -> bool:
         """Whether a WebSocket with this ``Origin`` may connect (None: not a browser)."""

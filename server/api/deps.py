@@ -8,7 +8,7 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request
 
 from server.runtime import DroneStack, Runtime
-from server.security import TOKEN_COOKIE
+from server.security import SAFETY_ACTIONS, TOKEN_COOKIE
 
 REST_HOLDER = "rest"  # the lease holder id of REST callers after a take-over
 
@@ -41,9 +41,6 @@ def pilot_role(role: Annotated[str, Depends(caller_role)]) -> str:
     if role != "pilot":
         raise HTTPException(status_code=403, detail=f"role '{role}' may not command the drones")
     return role
-
-
-SAFETY_ACTIONS = frozenset({"land", "emergency", "hover"})
 
 
 def check_lease(request: Request, runtime: Runtime, actions: set[str]) -> None:

@@ -51,7 +51,9 @@ def server_version() -> str:
 
 
 class _Connection:
-    def __init__(self, ws: WebSocket, ctx: BridgeContext, role: Role | None) -> None:
+    def __init__(
+        self, ws: WebSocket, ctx: BridgeContext, role: Role | None, who: str | None = None
+    ) -> None:
         self.ws = ws
         self.ctx = ctx
         s = ctx.settings
@@ -68,6 +70,7 @@ class _Connection:
             self.protocol,
             owner=ctx.new_owner(peer),
             role=role,
+            who=who,
             notify=self._pump,
             schedule=lambda delay, fn: self.loop.call_later(delay, fn),
             spawn=self._spawn,
@@ -253,7 +256,10 @@ async def serve_rosbridge(websocket: WebSocket, ctx: BridgeContext) -> None:
             await websocket.close(code=CLOSE_POLICY, reason="invalid token")
             return
     ip_key = "ip:" + (websocket.client.host if websocket.client else "?")
+    who = ctx.security.identify(token) if role is not None else None
     token_key = f"token:{role.value}" if role is not None else None
+    if token_key is not None and who:  # counted per vehicle, not per role
+        token_key += f":{who}"
     over = None
     if ctx.connections[ip_key] >= ctx.max_connections_per_ip:
         over = f"too many connections from this address (at most {ctx.max_connections_per_ip})"
@@ -271,7 +277,7 @@ async def serve_rosbridge(websocket: WebSocket, ctx: BridgeContext) -> None:
         lift_frame_cap(websocket.scope)  # before the client can send its first frame
     try:
         await websocket.accept()
-        conn = _Connection(websocket, ctx, role)
+        conn = _Connection(websocket, ctx, role, who)
         with contextlib.suppress(WebSocketDisconnect, ConnectionAbortedError, OSError):
             await conn.run()
     finally:

@@ -50,6 +50,7 @@ class BridgeSession:
         *,
         owner: str,
         role: Role | None,
+        who: str | None = None,
         notify: Callable[[], None],
         schedule: Schedule,
         spawn: Spawn,
@@ -60,6 +61,7 @@ class BridgeSession:
         self.protocol = protocol
         self.owner = owner
         self.role = role
+        self.who = who  # beyond the role, who authenticated (a vehicle's name), if known
         self._notify = notify
         self._schedule = schedule
         self._spawn = spawn
@@ -103,6 +105,7 @@ class BridgeSession:
             self.close_request = (1008, "invalid token")
             raise RefusedError("auth: invalid token", id=op.id)
         self.role = role
+        self.who = self.security.identify(op.token)
         self.protocol.authenticated = True
         self.protocol.send_status("info", f"authenticated as {role.value}", id=op.id)
 
@@ -118,8 +121,8 @@ class BridgeSession:
             raise NotFoundError(f"{what}: unknown message type {type_name}", id=id)
 
     def _advertise(self, op: ops.Advertise, now: float) -> None:
-        if not self.security.can_publish(self.role, op.topic):
-            raise RefusedError(self.security.refusal(self.role, "advertise", op.topic))
+        if not self.security.can_publish(self.role, op.topic, self.who):
+            raise RefusedError(self.security.refusal(self.role, "advertise", op.topic, self.who))
         self._check_type(op.type, f"advertise {op.topic}", op.id)
         try:
             key = self.graph.advertise(op.topic, op.type, latch=op.latch, owner=self.owner)
@@ -136,15 +139,17 @@ class BridgeSession:
 
     def _publish(self, op: ops.Publish, now: float) -> None:
         topic = op.topic
-        if not self.security.can_publish(self.role, topic):
-            raise RefusedError(self.security.refusal(self.role, "publish to", topic))
+        if not self.security.can_publish(self.role, topic, self.who):
+            raise RefusedError(self.security.refusal(self.role, "publish to", topic, self.who))
         key = g.canonical(topic)
         type_name = self.advertised.get(key) or self.graph.topic_type(key)
         if type_name is None:
             raise NotFoundError(
                 f"publish to {topic}: unknown topic; advertise it first with its type"
             )
-        if self.security.needs_lease(key, service=False):
+        if self.security.needs_lease(key, service=False) and not self.security.lease_exempt(
+            key, op.msg
+        ):
             self._ensure_lease(now, f"publish to {topic}")
         msg = check_message(type_name, op.msg, self.ctx.wall_clock())
         try:
@@ -341,8 +346,8 @@ class BridgeSession:
     # -- services -------------------------------------------------------------------------
     def _call_service(self, op: ops.CallService, now: float) -> None:
         key = g.canonical(op.service)
-        if not self.security.can_call(self.role, key):
-            msg = self.security.refusal(self.role, "call", op.service)
+        if not self.security.can_call(self.role, key, self.who):
+            msg = self.security.refusal(self.role, "call", op.service, self.who)
             self._service_failed(op, msg)
             raise RefusedError(msg)
         if key == LEASE_SERVICE:
@@ -420,9 +425,10 @@ class BridgeSession:
             self.protocol.send_service_response(op.service, op.id, message, False)
 
     def _advertise_service(self, op: ops.AdvertiseService, now: float) -> None:
-        if self.role is not Role.PILOT:
-            raise RefusedError(self.security.refusal(self.role, "provide the service", op.service))
         key = g.canonical(op.service)
+        if not self.security.can_provide(self.role, key, self.who):
+            msg = self.security.refusal(self.role, "provide the service", op.service, self.who)
+            raise RefusedError(msg)
         owner = self.graph.service_owner(key)
         if (
             key.startswith("/rosapi/")

@@ -1,8 +1,13 @@
 """The web process's side of vehicle processes: the link endpoint, discovery, supervision.
 
-- ``/vehicle-link``: a rosbridge v2 WebSocket for vehicles only. It takes the pilot token and no
-  browser (a request with ``Origin`` is refused); a vehicle may publish its drone's topics
-  without holding the pilot lease (it reports, it does not command) and may provide services.
+- ``/vehicle-link``: a rosbridge v2 WebSocket for vehicles only. It takes a vehicle key
+  (:mod:`server.vehicles.keys`; never the pilot or observer token) and no browser (a request
+  with ``Origin`` is refused); a vehicle may publish only its own drone's topics and provide only
+  its own services (:mod:`server.vehicles.access`). Its dialog's replies and state come under its
+  own name and are re-published here after a check (:mod:`server.vehicles.relay`), so this
+  process is the only publisher of ``/console/reply``.
+- Keys: ``serve`` makes one per vehicle it spawns (``<data dir>/vehicle-keys``) and hands it over
+  in the child's environment (``UAVC_VEHICLE_KEY``), not on its command line.
 - Discovery: every ``/NAME/vehicle/info`` on the graph becomes a drone of the runtime
   (:class:`~server.vehicles.remote.RemoteDroneStack` + :class:`RemoteDialog`), whether
   ``serve`` spawned the vehicle or it joined from another host (``uav-console vehicle``).
@@ -35,9 +40,11 @@ from server.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.msgs import header
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge
-from server.security import Role, Security
 from server.settings import Settings, SettingsError
 from server.vehicles import names
+from server.vehicles.access import VehicleLinkSecurity
+from server.vehicles.keys import VehicleKeys, vehicle_env
+from server.vehicles.relay import DialogRelay
 
 if TYPE_CHECKING:
     from server.runtime import Runtime
@@ -52,28 +59,6 @@ DISCOVER_EVERY = 5  # heartbeat periods
 def pid_dir_of(settings: Settings) -> Path:
     """Where vehicle processes leave their pid (``NAME.pid``) while they run."""
     return settings.data_dir / "vehicles"
-
-
-class VehicleLinkSecurity(Security):
-    """Security of ``/vehicle-link``: pilot token only, no browsers, no lease to report."""
-
-    def role_for(self, token: str | None) -> Role | None:
-        role = self.tokens.role_for(token)
-        return role if role is Role.PILOT else None
-
-    def origin_allowed(self, origin: str | None, host_header: str | None) -> bool:
-        return origin is None
-
-    def needs_lease(self, service_or_topic: str, *, service: bool) -> bool:
-        return False
-
-    # Explicit, so tightening what browser clients may publish (e.g. ``/console/*``) never
-    # silences a vehicle's own replies, state and telemetry.
-    def can_publish(self, role: Role | None, topic: str) -> bool:
-        return role is Role.PILOT
-
-    def can_call(self, role: Role | None, service: str) -> bool:
-        return role is Role.PILOT
 
 
 # What a vehicle process needs of the server's settings (an allowlist: a setting added later
@@ -109,7 +94,9 @@ CHILD_SETTINGS = (
 
 
 def child_env(settings: Settings, token: str) -> dict[str, str]:
-    """The environment of a vehicle child: ours plus the settings it needs as ``UAVC_*``."""
+    """The environment of a vehicle child: ours plus the settings it needs as ``UAVC_*``, and
+    the pilot token as ``UAVC_TOKEN``, which only its safety port checks (its link opens with
+    its own key: :func:`~server.vehicles.keys.vehicle_env`)."""
     env = dict(os.environ)
     for name in CHILD_SETTINGS:
         value = getattr(settings, name, None)
@@ -180,12 +167,18 @@ class VehicleCentral:
         s = runtime.settings
         if s.vehicles not in ("inline", "process"):
             raise SettingsError(f"vehicles must be inline or process, not {s.vehicles!r}")
-        self.ctx = BridgeContext(runtime.graph, VehicleLinkSecurity(s, runtime.tokens), s)
+        self.keys = VehicleKeys(s.data_dir)
+        # The prefix of each spawned vehicle's drone topics; any other vehicle's is /NAME.
+        self.prefixes: dict[str, str] = {}
+        security = VehicleLinkSecurity(s, runtime.tokens, self.keys, prefix_of=self.prefix_of)
+        self.ctx = BridgeContext(runtime.graph, security, s)
+        self.relays: dict[str, DialogRelay] = {}
         self.processes: dict[str, VehicleProcess] = {}
         self.alerts: list[str] = []
         self._tasks: list[asyncio.Task[Any]] = []
         self._stopping = False
         self._recording_sent: str | None = None
+        self._misnamed: set[str] = set()
         self._utterances: Any = None
         self.bus: ConsoleBus | None = None
 
@@ -242,7 +235,9 @@ class VehicleCentral:
             argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
             if tls is not None:  # our own certificate, pinned (whatever names it carries)
                 argv += ["--fingerprint", tls.fingerprint]
-            self.processes[name] = VehicleProcess(argv, {**env, **self._bus_env(name)}, name)
+            self.prefixes[name] = prefix
+            child = {**vehicle_env(env, self.keys, name), **self._bus_env(name)}
+            self.processes[name] = VehicleProcess(argv, child, name)
             self._register(name, prefix, simulated=kind in ("sim", SIM_MAVLINK))
             self._expect(name)
         self._tasks.append(asyncio.create_task(self._launch(), name="vehicles-launch"))
@@ -341,6 +336,14 @@ class VehicleCentral:
         if self.bus is not None:
             self.bus.close()
             self.bus = None
+        for relay in self.relays.values():
+            relay.close()
+        self.relays.clear()
+
+    def prefix_of(self, name: str) -> str:
+        """The prefix of vehicle ``name``'s drone topics: what ``serve`` gave the vehicle it
+        spawned, else ``/NAME`` (a vehicle does not choose it: it would pick another's)."""
+        return self.prefixes.get(name, f"/{name}")
 
     # ------------------------------------------------------------------ drones
     def _register(self, name: str, prefix: str, *, simulated: bool) -> None:
@@ -352,6 +355,7 @@ class VehicleCentral:
         stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
         stack.touch_recording = self.touch_recording
         rt.drones[name] = stack
+        self.relays[name] = DialogRelay(rt.graph, name, prefix)
         rt.dialogs[name] = RemoteDialog(stack)
         # Listings (REST, fleet status, the console's selector) follow the names, not the
         # order in which the vehicles joined.
@@ -382,8 +386,23 @@ class VehicleCentral:
                 name, prefix = str(info["name"]), str(info.get("prefix", f"/{info['name']}"))
             except (ValueError, KeyError, TypeError):
                 continue
-            if name not in self.runtime.drones:
-                self._register(name, prefix, simulated=bool(info.get("simulated", True)))
+            if name in self.runtime.drones:
+                continue
+            if topic != names.info_topic(name) or prefix != self.prefix_of(name):
+                # Its link may publish only under the prefix the console gives it: the drone
+                # it describes would show nothing.
+                if name not in self._misnamed:
+                    self._misnamed.add(name)
+                    log.warning(
+                        "vehicle %s announced itself on %s with prefix %r: not registered "
+                        "(a vehicle that joins from elsewhere uses the prefix %s)",
+                        name,
+                        topic,
+                        prefix,
+                        self.prefix_of(name),
+                    )
+                continue
+            self._register(name, prefix, simulated=bool(info.get("simulated", True)))
 
     async def _beat(self) -> None:
         n = 0

@@ -4,6 +4,7 @@
 
     VehicleError
     ├── LinkError             the vehicle link cannot be used (bad URL, closed)
+    ├── VehicleKeyError       a vehicle key or its name is missing, unreadable or malformed
     └── RemoteCallError       a call over the link was refused or not answered
         └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
 """
@@ -17,6 +18,11 @@ class VehicleError(Exception):
 
 class LinkError(VehicleError):
     """The vehicle link cannot be used; the message says why."""
+
+
+class VehicleKeyError(VehicleError):
+    """A vehicle key (or the vehicle name it is for) is missing, unreadable or malformed; the
+    message says which and how to make one."""
 
 
 class RemoteCallError(VehicleError):

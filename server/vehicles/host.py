@@ -6,7 +6,9 @@ process`` spawns one per drone) runs, on its own event loop and its own graph: t
 perception), the task manager, the vehicle node (navdata, camera, pose, markers, task, jog,
 operator watchdog), the dialog manager with its ANS monitors, the fleet's LTM, and the safety
 port. :class:`~server.vehicles.link.GraphLink` mirrors that graph onto the central one, so the
-central server and its clients see the drone exactly as an in-process one.
+central server and its clients see the drone exactly as an in-process one. The link opens with
+the vehicle's own key (``--key-file`` or ``UAVC_VEHICLE_KEY``: :mod:`server.vehicles.keys`),
+never the pilot token; the central server lets it publish only this drone's topics.
 
 The drone stays safe without the central server: :class:`CentralWatch` hovers it after
 ``heartbeat_timeout_s`` of silence and lands it after ``central_loss_land_s``; the link
@@ -22,6 +24,7 @@ import gc
 import json
 import logging
 import os
+import secrets
 import signal
 import sys
 import time
@@ -40,6 +43,7 @@ from server.vehicles import names
 from server.vehicles.errors import RemoteCallError, VehicleError
 from server.vehicles.link import GraphLink
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
+from server.vehicles.relay import dialog_out
 from server.vehicles.safety import SafetyPort, loopback_origin
 from server.vehicles.watch import CentralWatch, LossAction
 
@@ -79,8 +83,12 @@ class VehicleOptions:
 
 def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
     """The topics and services a whole vehicle shares with the central server: an AR.Drone's
-    navdata and camera, or a MAVLink drone's ``/mavros/*`` topics (no camera over MAVLink)."""
-    from server.dialog.manager import INTERPRET, REPLY, STATE, UTTERANCE
+    navdata and camera, or a MAVLink drone's ``/mavros/*`` topics (no camera over MAVLink).
+
+    What it publishes and provides is all its own drone's (the central server lets a vehicle
+    publish nothing else: :mod:`server.vehicles.access`); its dialog speaks under
+    ``/NAME/vehicle/*`` (:mod:`server.vehicles.relay`)."""
+    from server.dialog.manager import UTTERANCE
     from server.fleet.messages import (
         FLEET_TOPIC,
         FLEET_TYPE,
@@ -108,8 +116,8 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
         TopicSpec(f"{p}/uav/pose", POSE),
         TopicSpec(f"{p}/uav/markers", MARKERS),
         TopicSpec(f"{p}/uav/task", TASK, latch=True),
-        TopicSpec(REPLY, "uav_console/Reply"),
-        TopicSpec(f"{p}{STATE}", "uav_console/DialogState", latch=True),
+        TopicSpec(names.reply_topic(name), "uav_console/Reply"),
+        TopicSpec(names.state_topic(name), "uav_console/DialogState", latch=True),
         TopicSpec(f"/{name}/{STATUS_TOPIC}", STATUS_TYPE),
         TopicSpec(names.info_topic(name), names.STRING, latch=True),
         TopicSpec(names.telemetry_topic(name), names.STRING),
@@ -127,7 +135,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
     services = (
         (names.control_service(name), names.CONTROL_TYPE),
         (f"/{name}/{PLAN_SERVICE}", PLAN_SERVICE_TYPE),
-        (f"{p}{INTERPRET}", "uav_console/Interpret"),
+        (names.interpret_service(name), "uav_console/Interpret"),
     )
     return LinkSpec(out, inn, services, owner=f"link:{name}")
 
@@ -164,10 +172,15 @@ class RemoteFleet:
 class VehicleHost:
     """See the module docstring: ``await start()``, ``await run(stop)``, ``await stop()``."""
 
-    def __init__(self, settings: Settings, options: VehicleOptions, token: str) -> None:
+    def __init__(
+        self, settings: Settings, options: VehicleOptions, key: str, *, safety_token: str | None
+    ) -> None:
+        """``key``: this vehicle's own key, for the link (:mod:`server.vehicles.keys`);
+        ``safety_token``: the pilot token the safety port checks (None: the port refuses all)."""
         self.settings = settings
         self.options = options
-        self.token = token
+        self.key = key
+        self.safety_token = safety_token
         self.name = options.name
         self.watch = CentralWatch(
             settings.heartbeat_timeout_s,
@@ -221,7 +234,7 @@ class VehicleHost:
         self.link = GraphLink(
             o.central,
             self.core,
-            token=self.token,
+            token=self.key,
             name=self.name,
             ca_file=o.ca_file,
             fingerprint=o.fingerprint,
@@ -249,6 +262,8 @@ class VehicleHost:
             fleet=RemoteFleet(self.core),
             drones=lambda: self.fleet_names or [self.name],
         )
+        # its replies, state and interpret service, under this vehicle's own names
+        self._dialog_out = dialog_out(self.graph, self.name, o.prefix)
         pad = station_positions(self.world, o.index + 1)[-1]
         self.ltm = LtmNode(
             self.graph,
@@ -271,7 +286,7 @@ class VehicleHost:
         self.safety = SafetyPort(
             o.safety_host,
             o.safety_port,
-            self.token,
+            self.safety_token or secrets.token_urlsafe(24),  # none given: nobody opens it
             lambda action: self.direct(action).detail,
             name=self.name,
             origin_allowed=lambda origin: origin in allowed or loopback_origin(origin),
@@ -440,6 +455,7 @@ class VehicleHost:
             self.bus.close()
         self._fleet_sub.close()
         self._recording_sub.close()
+        self._dialog_out.close()
         self.ltm.close()
         self.core.close()
         st = self.stack
@@ -499,13 +515,15 @@ def join_bus(settings: Settings, name: str) -> VehicleBus | None:
     return bus
 
 
-async def run_vehicle(settings: Settings, options: VehicleOptions, token: str) -> None:
+async def run_vehicle(
+    settings: Settings, options: VehicleOptions, key: str, *, safety_token: str | None
+) -> None:
     """Run one vehicle process until SIGTERM/SIGINT (then land and stop)."""
     granted = raise_priority(settings.vehicle_nice, settings.vehicle_rt_priority)
     log.info("%s: vehicle threads run at %s", options.name, granted)
     # How long another thread may keep the GIL from the control thread (see the constant).
     sys.setswitchinterval(VEHICLE_SWITCH_INTERVAL_S)
-    host = VehicleHost(settings, options, token)
+    host = VehicleHost(settings, options, key, safety_token=safety_token)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):

@@ -1,7 +1,11 @@
 """``uav-console vehicle --central ws://HOST:PORT/vehicle-link --name NAME``: a whole vehicle.
 
 Settings come from ``UAVC_*`` (``serve`` passes all of its own to the vehicles it spawns) and
-the flags; the token from ``--token`` or ``UAVC_TOKEN``.
+the flags. The link opens with the vehicle's own key: ``--key-file PATH`` or ``UAVC_VEHICLE_KEY``
+(``serve`` puts it there for the vehicles it spawns; for a vehicle on another computer the
+console's operator makes it with ``uav-console vehicle-key NAME``). The pilot token
+(``--token`` or ``UAVC_TOKEN``) only lets pages call the vehicle's safety port; without it that
+port refuses every request.
 """
 
 from __future__ import annotations
@@ -13,18 +17,26 @@ import os
 import sys
 
 from server.settings import Settings
-from server.vehicles.errors import VehicleError
+from server.vehicles.errors import VehicleError, VehicleKeyError
 from server.vehicles.host import VehicleOptions, run_vehicle
+from server.vehicles.keys import check_name, key_from, loosely_readable
+
+log = logging.getLogger("uav_console.vehicle")
 
 
 def whole_vehicle_main(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    token = args.token or os.environ.get("UAVC_TOKEN")
-    if not token:
-        print(
-            "uav-console vehicle: a pilot token is needed (--token or UAVC_TOKEN)", file=sys.stderr
-        )
+    try:
+        check_name(args.name)
+        key = key_from(args.key_file, os.environ)
+    except VehicleKeyError as exc:
+        print(f"uav-console vehicle: {exc}", file=sys.stderr)
         return 2
+    if args.key_file is not None and loosely_readable(args.key_file):
+        log.warning("%s: others may read the vehicle key file (chmod 600 it)", args.key_file)
+    safety_token = args.token or os.environ.get("UAVC_TOKEN")
+    if not safety_token:
+        log.warning("no pilot token (--token or UAVC_TOKEN): the safety port refuses every request")
     digits = "".join(c for c in args.name if c.isdigit())
     index = args.index if args.index is not None else max(0, int(digits or 1) - 1)
     settings = Settings.from_env(drone=args.drone, world=args.world)
@@ -42,7 +54,7 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         fingerprint=args.fingerprint,
     )
     try:
-        asyncio.run(run_vehicle(settings, options, token))
+        asyncio.run(run_vehicle(settings, options, key, safety_token=safety_token))
     except VehicleError as exc:
         print(f"uav-console vehicle: {exc}", file=sys.stderr)
         return 2

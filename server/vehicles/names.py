@@ -11,6 +11,11 @@ A vehicle process puts its drone on the central graph through the vehicle link
 - ``/NAME/vehicle/control`` (service ``uav_console/VehicleControl``; args ``{op, ...}``): ``op``
   is ``direct`` (``action``), ``fault`` (``kind``, ``duration_s``, ``battery_pct``,
   ``wind_mps``) or ``utterance`` (``text``, ``confidence``, ``source``, ``role``);
+- ``/NAME/vehicle/reply`` (uav_console/Reply), ``/NAME/vehicle/state`` (uav_console/DialogState,
+  latched) and the service ``/NAME/vehicle/interpret``: the vehicle's dialog, under the vehicle's
+  own name. The central server checks each reply (it names this drone, a known level) and is the
+  only publisher of ``/console/reply``, ``PREFIX/console/state`` and ``PREFIX/console/interpret``
+  (:mod:`server.vehicles.relay`): a vehicle publishes nothing of the server's own;
 - ``/console/recording`` (std_msgs/String, latched, from the central server): the id of the
   flight recording being written (``""``: none), for the vehicle's audit rows; published before
   an operator's command is passed on, so its rows carry the recording it opened;
@@ -39,6 +44,18 @@ def telemetry_topic(name: str) -> str:
 
 def control_service(name: str) -> str:
     return f"/{name}/vehicle/control"
+
+
+def reply_topic(name: str) -> str:
+    return f"/{name}/vehicle/reply"
+
+
+def state_topic(name: str) -> str:
+    return f"/{name}/vehicle/state"
+
+
+def interpret_service(name: str) -> str:
+    return f"/{name}/vehicle/interpret"
 
 
 def drone_order(name: str) -> tuple[str, int, str]:

@@ -293,11 +293,12 @@ def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerP
         a.wait_for_selector("#takeover:not([hidden])", timeout=5000)
         assert "took over" in (a.text_content("#banner") or "")
         assert a.is_disabled("#btn-takeoff") and a.is_disabled("#send")
-        # The server agrees: the first pilot's jog is refused.
+        # The server agrees: the first pilot's jog is refused (a zero twist, a hover, is not:
+        # any pilot may hover).
         a.evaluate("""() => { window.__statuses = [];
             uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
         a.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
-            {linear: {x: 0, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
+            {linear: {x: 0.2, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
         a.wait_for_function(
             "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))", timeout=5000
         )

@@ -25,7 +25,7 @@ def compose() -> dict:
 def test_compose_shape() -> None:
     c = compose()
     services = c["services"]
-    assert {"central", "sim1", "sim2", "vehicle1", "vehicle2"} <= set(services)
+    assert {"keys", "central", "sim1", "sim2", "vehicle1", "vehicle2"} <= set(services)
     nets = c["networks"]["fleet"]["ipam"]["config"][0]["subnet"]
     assert nets == "172.28.0.0/24"
     for name, svc in services.items():
@@ -38,9 +38,13 @@ def test_compose_shape() -> None:
         assert cmd[cmd.index("--drone") + 1] == sim_ip
         assert cmd[cmd.index("--central") + 1] == "ws://central:8000/vehicle-link"
         assert services[f"sim{k}"]["command"][2] == sim_ip
+        # its own key, made by the one-shot `keys` service in the central's data volume
+        assert cmd[cmd.index("--key-file") + 1] == f"/central/vehicle-keys/uav{k}.key"
+        assert f"uav{k}" in services["keys"]["command"]
+        assert services[f"vehicle{k}"]["volumes"] == ["central-data:/central:ro"]
 
 
-@pytest.mark.parametrize("service", ["central", "sim1", "sim2", "vehicle1", "vehicle2"])
+@pytest.mark.parametrize("service", ["keys", "central", "sim1", "sim2", "vehicle1", "vehicle2"])
 def test_compose_commands_exist(service: str) -> None:
     cmd = [
         re.sub(r"\$\{UAVC_TOKEN[^}]*\}", "tok", a)
