@@ -153,13 +153,11 @@ class Settings(BaseSettings):
         "or the next free port.",
     )
     bus_connect: CommaList = Field(
-        (), description="Other bus routers to join (consoles on other hosts, zenohd)."
+        (),
+        description="Other bus routers to join (consoles on other hosts, zenohd); for a "
+        "vehicle process, the routers it joins as vehicle-NAME with its vehicle key.",
     )
     fleet_name: str = Field("default", description="The fleet's name on the bus (its keys).")
-    bus_user: str | None = Field(
-        None, description="A vehicle process's bus user (given by serve to its vehicles)."
-    )
-    bus_password: str | None = Field(None, description="That user's bus password.")
     # -- vehicle processes ---------------------------------------------------------------------
     vehicles: Literal["inline", "process"] = Field(
         "inline",

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,6 +49,8 @@ class ConsoleBus:
         directory: ``<data dir>/bus`` (credentials and the client files, 0600).
         fleet: the fleet's name, the second key segment.
         vehicles: the vehicle names that get a credential (the ACL is fixed at start).
+        vehicle_passwords: name → password for vehicles whose password is given (the
+            console's vehicle keys); they are on the bus too.
         listen: endpoints to listen on; empty: ``tcp/127.0.0.1:7447`` or the next free port.
         connect: other routers to join (consoles on other hosts, ``zenohd``).
     """
@@ -60,10 +62,14 @@ class ConsoleBus:
         vehicles: Iterable[str],
         listen: Iterable[str] = (),
         connect: Iterable[str] = (),
+        vehicle_passwords: Mapping[str, str] | None = None,
     ) -> None:
         self.directory = directory
         self.fleet = keys.segment(fleet)
-        self.vehicle_names = [keys.segment(v) for v in vehicles]
+        self.vehicle_passwords = dict(vehicle_passwords or {})
+        self.vehicle_names = sorted(
+            {keys.segment(v) for v in vehicles} | set(self.vehicle_passwords)
+        )
         self.listen = list(listen) or [free_listen_endpoint(DEFAULT_LISTEN)]
         self.connect = list(connect)
         self.credentials: Credentials | None = None
@@ -80,7 +86,9 @@ class ConsoleBus:
         Raises:
             BusConfigError: an endpoint cannot be listened on or the credentials are unusable.
         """
-        creds = Credentials.load_or_create(self.directory, self.vehicle_names)
+        creds = Credentials.load_or_create(
+            self.directory, self.vehicle_names, self.vehicle_passwords
+        )
         self.credentials = creds
         acl = access_control(self.fleet, creds.vehicles())
         self.session = open_session(

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 import secrets
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from drone.bus.config import CONSOLE_USER, OBSERVER_USER, PILOT_USER, vehicle_user
@@ -33,8 +33,16 @@ class Credentials:
         return sorted(u.removeprefix("vehicle-") for u in self.users if u.startswith("vehicle-"))
 
     @classmethod
-    def load_or_create(cls, directory: Path, vehicles: Iterable[str]) -> Credentials:
+    def load_or_create(
+        cls,
+        directory: Path,
+        vehicles: Iterable[str],
+        vehicle_passwords: Mapping[str, str] | None = None,
+    ) -> Credentials:
         """Read the dictionary, adding the roles and any of ``vehicles`` it lacks.
+
+        ``vehicle_passwords`` (name → password: the console's vehicle keys) are authoritative:
+        a vehicle joins the bus with the same key it joins the console with.
 
         Raises:
             BusConfigError: a line of the file is not ``user:password``.
@@ -51,11 +59,14 @@ class Credentials:
                 if not sep or not user or not password:
                     raise BusConfigError(f"{path}:{n}: not user:password")
                 users[user] = password
+        given = {vehicle_user(n): p for n, p in (vehicle_passwords or {}).items()}
+        changed = {u for u, p in given.items() if users.get(u) != p}
+        users.update(given)
         wanted = [CONSOLE_USER, OBSERVER_USER, PILOT_USER, *(vehicle_user(v) for v in vehicles)]
         missing = [u for u in wanted if u not in users]
         for user in missing:
             users[user] = secrets.token_urlsafe(24)
-        if missing or not path.exists():
+        if missing or changed or not path.exists():
             write_private(path, "".join(f"{u}:{p}\n" for u, p in users.items()))
         return cls(path, users)
 

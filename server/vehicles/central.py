@@ -246,8 +246,15 @@ class VehicleCentral:
         """The console's embedded bus router (docs/bus.md); None, said in the log, when it
         cannot start: the vehicles still reach the console over /vehicle-link."""
         s = self.runtime.settings
+        passwords = {v: self.keys.ensure(v).secret for v in vehicles}
+        passwords |= {k.name: k.secret for k in self.keys.all()}  # vehicles from elsewhere
         bus = ConsoleBus(
-            s.data_dir / "bus", s.fleet_name, vehicles, listen=s.bus_listen, connect=s.bus_connect
+            s.data_dir / "bus",
+            s.fleet_name,
+            vehicles,
+            listen=s.bus_listen,
+            connect=s.bus_connect,
+            vehicle_passwords=passwords,
         )
         try:
             bus.start()
@@ -260,11 +267,9 @@ class VehicleCentral:
     def _bus_env(self, name: str) -> dict[str, str]:
         if self.bus is None:
             return {}
-        cred = self.bus.vehicle_credential(name)
+        cred = self.bus.vehicle_credential(name)  # the password is its vehicle key
         return {
             "UAVC_BUS_CONNECT": ",".join(cred.connect),
-            "UAVC_BUS_USER": cred.user,
-            "UAVC_BUS_PASSWORD": cred.password,
             "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
         }
 

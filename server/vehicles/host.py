@@ -34,6 +34,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
+from drone.bus.config import vehicle_user
 from drone.bus.errors import BusError
 from drone.bus.vehicle import VehicleBus
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
@@ -294,7 +295,7 @@ class VehicleHost:
             tls=tls,
         )
         await self.safety.start()
-        self.bus = join_bus(s, self.name)
+        self.bus = join_bus(s, self.name, self.key)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         self._tasks = [
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
@@ -497,15 +498,13 @@ def raise_priority(nice: int, rt_priority: int = 0) -> str:
     return f"nice {os.getpriority(os.PRIO_PROCESS, 0)}"
 
 
-def join_bus(settings: Settings, name: str) -> VehicleBus | None:
-    """This vehicle on the fleet's bus (docs/bus.md) when ``serve`` gave it a credential;
-    None when it did not, or the router cannot be reached (said in the log: the vehicle flies
-    on, its console link carries everything the bus does)."""
-    if not settings.bus_connect or not settings.bus_user or not settings.bus_password:
+def join_bus(settings: Settings, name: str, key: str) -> VehicleBus | None:
+    """This vehicle on the fleet's bus (docs/bus.md) as ``vehicle-NAME`` with its own vehicle
+    key, when told where the bus is; None when not, or when the router cannot be reached or
+    refuses (said in the log: the vehicle flies on, its console link carries everything)."""
+    if not settings.bus_connect:
         return None
-    bus = VehicleBus(
-        settings.bus_connect, settings.bus_user, settings.bus_password, settings.fleet_name, name
-    )
+    bus = VehicleBus(settings.bus_connect, vehicle_user(name), key, settings.fleet_name, name)
     try:
         bus.start()
     except BusError as exc:

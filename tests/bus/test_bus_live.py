@@ -184,3 +184,26 @@ def test_the_default_endpoint_moves_to_the_next_free_port() -> None:
         port = held.getsockname()[1]
         moved = free_listen_endpoint(f"tcp/127.0.0.1:{port}")
     assert moved != f"tcp/127.0.0.1:{port}" and moved.startswith("tcp/127.0.0.1:")
+
+
+def test_a_vehicle_joins_with_its_vehicle_key(tmp_path: Path) -> None:
+    """The console's vehicle keys are the bus passwords: one credential per vehicle, also for
+    a vehicle from elsewhere whose key was made with ``uav-console vehicle-key``."""
+    bus = ConsoleBus(
+        tmp_path / "bus",
+        "default",
+        ["uav1"],
+        listen=[f"tcp/127.0.0.1:{free_port()}"],
+        vehicle_passwords={"uav1": "uavk_one", "uav7": "uavk_seven"},
+    )
+    bus.start()
+    try:
+        assert bus.vehicle_names == ["uav1", "uav7"]
+        uav7 = VehicleBus(bus.listen, "vehicle-uav7", "uavk_seven", "default", "uav7")
+        uav7.start()
+        wait_for(bus.alive, lambda a: a == ["uav7"], 10, "uav7 alive")
+        uav7.close()
+        with pytest.raises(BusConfigError):
+            VehicleBus(bus.listen, "vehicle-uav1", "uavk_seven", "default", "uav1").start()
+    finally:
+        bus.close()
