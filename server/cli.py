@@ -92,7 +92,14 @@ def _parser() -> argparse.ArgumentParser:
         help="/vehicle-link: this vehicle's own key (uav-console vehicle-key NAME on the console; "
         "else UAVC_VEHICLE_KEY)",
     )
-    v.add_argument("--world", default="outdoor")
+    v.add_argument("--world", default=None, help="indoor | outdoor | a world file (UAVC_WORLD)")
+    v.add_argument(
+        "--bus-connect",
+        action="append",
+        default=None,
+        help="the fleet's bus router to join as vehicle-NAME with this vehicle's key (repeatable)",
+    )
+    v.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
     v.add_argument("--ca", type=Path, default=None, help="CA file for a wss:// central")
     v.add_argument("--fingerprint", default=None, help="pinned SHA-256 of the central's cert")
     v.add_argument("--prefix", default=None, help="topic prefix (default /NAME; '' for one drone)")

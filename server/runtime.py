@@ -260,7 +260,7 @@ class Runtime:
                 self.settings.sim_speed,
                 self.settings.sim_speed,
             )
-        count = 0 if self.settings.drone == "none" else max(1, self.settings.fleet)
+        count = 0 if self.settings.drone == "none" else self.settings.fleet
         await self.vehicles.start()
         process = self.settings.vehicles == "process"
         if process:

@@ -54,7 +54,7 @@ class Settings(BaseSettings):
         "string; a fleet may list one per drone, comma-separated.",
     )
     world: str = Field("indoor", description="indoor | outdoor | path to a world file.")
-    fleet: int = Field(1, description="Number of drones (0: a console with none of its own).")
+    fleet: int = Field(1, ge=0, description="Number of drones (0: a console with none of its own).")
     sim_base_addr: str = Field(
         "127.0.0.2", description="Loopback address of the first simulated drone."
     )

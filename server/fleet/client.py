@@ -188,7 +188,10 @@ def vehicle_main(args: argparse.Namespace) -> int:
     token = args.token or os.environ.get("UAVC_TOKEN")
     try:
         tls = (getattr(args, "ca", None), getattr(args, "fingerprint", None))
-        asyncio.run(_vehicle(args.central, args.name, args.drone, args.world, token, tls))
+        from server.settings import Settings
+
+        world = args.world or Settings.from_env().world
+        asyncio.run(_vehicle(args.central, args.name, args.drone, world, token, tls))
     except (FleetError, TLSError) as exc:
         print(f"uav-console vehicle: {exc}", file=__import__("sys").stderr)
         return 2

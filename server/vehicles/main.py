@@ -39,7 +39,12 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         log.warning("no pilot token (--token or UAVC_TOKEN): the safety port refuses every request")
     digits = "".join(c for c in args.name if c.isdigit())
     index = args.index if args.index is not None else max(0, int(digits or 1) - 1)
-    settings = Settings.from_env(drone=args.drone, world=args.world)
+    settings = Settings.from_env(
+        drone=args.drone,
+        world=args.world,
+        bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
+        fleet_name=args.fleet_name,
+    )
     options = VehicleOptions(
         central=args.central,
         name=args.name,

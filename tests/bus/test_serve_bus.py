@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 import statistics
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
-from tests.isolation.conftest import serve, wait_for
+from server.cli import main as cli_main
+from tests.isolation.conftest import HOST, ROOT, serve, wait_for
 from tests.loopback import for_worker, free_port
 
 SCRIPT = textwrap.dedent(
@@ -63,3 +65,32 @@ def test_a_third_party_script_watches_a_served_drone(tmp_path: Path) -> None:
     assert samples[-1]["drone"] == "uav1" and samples[-1]["state"] == "LANDED"
     periods = [b["stamp"] - a["stamp"] for a, b in itertools.pairwise(samples)]
     assert statistics.median(periods) <= 0.2  # at least 5 Hz, as the vehicle stamps them
+
+
+def test_a_vehicle_from_elsewhere_joins_the_bus_with_its_key(tmp_path: Path) -> None:
+    """``uav-console vehicle --bus-connect ENDPOINT --name NAME --key-file …`` on another
+    computer: with a key the operator made before ``serve --fleet 0`` started, it is on the
+    bus as ``vehicle-NAME``."""
+    assert cli_main(["vehicle-key", "uav7", "--data-dir", str(tmp_path / "data")]) == 0
+    key_file = tmp_path / "data" / "vehicle-keys" / "uav7.key"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    extra = ("--vehicles", "process", "--fleet", "0", "--bus-listen", endpoint)
+    with serve(tmp_path, "sim", extra=extra) as srv:
+        assert srv.http.get("/api/v1/drones").json() == []  # --fleet 0: none of its own
+        env = {**os.environ, "UAVC_SIM_BASE_ADDR": for_worker("127.0.41.20")}
+        env.pop("UAVC_VEHICLE_KEY", None)
+        env["UAVC_DATA_DIR"] = str(tmp_path / "vehicle-data")
+        argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav7", "--drone", "sim"]
+        argv += ["--central", f"ws://{HOST}:{srv.port}/vehicle-link", "--index", "0"]
+        argv += ["--key-file", str(key_file), "--bus-connect", endpoint]
+        with open(tmp_path / "uav7.log", "wb") as log:
+            proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
+        try:
+            wait_for(
+                lambda: srv.http.get("/api/v1/health").json()["bus"]["alive"] == ["uav7"],
+                "uav7 alive on the bus",
+                60,
+            )
+        finally:
+            proc.terminate()
+            proc.wait(20)
