@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from drone.deadline import DEFAULT_DEADLINE_S, check_deadline_s
 from drone.share import SOURCE_ROOT, share_dir
 
 ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
@@ -39,6 +40,9 @@ class Settings:
     rate_limit_per_s: float = 2000.0  # frames per second per connection (token bucket)
     rate_burst: int = 4000
     heartbeat_timeout_s: float = 1.0  # operator lost while jogging -> hover (DESIGN §5)
+    # A motion command handed to the drone later than this after the operator gave it is
+    # dropped, audited and reported (drone/deadline.py; stops never expire).
+    command_deadline_s: float = DEFAULT_DEADLINE_S
     link_timeout_s: float = 0.5  # no navdata for this long -> link lost (DESIGN §5)
     confidence_threshold: float = 0.5
     # Spoken commands from this confidence up to the threshold are read back ("Did you say …?")
@@ -114,6 +118,10 @@ class Settings:
                 "would otherwise hold the control thread off the CPU"
             )
 
+        try:
+            check_deadline_s(self.command_deadline_s)
+        except ValueError as exc:
+            raise SettingsError(f"command_deadline_s: {exc}") from exc
         for name in ("confidence_threshold", "confirm_floor"):
             if not 0 <= getattr(self, name) <= 1:
                 raise SettingsError(f"{name} must be 0 to 1, not {getattr(self, name)}")
