@@ -27,10 +27,14 @@ class Unadvertise:
 
 @dataclass(frozen=True)
 class Publish:
+    """``issued`` (ours, beside the protocol's fields): when the operator gave the command,
+    Unix seconds of the server's clock (drone/deadline.py); None: when it arrives."""
+
     topic: str
     msg: dict[str, Any]
     id: str | None = None
     latch: bool = False
+    issued: float | None = None
 
 
 @dataclass(frozen=True)
