@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
 
+from drone.deadline import Expired, label
+from server import deadlines
 from server.runtime import DroneStack, Runtime
 from server.security import TOKEN_COOKIE
 
@@ -96,6 +99,56 @@ def lease_dep(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)
     check_lease(request, runtime, {"command"})
 
 
+async def command_issued(request: Request) -> float:
+    """When a REST command was issued (Unix seconds of the server's clock, drone/deadline.py):
+    the ``X-Command-Issued`` header, else the JSON body's ``issued``, else its arrival (a
+    script that says nothing); never later than its arrival.
+
+    Raises:
+        HTTPException: 422, the value is not Unix seconds or is far ahead of our clock.
+    """
+    arrival = time.time()
+    given = request.headers.get(deadlines.ISSUED_HEADER)
+    body_value: object = None
+    if not given and "json" in request.headers.get("content-type", ""):
+        try:
+            body = json.loads(await request.body() or b"null")
+        except ValueError:
+            body = None  # the route's own parsing says what is wrong with it
+        if isinstance(body, dict):
+            body_value = body.get("issued")
+    try:
+        return deadlines.issued_at_door(given, body_value, arrival)
+    except deadlines.BadIssued as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from exc
+
+
+async def fleet_deadline(
+    request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]
+) -> None:
+    """Starting a mission or the patrol is a motion command: past its deadline at the door it
+    is not started, but said, audited and answered (409, ``accepted: false``). Stopping one
+    (DELETE) never expires."""
+    if request.method != "POST":
+        return
+    issued = await command_issued(request)
+    kind = "patrol_start" if request.url.path.endswith("/patrol") else "mission"
+    verdict = deadlines.judge(runtime.settings.command_deadline_s, kind, issued)
+    if isinstance(verdict, Expired):
+        text = deadlines.report_expired(
+            runtime.graph,
+            runtime.audit,
+            label(kind),
+            verdict,
+            kind=kind,
+            drone="*",
+            prefix="",
+            source="rest",
+            utterance=f"POST {request.url.path}",
+        )
+        raise deadlines.CommandExpired(text, verdict)
+
+
 def drone_stack(drone_id: str, runtime: Annotated[Runtime, Depends(get_runtime)]) -> DroneStack:
     stack = runtime.drones.get(drone_id)
     if stack is None:
@@ -109,3 +162,4 @@ RoleDep = Annotated[str, Depends(caller_role)]
 PilotDep = Annotated[str, Depends(pilot_role)]
 DroneDep = Annotated[DroneStack, Depends(drone_stack)]
 LeaseDep = Annotated[None, Depends(lease_dep)]
+IssuedDep = Annotated[float, Depends(command_issued)]
