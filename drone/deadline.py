@@ -181,12 +181,13 @@ class ClockOffset:
 
     Each sample is (remote time when sent, our time when received): remote − ours is the true
     offset less the message's transit time. The largest over the last ``window`` samples is
-    the one that waited least, so a burst of late heartbeats (a stalled console) does not
-    make old commands look young; a clock step on either side is forgotten after ``window``
-    samples (5 s at the heartbeat's 10 Hz).
+    the one that waited least, so a burst of late heartbeats (a stalled console, a stalled
+    vehicle reading its backlog) does not make old commands look young; a clock step on
+    either side is forgotten after ``window`` samples (30 s at the heartbeat's 10 Hz, longer
+    than a vehicle waits for a silent console before it lands).
     """
 
-    def __init__(self, window: int = 50) -> None:
+    def __init__(self, window: int = 300) -> None:
         if window < 1:
             raise ValueError(f"window must be at least 1 sample, not {window}")
         self._samples: collections.deque[float] = collections.deque(maxlen=window)

@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
-from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, not_flown
+from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, audit_outcome, not_flown
 from server.dialog import assist, clarify, confirm, replies
 from server.dialog.addressing import parse_address, recipients
 from server.dialog.autonomic import (
@@ -117,6 +117,7 @@ class DialogResult:
     # What the reply waits for: "confirm" when it asks "Did you say …?" (a yes runs it, a no
     # drops it: the console shows Yes / No buttons), else "".
     expects: str = ""
+    expired: Expired | None = None  # not run: handed to the drone past its deadline
 
 
 class DialogManager:
@@ -339,11 +340,12 @@ class DialogManager:
             said = f"{self.drone}: {said}"
             result = replace(result, reply=said)
         self._reply(said, level, text, result.commands, expects=result.expects)
+        late = result.expired
         self._log(
             utterance=text,
             commands=result.commands,
             action=action,
-            outcome=result.reply,
+            outcome=f"{audit_outcome(late)}. {result.reply}" if late else result.reply,
             role=role,
             source=source,
             confidence=confidence,
@@ -401,7 +403,8 @@ class DialogManager:
         late = self._late(commands, issued)
         if late is not None:  # judged here, as the sentence is handed to the drone
             self._question = question  # a question still open stays open
-            return DialogResult(not_flown(text, late), commands, False), "expired"
+            reply = not_flown(text, late)
+            return DialogResult(reply, commands, False, expired=late), "expired"
         self._asked = None
         reply, ok = await self._execute(commands)
         asked = next((i for i, p in enumerate(interp.parsed) if p.command == self._asked), None)
