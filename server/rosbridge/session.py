@@ -200,7 +200,7 @@ class BridgeSession:
 
     def _in_time(self, key: str, msg: dict[str, Any], issued: float, op_id: str | None) -> bool:
         """Judge a drone command's deadline here, where the console hands it over; an
-        expired one is told to this client (a ``status`` warning with the op's id), said on
+        expired one is told to this client (a ``status`` error with the op's id), said on
         ``/console/reply`` and audited. Utterances are judged by the dialog, which knows
         what they ask."""
         kind = _command_kind(key, msg)
@@ -218,7 +218,7 @@ class BridgeSession:
         if not self._expiry_reports.allow(key, self.ctx.clock()):
             return False  # said a moment ago (a late jog comes ten times a second)
         deadlines.say(self.graph, text, drone, prefix)
-        self.protocol.send_status("warning", f"publish to {key}: {text}", id=op_id)
+        self.protocol.send_status("error", f"publish to {key}: {text}", id=op_id)
         if self.ctx.audit is not None and self.audit_pending < MAX_AUDIT_PENDING:
             self.audit_pending += 1
 
