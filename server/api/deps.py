@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
 
-from drone.deadline import Expired, label
+from drone.deadline import Expired, expires, label
 from server import deadlines
 from server.runtime import DroneStack, Runtime
 from server.security import TOKEN_COOKIE
@@ -99,14 +100,31 @@ def lease_dep(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)
     check_lease(request, runtime, {"command"})
 
 
-async def command_issued(request: Request) -> float:
-    """When a REST command was issued (Unix seconds of the server's clock, drone/deadline.py):
-    the ``X-Command-Issued`` header, else the JSON body's ``issued``, else its arrival (a
-    script that says nothing); never later than its arrival.
+@dataclass(frozen=True)
+class Issued:
+    """When a REST command was issued (Unix seconds, server clock), or why the stamp it gave
+    is not one (then ``at`` is its arrival)."""
 
-    Raises:
-        HTTPException: 422, the value is not Unix seconds or is far ahead of our clock.
-    """
+    at: float
+    error: str | None = None
+
+    def of(self, kinds: tuple[str, ...] | list[str] | set[str]) -> float:
+        """The time to judge commands of ``kinds`` by. A bad stamp refuses a motion command
+        (422) but never holds a stop back: a stop is judged from its arrival (it never
+        expires anyway).
+
+        Raises:
+            HTTPException: 422, the stamp is bad and a command of ``kinds`` can expire.
+        """
+        if self.error is not None and any(expires(k) for k in kinds):
+            raise HTTPException(status_code=422, detail=self.error)
+        return self.at
+
+
+async def command_issued(request: Request) -> Issued:
+    """When a REST command was issued (drone/deadline.py): the ``X-Command-Issued`` header,
+    else the JSON body's ``issued``, else its arrival (a script that says nothing); never
+    later than its arrival."""
     arrival = time.time()
     given = request.headers.get(deadlines.ISSUED_HEADER)
     body_value: object = None
@@ -118,9 +136,9 @@ async def command_issued(request: Request) -> float:
         if isinstance(body, dict):
             body_value = body.get("issued")
     try:
-        return deadlines.issued_at_door(given, body_value, arrival)
+        return Issued(deadlines.issued_at_door(given, body_value, arrival))
     except deadlines.BadIssued as exc:
-        raise HTTPException(status_code=422, detail=str(exc)) from exc
+        return Issued(arrival, str(exc))
 
 
 async def fleet_deadline(
@@ -131,8 +149,8 @@ async def fleet_deadline(
     (DELETE) never expires."""
     if request.method != "POST":
         return
-    issued = await command_issued(request)
     kind = "patrol_start" if request.url.path.endswith("/patrol") else "mission"
+    issued = (await command_issued(request)).of([kind])
     verdict = deadlines.judge(runtime.settings.command_deadline_s, kind, issued)
     if isinstance(verdict, Expired):
         text = deadlines.report_expired(
@@ -162,4 +180,4 @@ RoleDep = Annotated[str, Depends(caller_role)]
 PilotDep = Annotated[str, Depends(pilot_role)]
 DroneDep = Annotated[DroneStack, Depends(drone_stack)]
 LeaseDep = Annotated[None, Depends(lease_dep)]
-IssuedDep = Annotated[float, Depends(command_issued)]
+IssuedDep = Annotated[Issued, Depends(command_issued)]

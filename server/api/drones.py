@@ -70,7 +70,8 @@ async def act(
     and what to do. ``X-Command-Source`` (button, keyboard, map) is recorded in the audit log.
     ``X-Command-Issued`` (or a JSON body's ``issued``): Unix seconds when the operator gave
     it; a take-off or reset that reaches the drone more than ``command_deadline_s`` later is
-    not sent (``accepted: false``, "Not flown: …"); a stop never expires.
+    not sent (``accepted: false``, "Not flown: …"); a stop never expires, and a bad stamp
+    (422 for the others) never holds it back.
     """
     check_lease(request, runtime, {action})
     out = await perform_async(
@@ -80,7 +81,7 @@ async def act(
         action,
         source=command_source(request.headers.get("x-command-source")),
         battery_low_pct=runtime.settings.battery_low_pct,
-        issued=issued,
+        issued=issued.of([action]),
         deadline_s=runtime.settings.command_deadline_s,
     )
     return ActionResult(drone=stack.name, action=action, accepted=out.accepted, detail=out.detail)

@@ -54,7 +54,8 @@ async def command(
     # A stated confidence means recognised speech: below the threshold it is not executed.
     source = "speech" if "confidence" in body.model_fields_set else "rest"
     kinds = tuple(str(c["action"]) for c in understood)
-    late = deadlines.judge(runtime.settings.command_deadline_s, kinds, issued)
+    when = issued.of(kinds)
+    late = deadlines.judge(runtime.settings.command_deadline_s, kinds, when)
     if understood and isinstance(late, Expired):  # already late here: not passed on
         text = deadlines.report_expired(
             runtime.graph,
@@ -73,7 +74,7 @@ async def command(
     for t in targets:
         try:
             result = await runtime.dialogs[t].handle_utterance(
-                body.text, confidence=body.confidence, source=source, role=role, issued=issued
+                body.text, confidence=body.confidence, source=source, role=role, issued=when
             )
         except VehicleUnavailable as exc:
             if len(targets) == 1:

@@ -462,26 +462,29 @@ def _p_unadvertise(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
     return ops.Unadvertise(topic=_name(obj, op, fid, "topic"), id=fid)
 
 
-def _issued(obj: dict[str, Any], op: str, fid: str | None) -> float | None:
-    """A ``publish``'s ``issued`` (a JSON number of Unix seconds), or None."""
+def _issued(obj: dict[str, Any]) -> tuple[float | None, str | None]:
+    """A ``publish``'s ``issued`` (a JSON number of Unix seconds) or None, and why it is
+    not one (judged by the session: a bad stamp must not hold a stop back)."""
     value = obj.get("issued")
     if value is None:
-        return None
+        return None, None
     if isinstance(value, str):
-        raise OpError(f"{op}: field 'issued' must be a number of Unix seconds", id=fid, op=op)
+        return None, "field 'issued' must be a number of Unix seconds"
     try:
-        return parse_issued(value)
+        return parse_issued(value), None
     except BadIssued as exc:
-        raise OpError(f"{op}: field 'issued': {exc}", id=fid, op=op) from exc
+        return None, f"field 'issued': {exc}"
 
 
 def _p_publish(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
+    issued, issued_error = _issued(obj)
     return ops.Publish(
         topic=_name(obj, op, fid, "topic"),
         msg=_field(obj, op, fid, "msg", dict, required=True),
         id=fid,
         latch=_bool(obj, op, fid, "latch", False),
-        issued=_issued(obj, op, fid),
+        issued=issued,
+        issued_error=issued_error,
     )
 
 

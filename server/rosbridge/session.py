@@ -15,7 +15,16 @@ import re
 from collections.abc import Callable, Coroutine
 from typing import Any
 
-from drone.deadline import BadIssued, Deadline, Expired, ReportGate, label, not_flown, stamp
+from drone.deadline import (
+    BadIssued,
+    Deadline,
+    Expired,
+    ReportGate,
+    expires,
+    label,
+    not_flown,
+    stamp,
+)
 from server import deadlines
 from server import graph as g
 from server.rosbridge import cborraw, ops
@@ -190,13 +199,25 @@ class BridgeSession:
     # -- deadlines ------------------------------------------------------------------------
     def _issued(self, op: ops.Publish, key: str, msg: dict[str, Any]) -> float | None:
         """When a command (``/cmd_vel``, ``/ardrone/*``, ``/console/utterance``) was issued:
-        its ``issued``, or now; None for anything else (no deadline, nothing carried on)."""
+        its ``issued``, or now; None for anything else (no deadline, nothing carried on).
+        A stamp that is not Unix seconds refuses a motion command; a stop, or an utterance
+        (which may be one), goes on judged from its arrival, with a warning."""
         if not (_DRONE_COMMAND.match(key) or _JOG_TOPIC.match(key) or _UTTERANCE_TOPIC.match(key)):
             return None
-        try:
-            return stamp(op.issued, self.ctx.wall_clock())
-        except BadIssued as exc:
-            raise OpError(f"publish to {op.topic}: {exc}") from exc
+        arrival = self.ctx.wall_clock()
+        error = op.issued_error
+        if error is None:
+            try:
+                return stamp(op.issued, arrival)
+            except BadIssued as exc:
+                error = str(exc)
+        kind = _command_kind(key, msg)
+        if kind is not None and expires(kind):
+            raise OpError(f"publish to {op.topic}: {error}")
+        self.protocol.send_status(
+            "warning", f"publish to {op.topic}: {error}; judged from its arrival", id=op.id
+        )
+        return arrival
 
     def _in_time(self, key: str, msg: dict[str, Any], issued: float, op_id: str | None) -> bool:
         """Judge a drone command's deadline here, where the console hands it over; an

@@ -48,21 +48,19 @@ def test_publish_carries_issued_and_unknown_fields_stay_tolerated() -> None:
         st.booleans(), st.text(max_size=8), st.floats(), st.integers(), st.lists(st.integers())
     )
 )
-def test_any_issued_decodes_or_is_refused_with_the_ops_id(value: Any) -> None:
+def test_any_issued_decodes_to_seconds_or_the_reason_it_is_not(value: Any) -> None:
     p = BridgeProtocol()
     frame = {"op": "publish", "id": "p1", "topic": "/t", "msg": {}, "issued": value}
     try:
         text = json.dumps(frame, allow_nan=True)
     except ValueError:
         return
-    out = p.receive_text(text, 0.0)
-    if out:
-        [op] = out
-        assert isinstance(op, ops.Publish) and isinstance(op.issued, float) and op.issued > 0
+    [op] = p.receive_text(text, 0.0)  # judged by the session: a stop must still get through
+    assert isinstance(op, ops.Publish) and p.frames_to_send() == []
+    if op.issued_error is None:
+        assert isinstance(op.issued, float) and op.issued > 0
     else:
-        [status] = [json.loads(f) for f in p.frames_to_send()]
-        assert status["level"] == "error" and status["id"] == "p1"
-        assert "issued" in status["msg"]
+        assert op.issued is None and "issued" in op.issued_error
 
 
 def test_an_outgoing_publish_carries_the_commands_issued() -> None:
@@ -287,3 +285,32 @@ async def test_subscribers_get_issued_and_a_script_without_it_gets_its_arrival(
             )
             status = await pilot.status("ms")
             assert status["level"] == "error" and "milliseconds" in status["msg"]
+
+
+async def test_a_bad_stamp_refuses_a_motion_command_but_never_holds_a_stop_back(
+    tmp_path: Path,
+) -> None:
+    with running_server(tmp_path) as srv:
+        seen = _taps(srv, ["/ardrone/takeoff", "/ardrone/land"])
+        async with await RawClient.open(srv.url()) as pilot:
+            for topic, fid in (("/ardrone/takeoff", "up"), ("/ardrone/land", "down")):
+                await pilot.send(
+                    {
+                        "op": "publish",
+                        "id": fid,
+                        "topic": topic,
+                        "type": EMPTY,
+                        "msg": {},
+                        "issued": "yesterday",
+                    }
+                )
+            refused = await pilot.status("up")
+            assert refused["level"] == "error" and "Unix seconds" in refused["msg"]
+            await pilot.send({"op": "set_level", "level": "warning"})
+            await pilot.send(
+                {"op": "publish", "id": "down2", "topic": "/ardrone/land", "msg": {}, "issued": -1}
+            )
+            warned = await pilot.status("down2")
+            assert warned["level"] == "warning" and "judged from its arrival" in warned["msg"]
+            _until(lambda: [t for t, _ in seen].count("/ardrone/land") == 2, "both landings")
+        assert [t for t, _ in seen].count("/ardrone/takeoff") == 0
