@@ -354,18 +354,16 @@ class VehicleHost:
         return min(self.clock_offset.to_local(issued), time.time())
 
     def _issued_arg(self, args: dict[str, Any]) -> float | None:
-        """A control call's ``issued`` on our clock (None: it has none).
-
-        Raises:
-            VehicleError: it is not Unix seconds.
-        """
+        """A control call's ``issued`` on our clock (None: it has none, or one that is not
+        Unix seconds, which is logged: a bad stamp must never hold a stop back)."""
         value = args.get("issued")
         if value is None:
             return None
         try:
             return self.local_issued(parse_issued(value))
         except BadIssued as exc:
-            raise VehicleError(str(exc)) from exc
+            log.warning("%s: %s: judged as it arrives", self.name, exc)
+            return None
 
     async def _control(self, args: dict[str, Any]) -> dict[str, Any]:
         """``/NAME/vehicle/control`` (see :mod:`server.vehicles.names`)."""
