@@ -183,8 +183,8 @@ class VehicleNode:
 
     def _late(self, kind: str) -> bool:
         """Whether the topic command being delivered (``kind``: drone/deadline.py) is past its
-        deadline now, as it reaches the drone; a late one is said and audited (a jog once
-        every 2 s) and must be dropped."""
+        deadline now, as it reaches the drone; a late one is said and audited (a late jog
+        once every 2 s) and must be dropped."""
         issued = getattr(self.graph, "issued", None)
         if issued is None:
             return False
@@ -193,7 +193,7 @@ class VehicleNode:
             self._expiry_reports.reset(kind)
             return False
         self.expired += 1
-        if self._expiry_reports.allow(kind, self.clock()):
+        if kind != "jog" or self._expiry_reports.allow(kind, self.clock()):
             deadlines.report_expired(
                 self.graph,
                 self.audit,

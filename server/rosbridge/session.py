@@ -236,7 +236,7 @@ class BridgeSession:
         prefix = (match.group(1) if match else None) or ""
         drone = prefix.strip("/") or "uav1"
         text = not_flown(label(kind), verdict)
-        if not self._expiry_reports.allow(key, self.ctx.clock()):
+        if kind == "jog" and not self._expiry_reports.allow(key, self.ctx.clock()):
             return False  # said a moment ago (a late jog comes ten times a second)
         deadlines.say(self.graph, text, drone, prefix)
         self.protocol.send_status("error", f"publish to {key}: {text}", id=op_id)

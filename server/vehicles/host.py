@@ -362,7 +362,7 @@ class VehicleHost:
         try:
             return self.local_issued(parse_issued(value))
         except BadIssued as exc:
-            log.warning("%s: %s: judged as it arrives", self.name, exc)
+            log.warning("%s: %s: no deadline judged here", self.name, exc)
             return None
 
     async def _control(self, args: dict[str, Any]) -> dict[str, Any]:
