@@ -16,8 +16,9 @@ from fastapi.templating import Jinja2Templates
 from drone.share import share_dir
 from server import __version__
 from server.api import drones, flights, language, sim, speech, strict, system, tls, tts
-from server.api.deps import fleet_access
+from server.api.deps import fleet_access, fleet_deadline
 from server.audit_trail import RestAuditMiddleware
+from server.deadlines import CommandExpired
 from server.http_guard import HttpGuard
 from server.runtime import Runtime
 from server.settings import Settings
@@ -71,6 +72,18 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         headers = {"Retry-After": str(exc.retry_after_s)}
         return JSONResponse(body, status_code=503, headers=headers)
 
+    @app.exception_handler(CommandExpired)
+    async def command_expired(request: Request, exc: CommandExpired) -> JSONResponse:
+        # Not flown: the command reached us past its deadline (drone/deadline.py).
+        body = {
+            "accepted": False,
+            "detail": exc.text,
+            "expired": True,
+            "age_s": round(exc.verdict.age_s, 3),
+            "deadline_s": exc.verdict.deadline_s,
+        }
+        return JSONResponse(body, status_code=409)
+
     for router in (
         system.router,
         language.router,
@@ -82,7 +95,8 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         app.include_router(router, prefix="/api/v1")
     for router in (speech.router, tls.router):  # issue 15: speech, HTTPS for phones
         app.include_router(router, prefix="/api/v1")
-    app.include_router(runtime.fleet.router(dependencies=[Depends(fleet_access)]), prefix="/api/v1")
+    fleet_deps = [Depends(fleet_access), Depends(fleet_deadline)]
+    app.include_router(runtime.fleet.router(dependencies=fleet_deps), prefix="/api/v1")
     for router in runtime.extra_routers():
         app.include_router(router)
 

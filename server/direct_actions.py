@@ -6,13 +6,27 @@ the reason and the way out (server.dialog.preflight): the caller gets ``accepted
 the reason, the dialog says it aloud on ``/console/reply``. Every action, accepted or refused,
 is written to the audit log with where it came from (a button, a keyboard shortcut, a script),
 like a spoken command.
+
+An action issued at ``issued`` (Unix seconds) and handed over past the deadline is not sent
+(drone/deadline.py; stops never expire): ``accepted: false`` with "Not flown: …", said by the
+dialog and audited as ``expired``.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
+from drone.deadline import (
+    DEFAULT_DEADLINE_S,
+    STOPS,
+    Deadline,
+    Expired,
+    audit_outcome,
+    label,
+    not_flown,
+)
 from server.dialog.preflight import DroneFacts, refusal
 
 # Where a direct action came from: the page says which (X-Command-Source); anything else is
@@ -24,6 +38,18 @@ SOURCES = frozenset({"button", "keyboard", "map", "rest"})
 class DirectOutcome:
     accepted: bool
     detail: str
+    expired: Expired | None = None  # not sent: it came past its deadline
+
+
+def late(action: str, issued: float | None, deadline_s: float) -> DirectOutcome | None:
+    """The outcome of ``action`` issued at ``issued`` if it is past its deadline now (None:
+    in time, a stop, or no ``issued``)."""
+    if issued is None:
+        return None
+    verdict = Deadline(deadline_s).judge(action, issued, time.time())
+    if not isinstance(verdict, Expired):
+        return None
+    return DirectOutcome(False, not_flown(label(action), verdict), verdict)
 
 
 def command_source(header: str | None) -> str:
@@ -58,18 +84,51 @@ def drone_facts(stack: Any) -> DroneFacts:
 
 
 async def perform_async(
-    stack: Any, dialog: Any, audit: Any, action: str, *, source: str, battery_low_pct: float
+    stack: Any,
+    dialog: Any,
+    audit: Any,
+    action: str,
+    *,
+    source: str,
+    battery_low_pct: float,
+    issued: float | None = None,
+    deadline_s: float = DEFAULT_DEADLINE_S,
 ) -> DirectOutcome:
     """:func:`perform` for any drone: a drone in its own vehicle process
     (``server.vehicles.remote``, which has ``act``) checks and does the action there, on its
     state now, and its own dialog follows and says a refusal; the audit row is written here.
+    A motion action is judged against its deadline here, as the console hands it over, and
+    by the vehicle again as it receives it (``act_in_time``).
 
     Raises:
         VehicleUnavailable: that vehicle is not on the link (a stop is still sent).
     """
     act = getattr(stack, "act", None)
     if act is None:
-        return perform(stack, dialog, audit, action, source=source, battery_low_pct=battery_low_pct)
+        return perform(
+            stack,
+            dialog,
+            audit,
+            action,
+            source=source,
+            battery_low_pct=battery_low_pct,
+            issued=issued,
+            deadline_s=deadline_s,
+        )
+    in_time = getattr(stack, "act_in_time", None)
+    if action not in STOPS and in_time is not None:
+        outcome = late(action, issued, deadline_s)
+        if outcome is not None:
+            if dialog is not None:
+                dialog.announce(outcome.detail, "warn")
+        else:
+            try:
+                outcome = await in_time(action, battery_low_pct, issued)
+            except Exception as exc:
+                _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
+                raise
+        _audit(audit, stack, dialog, action, source, outcome)
+        return outcome
     try:
         accepted, detail = await act(action, battery_low_pct)
     except Exception as exc:
@@ -81,9 +140,18 @@ async def perform_async(
 
 
 def perform(
-    stack: Any, dialog: Any, audit: Any, action: str, *, source: str, battery_low_pct: float
+    stack: Any,
+    dialog: Any,
+    audit: Any,
+    action: str,
+    *,
+    source: str,
+    battery_low_pct: float,
+    issued: float | None = None,
+    deadline_s: float = DEFAULT_DEADLINE_S,
 ) -> DirectOutcome:
     """Check ``action`` against the drone's state, send it if it may run, tell and audit.
+    An action past its deadline (``issued``, ``deadline_s``; stops never) is not sent.
 
     Runs on the event loop (the dialog manager's thread): the command reaches the driver
     first, then the dialog is told; the audit row is written on the log's writer thread, so
@@ -94,8 +162,13 @@ def perform(
         dialog: its dialog manager (or None), told so its state follows and refusals are said.
         audit: the audit log (``server.store.AuditLog``) or None.
     """
-    why = refusal(action, drone_facts(stack), battery_low_pct)
-    if why is None:
+    expired = late(action, issued, deadline_s)
+    why = None if expired is not None else refusal(action, drone_facts(stack), battery_low_pct)
+    if expired is not None:
+        outcome = expired
+        if dialog is not None:
+            dialog.announce(expired.detail, "warn")
+    elif why is None:
         detail = stack.direct(action)
         outcome = DirectOutcome(True, detail)
         if dialog is not None:
@@ -113,11 +186,12 @@ def _audit(
 ) -> None:
     if audit is not None:
         # On its own thread: the fsync must not hold the loop the driver sends from.
+        verdict = outcome.expired
         audit.append_later(
             utterance="",
             commands=[{"action": action}],
-            action="executed" if outcome.accepted else "refused",
-            outcome=outcome.detail,
+            action="executed" if outcome.accepted else "expired" if verdict else "refused",
+            outcome=f"{audit_outcome(verdict)}. {outcome.detail}" if verdict else outcome.detail,
             role="pilot",
             source=source,
             drone=stack.name,

@@ -11,6 +11,10 @@ loop thread it hands the message over with ``call_soon_threadsafe``. Without a b
 
 Subscribers are either callbacks (must not block) or :class:`QueueSubscription` objects whose
 bounded queue drops the oldest message, so a slow consumer never stalls a publisher or others.
+
+A command may be published with ``issued`` (Unix seconds: when the operator gave it,
+drone/deadline.py); a callback reads it as :attr:`Graph.issued` while it is being called, so
+the part that hands the command to the drone judges its deadline (a queue does not keep it).
 """
 
 from __future__ import annotations
@@ -144,6 +148,7 @@ class Graph:
         self._lock = threading.RLock()
         self._ids = itertools.count(1)
         self._taps: tuple[Tap, ...] = ()
+        self._issued: float | None = None
 
     # -- loop -----------------------------------------------------------------------------
     def bind_loop(self, loop: asyncio.AbstractEventLoop) -> None:
@@ -202,8 +207,11 @@ class Graph:
         if not topic.publishers and not topic.subscriptions and not topic.latch:
             self._topics.pop(topic.name, None)
 
-    def publish(self, name: str, msg: Message, *, type: str | None = None) -> None:
+    def publish(
+        self, name: str, msg: Message, *, type: str | None = None, issued: float | None = None
+    ) -> None:
         """Send ``msg`` to every subscriber of ``name``; safe to call from any thread.
+        ``issued``: when the operator gave the command (:attr:`issued` to the callbacks).
 
         Raises:
             NotFound: nobody advertised the topic and no ``type`` was given.
@@ -228,24 +236,37 @@ class Graph:
         if not subscriptions:
             return
         if self._on_loop_thread():
-            self._deliver(subscriptions, msg)
+            self._deliver(subscriptions, msg, issued)
         else:
             assert self._loop is not None
             # RuntimeError: the loop closed while a worker thread was finishing.
             with contextlib.suppress(RuntimeError):
-                self._loop.call_soon_threadsafe(self._deliver, subscriptions, msg)
+                self._loop.call_soon_threadsafe(self._deliver, subscriptions, msg, issued)
 
-    @staticmethod
-    def _deliver(subscriptions: list[Subscription], msg: Message) -> None:
-        # One subscriber's bug must not cost the others their message (issue 14): each
-        # callback is isolated, and the failure logged with the topic and the subscriber.
-        for sub in subscriptions:
-            try:
-                sub.callback(msg)
-            except Exception:
-                log.exception(
-                    "subscriber %s of %s failed; other subscribers served", sub.owner, sub.topic
-                )
+    @property
+    def issued(self) -> float | None:
+        """Inside a subscriber's callback: the ``issued`` its message was published with
+        (None when none was given, and outside a delivery)."""
+        return self._issued
+
+    def _deliver(
+        self, subscriptions: list[Subscription], msg: Message, issued: float | None = None
+    ) -> None:
+        # Delivery runs on the loop thread only, so one attribute carries ``issued``; a
+        # callback that publishes in turn gets its own and ours back after.
+        outer, self._issued = self._issued, issued
+        try:
+            # One subscriber's bug must not cost the others their message (issue 14): each
+            # callback is isolated, and the failure logged with the topic and the subscriber.
+            for sub in subscriptions:
+                try:
+                    sub.callback(msg)
+                except Exception:
+                    log.exception(
+                        "subscriber %s of %s failed; other subscribers served", sub.owner, sub.topic
+                    )
+        finally:
+            self._issued = outer
 
     def subscribe(
         self, name: str, callback: Callback, *, type: str | None = None, owner: str = INTERNAL

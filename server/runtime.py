@@ -170,7 +170,14 @@ async def build_drone_stack(
         vehicle, world, vehicle.clock, search_after_s=s.search_after_s, idle_search=idle_search
     )
     node = node_class(
-        graph, vehicle, tasks, name, prefix, heartbeat_timeout_s=s.heartbeat_timeout_s, audit=audit
+        graph,
+        vehicle,
+        tasks,
+        name,
+        prefix,
+        heartbeat_timeout_s=s.heartbeat_timeout_s,
+        audit=audit,
+        command_deadline_s=s.command_deadline_s,
     )
     return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
 

@@ -15,6 +15,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BeforeValidator, Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, EnvSettingsSource, NoDecode, SettingsConfigDict
 
+from drone.deadline import DEFAULT_DEADLINE_S, check_deadline_s
 from drone.share import SOURCE_ROOT, share_dir
 
 ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
@@ -96,6 +97,11 @@ class Settings(BaseSettings):
     # -- safety (DESIGN §5) --------------------------------------------------------------------
     heartbeat_timeout_s: float = Field(
         1.0, description="Operator lost while jogging, or console silent: hover after this."
+    )
+    command_deadline_s: float = Field(
+        DEFAULT_DEADLINE_S,
+        description="A motion command handed to the drone later than this after the operator "
+        "gave it is dropped, audited and reported (stops never expire; docs/deadlines.md).",
     )
     link_timeout_s: float = Field(0.5, description="No navdata for this long: link lost.")
     battery_low_pct: float = Field(25.0, description="ANS: tell the operator, return home.")
@@ -228,6 +234,10 @@ class Settings(BaseSettings):
             raise ValueError(
                 f"asr_window_s must be 0 (default) or 1 to 30, not {self.asr_window_s}"
             )
+        try:
+            check_deadline_s(self.command_deadline_s)
+        except ValueError as exc:
+            raise ValueError(f"command_deadline_s: {exc}") from exc
         if not 0 <= self.asr_beams <= 16:
             raise ValueError(f"asr_beams must be 0 (default) or 1 to 16, not {self.asr_beams}")
         return self

@@ -17,6 +17,11 @@ Subscribes: ``/cmd_vel`` (Twist fractions → ``vehicle.jog``, which cancels the
 ``/ardrone/takeoff``, ``/ardrone/land``, ``/ardrone/reset`` (std_msgs/Empty). ``reset`` only
 leaves the emergency state (unlike ardrone_autonomy it never cuts flying motors).
 
+Deadlines (drone/deadline.py): a ``/cmd_vel`` jog, take-off or reset published with an
+``issued`` time (:attr:`Graph.issued`) that reaches this node past ``command_deadline_s`` is
+dropped, said on ``/console/reply`` and audited; ``/ardrone/land`` and a ``/cmd_vel`` of zeros
+(the end of a jog) are stops and never expire.
+
 Operator watchdog (DESIGN §5): while jogging, if neither ``/cmd_vel`` nor
 ``operator_heartbeat()`` is heard for ``heartbeat_timeout_s`` (1 s), the drone hovers.
 
@@ -40,7 +45,9 @@ from typing import Any
 import cv2
 
 from drone.ardrone.navdata import Navdata, ros_navdata_fields
+from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, ReportGate, label
 from drone.perception.markers import FrameResult
+from server import deadlines
 from server.graph import Graph
 from server.msgs import header
 
@@ -92,6 +99,7 @@ class VehicleNode:
         image_hz: float = 15.0,
         jpeg_quality: int = 80,
         audit: Any = None,
+        command_deadline_s: float = DEFAULT_DEADLINE_S,
     ) -> None:
         self.graph = graph
         self.vehicle = vehicle
@@ -104,6 +112,9 @@ class VehicleNode:
         self.image_period_s = 1.0 / image_hz
         self.jpeg_quality = jpeg_quality
         self.owner = f"vehicle:{name}"
+        self.deadline = Deadline(command_deadline_s)
+        self._expiry_reports = ReportGate()  # a late jog at 10 Hz is said once every 2 s
+        self.expired = 0  # topic commands dropped as late
         self.topic = {
             k: self._name(v)
             for k, v in {
@@ -170,11 +181,44 @@ class VehicleNode:
         """The jogging operator is still there (the console pings while a key is held)."""
         self._last_operator = self.clock()
 
+    def _late(self, kind: str) -> bool:
+        """Whether the topic command being delivered (``kind``: drone/deadline.py) is past its
+        deadline now, as it reaches the drone; a late one is said and audited (a late jog
+        once every 2 s) and must be dropped."""
+        issued = getattr(self.graph, "issued", None)
+        if issued is None:
+            return False
+        verdict = self.deadline.judge(kind, issued, self.stamp())
+        if not isinstance(verdict, Expired):
+            self._expiry_reports.reset(kind)
+            return False
+        self.expired += 1
+        if kind != "jog" or self._expiry_reports.allow(kind, self.clock()):
+            deadlines.report_expired(
+                self.graph,
+                self.audit,
+                label(kind),
+                verdict,
+                kind=kind,
+                drone=self.name,
+                prefix=self.prefix,
+                source="topic",
+            )
+        return True
+
     def _on_cmd_vel(self, msg: dict[str, Any]) -> None:
         try:
             lin, ang = msg.get("linear") or {}, msg.get("angular") or {}
             vals = [float(lin.get("x", 0.0)), float(lin.get("y", 0.0)), float(lin.get("z", 0.0))]
             vals.append(float(ang.get("z", 0.0)))
+        except (TypeError, ValueError, AttributeError) as exc:
+            log.warning("%s: bad /cmd_vel %r: %s", self.name, msg, exc)
+            return
+        # A late jog is dropped (the operator watchdog hovers a drone left jogging); the
+        # end of a jog is a stop and always goes through.
+        if self._late("jog" if any(v != 0.0 for v in vals) else "hover"):
+            return
+        try:
             self.vehicle.jog(*vals)
         except (TypeError, ValueError, AttributeError) as exc:
             log.warning("%s: bad /cmd_vel %r: %s", self.name, msg, exc)
@@ -206,6 +250,8 @@ class VehicleNode:
             log.error("%s: audit log write failed: %s", self.name, exc)
 
     def _on_takeoff(self, _msg: dict[str, Any]) -> None:
+        if self._late("takeoff"):
+            return
         self._audit("takeoff", "takeoff sent (/ardrone/takeoff)")
         self.tasks.cancel("take-off requested")
         self.vehicle.takeoff()
@@ -215,6 +261,8 @@ class VehicleNode:
         self._audit("land", "land sent (/ardrone/land)")
 
     def _on_reset(self, _msg: dict[str, Any]) -> None:
+        if self._late("reset"):
+            return
         self._audit("reset", "reset sent (/ardrone/reset)")
         self.tasks.cancel("reset requested")
         self.vehicle.reset()

@@ -22,19 +22,31 @@ TAKEOFF_BIT = 1 << 9
 
 
 class ProbeSim(SimServer):
-    """A :class:`SimServer` that timestamps ``AT*REF`` commands with the emergency bit."""
+    """A :class:`SimServer` that timestamps ``AT*REF`` commands with the emergency bit, and the
+    first of each run of REFs with the take-off bit (a take-off reaching the drone)."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.emergency_times: list[float] = []  # monotonic, each REF with bit 8 set
+        self.takeoff_times: list[float] = []  # monotonic, each REF with bit 9 after one without
+        self._takeoff_held = False
         self.datagrams = 0
 
     def _at(self, data: bytes) -> None:
         self.datagrams += 1
         for m in REF_RE.finditer(data):
-            if int(m.group(1)) & EMERGENCY_BIT:
+            ref = int(m.group(1))
+            if ref & EMERGENCY_BIT:
                 self.emergency_times.append(time.monotonic())
+            held = bool(ref & TAKEOFF_BIT)
+            if held and not self._takeoff_held:
+                self.takeoff_times.append(time.monotonic())
+            self._takeoff_held = held
         super()._at(data)
+
+    def first_takeoff_after(self, t0: float) -> float | None:
+        """The first take-off REF (bit 9 rising) at or after monotonic ``t0`` (None: none)."""
+        return next((t for t in self.takeoff_times if t >= t0), None)
 
     def first_emergency_after(self, t0: float) -> float | None:
         """The first emergency REF received at or after monotonic ``t0`` (None: none yet)."""

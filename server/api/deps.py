@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import json
 import time
+from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
 
+from drone.deadline import Expired, expires, label
+from server import deadlines
 from server.runtime import DroneStack, Runtime
 from server.security import SAFETY_ACTIONS, TOKEN_COOKIE
 
@@ -93,6 +97,73 @@ def lease_dep(request: Request, runtime: Annotated[Runtime, Depends(get_runtime)
     check_lease(request, runtime, {"command"})
 
 
+@dataclass(frozen=True)
+class Issued:
+    """When a REST command was issued (Unix seconds, server clock), or why the stamp it gave
+    is not one (then ``at`` is its arrival)."""
+
+    at: float
+    error: str | None = None
+
+    def of(self, kinds: tuple[str, ...] | list[str] | set[str]) -> float:
+        """The time to judge commands of ``kinds`` by. A bad stamp refuses a motion command
+        (422) but never holds a stop back: a stop is judged from its arrival (it never
+        expires anyway).
+
+        Raises:
+            HTTPException: 422, the stamp is bad and a command of ``kinds`` can expire.
+        """
+        if self.error is not None and any(expires(k) for k in kinds):
+            raise HTTPException(status_code=422, detail=self.error)
+        return self.at
+
+
+async def command_issued(request: Request) -> Issued:
+    """When a REST command was issued (drone/deadline.py): the ``X-Command-Issued`` header,
+    else the JSON body's ``issued``, else its arrival (a script that says nothing); never
+    later than its arrival."""
+    arrival = time.time()
+    given = request.headers.get(deadlines.ISSUED_HEADER)
+    body_value: object = None
+    if not given and "json" in request.headers.get("content-type", ""):
+        try:
+            body = json.loads(await request.body() or b"null")
+        except ValueError:
+            body = None  # the route's own parsing says what is wrong with it
+        if isinstance(body, dict):
+            body_value = body.get("issued")
+    try:
+        return Issued(deadlines.issued_at_door(given, body_value, arrival))
+    except deadlines.BadIssued as exc:
+        return Issued(arrival, str(exc))
+
+
+async def fleet_deadline(
+    request: Request, runtime: Annotated[Runtime, Depends(get_runtime)]
+) -> None:
+    """Starting a mission or the patrol is a motion command: past its deadline at the door it
+    is not started, but said, audited and answered (409, ``accepted: false``). Stopping one
+    (DELETE) never expires."""
+    if request.method != "POST":
+        return
+    kind = "patrol_start" if request.url.path.endswith("/patrol") else "mission"
+    issued = (await command_issued(request)).of([kind])
+    verdict = deadlines.judge(runtime.settings.command_deadline_s, kind, issued)
+    if isinstance(verdict, Expired):
+        text = deadlines.report_expired(
+            runtime.graph,
+            runtime.audit,
+            label(kind),
+            verdict,
+            kind=kind,
+            drone="*",
+            prefix="",
+            source="rest",
+            utterance=f"POST {request.url.path}",
+        )
+        raise deadlines.CommandExpired(text, verdict)
+
+
 def drone_stack(drone_id: str, runtime: Annotated[Runtime, Depends(get_runtime)]) -> DroneStack:
     stack = runtime.drones.get(drone_id)
     if stack is None:
@@ -106,3 +177,4 @@ RoleDep = Annotated[str, Depends(caller_role)]
 PilotDep = Annotated[str, Depends(pilot_role)]
 DroneDep = Annotated[DroneStack, Depends(drone_stack)]
 LeaseDep = Annotated[None, Depends(lease_dep)]
+IssuedDep = Annotated[Issued, Depends(command_issued)]

@@ -9,7 +9,7 @@ from typing import Any, Literal
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import StreamingResponse
 
-from server.api.deps import DroneDep, PilotDep, RoleDep, RuntimeDep, check_lease
+from server.api.deps import DroneDep, IssuedDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import ActionResult, Describe
 from server.direct_actions import command_source, perform_async
 from server.vehicles.safety import advertised_url
@@ -56,13 +56,22 @@ async def describe(stack: DroneDep, runtime: RuntimeDep, _role: RoleDep) -> Desc
 
 @router.post("/{drone_id}/{action}", response_model=ActionResult)
 async def act(
-    action: Action, request: Request, stack: DroneDep, runtime: RuntimeDep, _role: PilotDep
+    action: Action,
+    request: Request,
+    stack: DroneDep,
+    runtime: RuntimeDep,
+    _role: PilotDep,
+    issued: IssuedDep,
 ) -> ActionResult:
     """Direct control; land and emergency reach the wire ahead of anything queued.
 
     Anything but land, emergency and hover needs the pilot lease to be free (409 otherwise).
     A take-off the drone cannot do now is not sent: ``accepted: false`` and ``detail`` says why
     and what to do. ``X-Command-Source`` (button, keyboard, map) is recorded in the audit log.
+    ``X-Command-Issued`` (or a JSON body's ``issued``): Unix seconds when the operator gave
+    it; a take-off or reset that reaches the drone more than ``command_deadline_s`` later is
+    not sent (``accepted: false``, "Not flown: …"); a stop never expires, and a bad stamp
+    (422 for the others) never holds it back.
     """
     check_lease(request, runtime, {action})
     out = await perform_async(
@@ -72,6 +81,8 @@ async def act(
         action,
         source=command_source(request.headers.get("x-command-source")),
         battery_low_pct=runtime.settings.battery_low_pct,
+        issued=issued.of([action]),
+        deadline_s=runtime.settings.command_deadline_s,
     )
     return ActionResult(drone=stack.name, action=action, accepted=out.accepted, detail=out.detail)
 

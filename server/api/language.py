@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter, HTTPException, Request
 
-from server.api.deps import PilotDep, RoleDep, RuntimeDep, check_lease
+from drone.deadline import Expired
+from server import deadlines
+from server.api.deps import IssuedDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import CommandRequest, CommandResponse, InterpretRequest, InterpretResponse
 from server.dialog.addressing import parse_address, recipients
 from server.dialog.manager import DialogResult
@@ -25,16 +27,19 @@ def interpret(body: InterpretRequest, runtime: RuntimeDep, _role: RoleDep) -> In
 
 @router.post("/command", response_model=CommandResponse)
 async def command(
-    body: CommandRequest, request: Request, runtime: RuntimeDep, role: PilotDep
+    body: CommandRequest, request: Request, runtime: RuntimeDep, role: PilotDep, issued: IssuedDep
 ) -> CommandResponse:
     """Say ``text`` to a drone's dialog manager, as if spoken with ``confidence``.
 
     Needs the pilot lease to be free unless all it asks is land, emergency or hover (409).
     503 (``Retry-After``) when the one drone addressed has a flight process that is starting,
     gone or silent (``server.vehicles.remote``); a fleet command tells which drones missed it.
+    ``issued`` (or ``X-Command-Issued``): when the operator gave it; a motion command handed to
+    the drone past ``command_deadline_s`` is not flown (``accepted: false``, "Not flown: …").
     """
     address = parse_address(body.text)
-    check_lease(request, runtime, {c["action"] for c in runtime.interpret(address.text, None)})
+    understood = runtime.interpret(address.text, None)
+    check_lease(request, runtime, {c["action"] for c in understood})
     name = body.drone or runtime.default_drone
     if name not in runtime.dialogs:
         raise HTTPException(status_code=404, detail=f"no drone '{name}'")
@@ -48,11 +53,28 @@ async def command(
         )
     # A stated confidence means recognised speech: below the threshold it is not executed.
     source = "speech" if "confidence" in body.model_fields_set else "rest"
+    kinds = tuple(str(c["action"]) for c in understood)
+    when = issued.of(kinds)
+    late = deadlines.judge(runtime.settings.command_deadline_s, kinds, when)
+    if understood and isinstance(late, Expired):  # already late here: not passed on
+        text = deadlines.report_expired(
+            runtime.graph,
+            runtime.audit,
+            body.text,
+            late,
+            kind=kinds[0] if len(kinds) == 1 else "utterance",
+            drone=name,
+            prefix="" if len(runtime.dialogs) == 1 else f"/{name}",
+            source=source,
+            role=role,
+            utterance=body.text,
+        )
+        return CommandResponse(reply=text, commands=understood, accepted=False, expects="")
     results = []
     for t in targets:
         try:
             result = await runtime.dialogs[t].handle_utterance(
-                body.text, confidence=body.confidence, source=source, role=role
+                body.text, confidence=body.confidence, source=source, role=role, issued=when
             )
         except VehicleUnavailable as exc:
             if len(targets) == 1:

@@ -28,6 +28,13 @@ class CommandRequest(StrictBody):
     text: str = Field(max_length=2000)
     confidence: float = Field(default=1.0, ge=0.0, le=1.0)
     drone: str | None = None
+    # Checked by the route (server.api.deps.Issued): a bad stamp refuses a motion command but
+    # never holds a stop back.
+    issued: float | None = Field(
+        default=None,
+        description="Unix seconds (server clock) when the operator gave it; default: arrival. "
+        "A motion command that reaches the drone past the deadline is not flown.",
+    )
 
 
 class CommandResponse(BaseModel):

@@ -5,6 +5,11 @@ state the drone will be in when that command runs (the active grammars of states
 transition table of states.py): one refused command refuses the sentence, with the reason, and
 nothing runs. Accepted commands run in spoken order through the task manager; emergency, and a
 leading land/hover, bypass the queue. ANS alarms preempt voluntary tasks and are spoken.
+
+An utterance that carries when it was issued (REST's ``issued``, rosbridge's, or the graph's
+:attr:`~server.graph.Graph.issued`) is judged as it is handed to the drone
+(drone/deadline.py): a sentence with a motion command that comes too late is not run ("Not
+flown: …", audited as ``expired``); one of stops only always runs.
 """
 
 from __future__ import annotations
@@ -13,10 +18,12 @@ import asyncio
 import contextlib
 import inspect
 import json
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
+from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, audit_outcome, not_flown
 from server.dialog import assist, clarify, confirm, replies
 from server.dialog.addressing import parse_address, recipients
 from server.dialog.autonomic import (
@@ -94,6 +101,7 @@ class DialogParams:
     altitude_ceiling_m: float | None = None  # None: the world's (VehiclePort.ceiling_m)
     ans_period_s: float = 0.5
     search_after_s: float = 1.5
+    command_deadline_s: float = DEFAULT_DEADLINE_S
 
     @classmethod
     def from_settings(cls, settings: Any) -> DialogParams:
@@ -109,6 +117,7 @@ class DialogResult:
     # What the reply waits for: "confirm" when it asks "Did you say …?" (a yes runs it, a no
     # drops it: the console shows Yes / No buttons), else "".
     expects: str = ""
+    expired: Expired | None = None  # not run: handed to the drone past its deadline
 
 
 class DialogManager:
@@ -129,11 +138,13 @@ class DialogManager:
         prefix: str = "",
         fleet: FleetPort | None = None,
         drones: Callable[[], list[str]] | None = None,
+        wall_clock: Callable[[], float] = time.time,
     ) -> None:
         """Args: ``prefix`` ("/uav2" in a fleet) goes before the state topic and the interpret
         service; utterances carry a ``drone`` field and are filtered by ``drone``, unless the
         sentence names its drones ("uav2 land", "all drones land"); ``drones`` lists every
-        drone's name (for "there is no drone uav5")."""
+        drone's name (for "there is no drone uav5"); ``wall_clock``: Unix seconds, the clock
+        of an utterance's ``issued``."""
         self.params = (
             params if isinstance(params, DialogParams) else DialogParams.from_settings(params)
         )
@@ -143,6 +154,8 @@ class DialogManager:
         self.describer = describe_port
         self.store = store
         self.clock = clock
+        self.wall_clock = wall_clock
+        self.deadline = Deadline(self.params.command_deadline_s)
         self.nlu = nlu or default_nlu()
         self.drone = drone
         self.fleet = fleet
@@ -279,6 +292,7 @@ class DialogManager:
             text,
             confidence=float(msg.get("confidence", 1.0) or 0.0),
             source=str(msg.get("source") or "speech"),
+            issued=getattr(self.graph, "issued", None),  # when the operator said it
         )
         try:
             loop = asyncio.get_running_loop()
@@ -294,13 +308,20 @@ class DialogManager:
         return {"commands": self.nlu.interpret(str(args.get("text", "")), state)}
 
     async def handle_utterance(
-        self, text: str, confidence: float = 1.0, source: str = "text", role: str = "pilot"
+        self,
+        text: str,
+        confidence: float = 1.0,
+        source: str = "text",
+        role: str = "pilot",
+        issued: float | None = None,
     ) -> DialogResult:
         """Interpret, check, execute and answer one utterance (also logged to the audit log:
         an intent row before acting, the outcome after; issue 14).
 
         A sentence that names its drone ("uav2, land") is answered with the drone's name; the
-        caller has already routed it here (``addressing.recipients``)."""
+        caller has already routed it here (``addressing.recipients``). ``issued`` (Unix
+        seconds, None: no deadline): when the operator gave it; a sentence with a motion
+        command handed to the drone past the deadline is not run (action ``expired``)."""
         self._log(
             utterance=text,
             commands=[],
@@ -310,7 +331,7 @@ class DialogManager:
             source=source,
             confidence=confidence,
         )
-        result, action = await self._handle(text, confidence, source, role)
+        result, action = await self._handle(text, confidence, source, role, issued)
         if self._confirm is not None:  # asked now, or a yes heard badly: still asking
             result = replace(result, expects="confirm")
         level = "info" if result.accepted else "warn"
@@ -319,11 +340,12 @@ class DialogManager:
             said = f"{self.drone}: {said}"
             result = replace(result, reply=said)
         self._reply(said, level, text, result.commands, expects=result.expects)
+        late = result.expired
         self._log(
             utterance=text,
             commands=result.commands,
             action=action,
-            outcome=result.reply,
+            outcome=f"{audit_outcome(late)}. {result.reply}" if late else result.reply,
             role=role,
             source=source,
             confidence=confidence,
@@ -331,7 +353,7 @@ class DialogManager:
         return result
 
     async def _handle(
-        self, text: str, confidence: float, source: str, role: str
+        self, text: str, confidence: float, source: str, role: str, issued: float | None = None
     ) -> tuple[DialogResult, str]:
         heard = source != "speech" or confidence >= self.params.confidence_threshold
         sentence = parse_address(text).text  # without the drone's name: "uav2, yes" is a yes
@@ -344,7 +366,7 @@ class DialogManager:
             if said == "no":
                 return DialogResult(confirm.NOT_CONFIRMED, [], False), "not_confirmed"
             if said == "yes":  # the sentence runs now, checked against the state of now
-                return await self._handle(pending.text, 1.0, "text", role)
+                return await self._handle(pending.text, 1.0, "text", role, issued)
         elif heard and said is not None:  # a yes or no, and nothing asked
             why = confirm.EXPIRED if pending is not None else confirm.NOTHING_ASKED
             return DialogResult(why, [], False), "not_understood"
@@ -378,6 +400,11 @@ class DialogManager:
         refusal = self._check(interp)
         if refusal is not None:
             return DialogResult(refusal, commands, False), "refused"
+        late = self._late(commands, issued)
+        if late is not None:  # judged here, as the sentence is handed to the drone
+            self._question = question  # a question still open stays open
+            reply = not_flown(text, late)
+            return DialogResult(reply, commands, False, expired=late), "expired"
         self._asked = None
         reply, ok = await self._execute(commands)
         asked = next((i for i, p in enumerate(interp.parsed) if p.command == self._asked), None)
@@ -386,6 +413,14 @@ class DialogManager:
         elif not ok and question is not None:
             self._question = question  # an answer that fits nothing: the question stands
         return DialogResult(reply, commands, ok), "executed" if ok else "refused"
+
+    def _late(self, commands: list[dict[str, Any]], issued: float | None) -> Expired | None:
+        """The expiry of a sentence issued at ``issued`` if handed over now, else None."""
+        if issued is None:
+            return None
+        kinds = [str(c.get("action", "")) for c in commands]
+        verdict = self.deadline.judge_all(kinds, issued, self.wall_clock())
+        return verdict if isinstance(verdict, Expired) else None
 
     def _low_confidence(
         self, text: str, sentence: str, confidence: float

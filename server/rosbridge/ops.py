@@ -27,10 +27,17 @@ class Unadvertise:
 
 @dataclass(frozen=True)
 class Publish:
+    """``issued`` (ours, beside the protocol's fields): when the operator gave the command,
+    Unix seconds of the server's clock (drone/deadline.py); None: when it arrives.
+    ``issued_error``: why the frame's ``issued`` is not Unix seconds (the session refuses a
+    motion command for it, but never holds a stop back)."""
+
     topic: str
     msg: dict[str, Any]
     id: str | None = None
     latch: bool = False
+    issued: float | None = None
+    issued_error: str | None = None
 
 
 @dataclass(frozen=True)

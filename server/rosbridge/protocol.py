@@ -24,6 +24,7 @@ from typing import Any
 
 import cbor2
 
+from drone.deadline import BadIssued, parse_issued
 from server.rosbridge import cborraw, ops
 from server.rosbridge.encode import fragments, png_decode, png_frame
 from server.rosbridge.errors import (
@@ -254,10 +255,14 @@ class BridgeProtocol:
         fragment_size: int | None = None,
         msg: Any = None,
         type_name: str | None = None,
+        issued: float | None = None,
     ) -> list[str | bytes]:
-        """The frames of one outgoing ``publish`` (``msg_json`` is the message's JSON text)."""
+        """The frames of one outgoing ``publish`` (``msg_json`` is the message's JSON text);
+        ``issued``: the command's, carried on to a subscriber that hands it on (a vehicle)."""
         if compression == "cbor":
             body = {"op": "publish", "topic": topic, "msg": to_cbor_value(type_name, msg)}
+            if issued is not None:
+                body["issued"] = issued
             return [cbor2.dumps(body)]
         if compression == "cbor-raw":
             try:
@@ -265,7 +270,10 @@ class BridgeProtocol:
             except cborraw.Ros1Error as exc:
                 err = {"op": "status", "level": "error", "msg": f"publish {topic}: {exc}"}
                 return [json.dumps(err)]
-        text = '{"op":"publish","topic":' + json.dumps(topic) + ',"msg":' + msg_json + "}"
+        text = '{"op":"publish","topic":' + json.dumps(topic) + ',"msg":' + msg_json
+        if issued is not None and math.isfinite(issued):
+            text += ',"issued":' + repr(float(issued))
+        text += "}"
         return self._wrap(text, compression, fragment_size)
 
     def send_publish(self, topic: str, msg_json: str, **kw: Any) -> None:
@@ -454,12 +462,29 @@ def _p_unadvertise(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
     return ops.Unadvertise(topic=_name(obj, op, fid, "topic"), id=fid)
 
 
+def _issued(obj: dict[str, Any]) -> tuple[float | None, str | None]:
+    """A ``publish``'s ``issued`` (a JSON number of Unix seconds) or None, and why it is
+    not one (judged by the session: a bad stamp must not hold a stop back)."""
+    value = obj.get("issued")
+    if value is None:
+        return None, None
+    if isinstance(value, str):
+        return None, "field 'issued' must be a number of Unix seconds"
+    try:
+        return parse_issued(value), None
+    except BadIssued as exc:
+        return None, f"field 'issued': {exc}"
+
+
 def _p_publish(obj: dict[str, Any], op: str, fid: str | None) -> ops.Op:
+    issued, issued_error = _issued(obj)
     return ops.Publish(
         topic=_name(obj, op, fid, "topic"),
         msg=_field(obj, op, fid, "msg", dict, required=True),
         id=fid,
         latch=_bool(obj, op, fid, "latch", False),
+        issued=issued,
+        issued_error=issued_error,
     )
 
 

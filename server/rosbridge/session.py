@@ -15,6 +15,17 @@ import re
 from collections.abc import Callable, Coroutine
 from typing import Any
 
+from drone.deadline import (
+    BadIssued,
+    Deadline,
+    Expired,
+    ReportGate,
+    expires,
+    label,
+    not_flown,
+    stamp,
+)
+from server import deadlines
 from server import graph as g
 from server.rosbridge import cborraw, ops
 from server.rosbridge.context import BridgeContext
@@ -37,7 +48,26 @@ Schedule = Callable[[float, Callable[[], None]], object]
 _DRONE_COMMAND = re.compile(r"^(/uav\d+)?/ardrone/(takeoff|land|reset|emergency)$")
 MAX_AUDIT_PENDING = 16
 _JOG_TOPIC = re.compile(r"^(/uav\d+)?/cmd_vel$")
+# Topics whose messages are operator commands: published on with their ``issued`` time.
+_UTTERANCE_TOPIC = re.compile(r"^(/[^/]+)?/console/utterance$")
 Spawn = Callable[[Coroutine[Any, Any, None]], object]
+
+
+def _command_kind(key: str, msg: dict[str, Any]) -> str | None:
+    """What a drone command topic asks (drone/deadline.py's kinds): ``takeoff``, ``land``,
+    ``reset``, ``emergency``, ``jog``, or ``hover`` for a ``/cmd_vel`` of zeros (the end of a
+    jog: a stop, never dropped); None for any other topic."""
+    command = _DRONE_COMMAND.match(key)
+    if command is not None:
+        return command.group(2)
+    if _JOG_TOPIC.match(key) is None:
+        return None
+    moving = any(
+        isinstance(v, int | float) and v != 0
+        for part in ("linear", "angular")
+        for v in (msg.get(part) or {}).values()
+    )
+    return "jog" if moving else "hover"
 
 
 class BridgeSession:
@@ -76,6 +106,7 @@ class BridgeSession:
         self.audit_pending = 0
         self._jogging: set[str] = set()  # /cmd_vel topics this connection is jogging on
         self._audit_lock = asyncio.Lock()  # FIFO: this connection's rows in order
+        self._expiry_reports = ReportGate()  # one "Not flown" per topic every 2 s (a late jog)
         self.close_request: tuple[int, str] | None = None
         self.closed = False
 
@@ -152,20 +183,88 @@ class BridgeSession:
         ):
             self._ensure_lease(now, f"publish to {topic}")
         msg = check_message(type_name, op.msg, self.ctx.wall_clock())
+        issued = self._issued(op, key, msg)
+        if issued is not None and not self._in_time(key, msg, issued, op.id):
+            return
         try:
             if key not in self.advertised or op.latch:
                 self.graph.advertise(key, type_name, latch=op.latch, owner=self.owner)
                 self.advertised[key] = type_name
             command = _DRONE_COMMAND.match(key)
             if command is not None and self.ctx.audit is not None:
-                self._audited_publish(key, msg, command.group(2), command.group(1) or "")
+                self._audited_publish(key, msg, command.group(2), command.group(1) or "", issued)
                 return
             jog = _JOG_TOPIC.match(key)
             if jog is not None and self.ctx.audit is not None:
                 self._audit_jog(key, msg, jog.group(1) or "")
-            self.graph.publish(key, msg)
+            self.graph.publish(key, msg, issued=issued)
         except g.GraphError as exc:
             raise OpError(f"publish to {topic}: {exc}") from exc
+
+    # -- deadlines ------------------------------------------------------------------------
+    def _issued(self, op: ops.Publish, key: str, msg: dict[str, Any]) -> float | None:
+        """When a command (``/cmd_vel``, ``/ardrone/*``, ``/console/utterance``) was issued:
+        its ``issued``, or now; None for anything else (no deadline, nothing carried on).
+        A stamp that is not Unix seconds refuses a motion command; a stop, or an utterance
+        (which may be one), goes on judged from its arrival, with a warning."""
+        if not (_DRONE_COMMAND.match(key) or _JOG_TOPIC.match(key) or _UTTERANCE_TOPIC.match(key)):
+            return None
+        arrival = self.ctx.wall_clock()
+        error = op.issued_error
+        if error is None:
+            try:
+                return stamp(op.issued, arrival)
+            except BadIssued as exc:
+                error = str(exc)
+        kind = _command_kind(key, msg)
+        if kind is not None and expires(kind):
+            raise OpError(f"publish to {op.topic}: {error}")
+        self.protocol.send_status(
+            "warning", f"publish to {op.topic}: {error}; judged from its arrival", id=op.id
+        )
+        return arrival
+
+    def _in_time(self, key: str, msg: dict[str, Any], issued: float, op_id: str | None) -> bool:
+        """Judge a drone command's deadline here, where the console hands it over; an
+        expired one is told to this client (a ``status`` error with the op's id), said on
+        ``/console/reply`` and audited. Utterances are judged by the dialog, which knows
+        what they ask."""
+        kind = _command_kind(key, msg)
+        if kind is None:
+            return True
+        now = self.ctx.wall_clock()
+        verdict = Deadline(self.ctx.settings.command_deadline_s).judge(kind, issued, now)
+        if not isinstance(verdict, Expired):
+            self._expiry_reports.reset(key)
+            return True
+        match = _DRONE_COMMAND.match(key) or _JOG_TOPIC.match(key)
+        prefix = (match.group(1) if match else None) or ""
+        drone = prefix.strip("/") or "uav1"
+        text = not_flown(label(kind), verdict)
+        if kind == "jog" and not self._expiry_reports.allow(key, self.ctx.clock()):
+            return False  # said a moment ago (a late jog comes ten times a second)
+        deadlines.say(self.graph, text, drone, prefix)
+        self.protocol.send_status("error", f"publish to {key}: {text}", id=op_id)
+        if self.ctx.audit is not None and self.audit_pending < MAX_AUDIT_PENDING:
+            self.audit_pending += 1
+
+            async def write() -> None:
+                try:
+                    await self._audit_write(
+                        deadlines.audit_row,
+                        self.ctx.audit.log,
+                        text,
+                        verdict,
+                        kind=kind,
+                        drone=drone,
+                        source="rosbridge",
+                        utterance=f"publish {key} by {self.owner}",
+                    )
+                finally:
+                    self.audit_pending -= 1
+
+            self._spawn(write())
+        return False
 
     async def _audit_write(self, fn: Callable[..., Any], *args: Any, **kw: Any) -> Any:
         """One audit write in a worker thread; writes of a connection keep their order."""
@@ -215,7 +314,9 @@ class BridgeSession:
 
         self._spawn(write())
 
-    def _audited_publish(self, key: str, msg: dict[str, Any], what: str, prefix: str) -> None:
+    def _audited_publish(
+        self, key: str, msg: dict[str, Any], what: str, prefix: str, issued: float | None = None
+    ) -> None:
         """Publish a drone command with its audit rows (server.audit_trail): land and
         emergency first and the rows after; the others after their intent row is committed."""
         trail = self.ctx.audit
@@ -228,7 +329,7 @@ class BridgeSession:
             )
         if what in ("land", "emergency"):
             arrived = self.ctx.wall_clock()
-            self.graph.publish(key, msg)
+            self.graph.publish(key, msg, issued=issued)
             self._spawn_published_rows(what, drone, detail, arrived)
             return
         self.audit_pending += 1
@@ -247,7 +348,9 @@ class BridgeSession:
                     result = "not published: the connection closed"
                 else:
                     try:
-                        self.graph.publish(key, msg)
+                        # Judged again where it reaches the drone (the vehicle node, or the
+                        # vehicle process): the audit row's fsync above counts against it.
+                        self.graph.publish(key, msg, issued=issued)
                         result = "published"
                     except g.GraphError as exc:
                         result = f"failed: {exc}"
@@ -284,7 +387,7 @@ class BridgeSession:
         stream.add(op.id, params)
 
         def deliver(msg: dict[str, Any]) -> None:
-            self._on_message(stream, msg)
+            self._on_message(stream, msg, self.graph.issued)
 
         try:
             self._graph_subs[op.topic] = self.graph.subscribe(
@@ -305,16 +408,26 @@ class BridgeSession:
             if sub is not None:
                 sub.close()
 
-    def _on_message(self, stream: TopicStream, msg: dict[str, Any]) -> None:
+    def _on_message(
+        self, stream: TopicStream, msg: dict[str, Any], issued: float | None = None
+    ) -> None:
         if self.closed or self.streams.get(stream.topic) is not stream:
             return
-        self._send(stream, stream.offer(msg, self.ctx.clock()))
+        self._send(stream, stream.offer(msg, self.ctx.clock()), (msg, issued))
         self._arm_poll(stream)
 
-    def _send(self, stream: TopicStream, msgs: list[Any]) -> None:
+    def _send(
+        self,
+        stream: TopicStream,
+        msgs: list[Any],
+        issued_of: tuple[Any, float | None] = (None, None),
+    ) -> None:
+        """Send ``msgs``; the one that is ``issued_of[0]`` (sent as it arrives, not from a
+        queue) carries its command's ``issued`` on to the client (a vehicle judges it)."""
         if not msgs:
             return
         p = stream.params
+        fresh, issued = issued_of
         for msg in msgs:
             text = "" if p.compression in ("cbor", "cbor-raw") else self.ctx.json_cache.text(msg)
             self.protocol.send_publish(
@@ -324,6 +437,7 @@ class BridgeSession:
                 fragment_size=p.fragment_size,
                 msg=msg,
                 type_name=stream.type_name,
+                issued=issued if msg is fresh else None,
             )
         self._notify()
 

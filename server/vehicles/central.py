@@ -78,6 +78,7 @@ CHILD_SETTINGS = (
     "grammar_dir",
     "model_dir",
     "heartbeat_timeout_s",
+    "command_deadline_s",
     "link_timeout_s",
     "confidence_threshold",
     "confirm_floor",
@@ -412,7 +413,9 @@ class VehicleCentral:
     async def _beat(self) -> None:
         n = 0
         while True:
-            self.runtime.graph.publish(names.HEARTBEAT, {"data": str(n)})
+            # Our clock in each beat: a vehicle learns its offset from it (command deadlines).
+            beat = json.dumps({"n": n, "t": time.time()})
+            self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
             self._publish_recording(self.runtime.recording_id() or "")
             if n % DISCOVER_EVERY == 0:
                 try:

@@ -14,6 +14,11 @@ The drone stays safe without the central server: :class:`CentralWatch` hovers it
 ``heartbeat_timeout_s`` of silence and lands it after ``central_loss_land_s``; the link
 reconnects on its own. ``emergency`` and ``land`` also reach the drone through the safety port
 (:mod:`server.vehicles.safety`), which no web traffic can delay.
+
+Deadlines (drone/deadline.py): a command from the central server carries when the operator
+gave it, on the console's clock; the vehicle moves it onto its own clock with the offset it
+learns from the console's heartbeat (:class:`~drone.deadline.ClockOffset`) and judges it again
+as it receives it, so a command held up on the way (a stalled console) is not flown late.
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 from drone.bus.config import vehicle_user
 from drone.bus.errors import BusError
 from drone.bus.vehicle import VehicleBus
+from drone.deadline import BadIssued, ClockOffset, parse_issued
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
 from server.tls import TLSError, server_context
@@ -192,6 +198,7 @@ class VehicleHost:
         self._tasks: list[asyncio.Task[Any]] = []
         self._started = time.monotonic()
         self.stop_requested = asyncio.Event()
+        self.clock_offset = ClockOffset()  # the console's clock minus ours (heartbeat)
 
     async def start(self) -> None:
         from drone.sim.world import load_world
@@ -231,7 +238,10 @@ class VehicleHost:
         assert tasks is not None and self.stack.node is not None
         await self.stack.node.start()
         spec = link_spec(self.name, o.prefix, mavlink=self.mavlink)
-        self.core = GraphLinkCore(self.graph, spec)
+        self.core = GraphLinkCore(self.graph, spec, to_local=self.local_issued)
+        self._heartbeat_sub = self.graph.subscribe(
+            names.HEARTBEAT, self._on_heartbeat, type=names.STRING
+        )
         self.link = GraphLink(
             o.central,
             self.core,
@@ -329,14 +339,51 @@ class VehicleHost:
             found = {str(d.get("name")) for d in drones if isinstance(d, dict) and d.get("name")}
             self.fleet_names = sorted(found | {self.name}, key=names.drone_order)
 
-    def direct(self, action: str, battery_low_pct: float | None = None) -> DirectOutcome:
+    def direct(
+        self, action: str, battery_low_pct: float | None = None, issued: float | None = None
+    ) -> DirectOutcome:
         """A button, key or REST action: checked against the drone's state now, sent, and
-        followed (or its refusal said) by this vehicle's dialog, as in-process. The central
-        server writes the audit row."""
+        followed (or its refusal said) by this vehicle's dialog, as in-process; one past its
+        deadline (``issued`` on our clock) is not sent. The central server writes the audit
+        row."""
         from server.direct_actions import perform
 
         low = self.settings.battery_low_pct if battery_low_pct is None else battery_low_pct
-        return perform(self.stack, self.dialog, None, action, source="rest", battery_low_pct=low)
+        return perform(
+            self.stack,
+            self.dialog,
+            None,
+            action,
+            source="rest",
+            battery_low_pct=low,
+            issued=issued,
+            deadline_s=self.settings.command_deadline_s,
+        )
+
+    def _on_heartbeat(self, msg: dict[str, Any]) -> None:
+        """The console's heartbeat carries its clock (``t``): one sample of the offset."""
+        try:
+            sent = json.loads(str(msg.get("data", "")))["t"]
+        except (ValueError, KeyError, TypeError):
+            return  # a console whose heartbeat carries no time: commands keep their stamps
+        if isinstance(sent, int | float):
+            self.clock_offset.sample(float(sent), time.time())
+
+    def local_issued(self, issued: float) -> float:
+        """A console-clock ``issued`` on our clock, never later than now."""
+        return min(self.clock_offset.to_local(issued), time.time())
+
+    def _issued_arg(self, args: dict[str, Any]) -> float | None:
+        """A control call's ``issued`` on our clock (None: it has none, or one that is not
+        Unix seconds, which is logged: a bad stamp must never hold a stop back)."""
+        value = args.get("issued")
+        if value is None:
+            return None
+        try:
+            return self.local_issued(parse_issued(value))
+        except BadIssued as exc:
+            log.warning("%s: %s: no deadline judged here", self.name, exc)
+            return None
 
     async def _control(self, args: dict[str, Any]) -> dict[str, Any]:
         """``/NAME/vehicle/control`` (see :mod:`server.vehicles.names`)."""
@@ -346,8 +393,13 @@ class VehicleHost:
             if action not in ("takeoff", "land", "hover", "emergency", "reset"):
                 raise VehicleError(f"unknown action {action!r}")
             low = args.get("battery_low_pct")
-            out = self.direct(action, float(low) if isinstance(low, int | float) else None)
-            return {"accepted": out.accepted, "detail": out.detail}
+            low_pct = float(low) if isinstance(low, int | float) else None
+            out = self.direct(action, low_pct, self._issued_arg(args))
+            answer: dict[str, Any] = {"accepted": out.accepted, "detail": out.detail}
+            if out.expired is not None:
+                late = {"age_s": out.expired.age_s, "deadline_s": out.expired.deadline_s}
+                answer["expired"] = late
+            return answer
         if op == "telemetry":
             return {k: v for k, v in self.telemetry().items() if k != "truth"}
         if op == "fault":
@@ -375,6 +427,7 @@ class VehicleHost:
                 confidence=float(args.get("confidence", 1.0)),
                 source=str(args.get("source", "rest")),
                 role=str(args.get("role", "pilot")),
+                issued=self._issued_arg(args),
             )
             return {
                 "reply": result.reply,
@@ -454,6 +507,7 @@ class VehicleHost:
         await self.safety.stop()
         if self.bus is not None:
             self.bus.close()
+        self._heartbeat_sub.close()
         self._fleet_sub.close()
         self._recording_sub.close()
         self._dialog_out.close()

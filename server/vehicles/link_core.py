@@ -6,7 +6,8 @@ rosbridge client frames (text in, text out, no socket, no clock of its own):
 - ``out_topics``: local publishes become ``publish`` frames (after an ``advertise`` in
   :meth:`hello`; latched ones are re-sent on every reconnect);
 - ``in_topics``: the central server's messages (``subscribe`` in :meth:`hello`) are published
-  on the local graph;
+  on the local graph, a command with its frame's ``issued`` moved onto the vehicle's clock by
+  ``to_local`` (so the part that hands it to the drone judges its deadline);
 - ``out_services``: the server's ``call_service`` frames call the local service; the answer goes
   back as ``service_response`` with the request's ``id``;
 - :meth:`call`: the vehicle calls a service of the central server (e.g. the captioner).
@@ -22,6 +23,7 @@ import collections
 import itertools
 import json
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -61,8 +63,10 @@ class GraphLinkCore:
         *,
         max_queue: int = 256,
         on_output: Callable[[], None] = lambda: None,
+        to_local: Callable[[float], float] = lambda t: t,
     ) -> None:
         self.graph = graph
+        self.to_local = to_local
         self.spec = spec
         self.on_output = on_output
         self.connected = False
@@ -169,8 +173,15 @@ class GraphLinkCore:
         if not isinstance(topic, str) or not isinstance(msg, dict):
             self._error(f"bad publish frame for {topic!r}")
             return
+        issued = obj.get("issued")
+        if isinstance(issued, bool) or not isinstance(issued, int | float):
+            issued = None
+        elif not math.isfinite(issued):
+            self._error(f"bad issued {issued!r} on {topic}: dropped")
+            return
         try:
-            self.graph.publish(topic, msg)
+            local = None if issued is None else self.to_local(float(issued))
+            self.graph.publish(topic, msg, issued=local)
         except GraphError as exc:
             self._error(f"cannot deliver {topic}: {exc}")
 

@@ -19,9 +19,10 @@ A vehicle process puts its drone on the central graph through the vehicle link
 - ``/console/recording`` (std_msgs/String, latched, from the central server): the id of the
   flight recording being written (``""``: none), for the vehicle's audit rows; published before
   an operator's command is passed on, so its rows carry the recording it opened;
-- ``/vehicles/heartbeat`` (std_msgs/String, from the central server at 10 Hz): a vehicle that
-  hears nothing from the central server for ``central_timeout_s`` hovers, and lands after
-  ``central_loss_land_s``.
+- ``/vehicles/heartbeat`` (std_msgs/String, from the central server at 10 Hz; ``data`` = JSON
+  ``{n, t}``, a counter and the server's Unix time): a vehicle that hears nothing from the
+  central server for ``central_timeout_s`` hovers, and lands after ``central_loss_land_s``; ``t``
+  gives it the offset of the server's clock for command deadlines.
 """
 
 from __future__ import annotations

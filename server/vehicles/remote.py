@@ -29,8 +29,10 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, cast
 
+from drone.deadline import Expired
 from server.captioner.grounding import SeenMarker, bearing_deg
 from server.dialog.manager import DialogResult
+from server.direct_actions import DirectOutcome
 from server.graph import Graph, GraphError, NotFound, ServiceError
 from server.msgs import header
 from server.runtime import DroneStack
@@ -213,6 +215,35 @@ class RemoteDroneStack(DroneStack):
         except GraphError as exc:
             raise VehicleUnavailable(f"{self.name} did not take {action}: {exc}") from exc
         return bool(out.get("accepted", True)), str(out.get("detail", f"{action} sent"))
+
+    async def act_in_time(
+        self, action: str, battery_low_pct: float, issued: float | None
+    ) -> DirectOutcome:
+        """A motion action that carries when it was issued (console clock): the vehicle judges
+        its deadline again as it receives it, then checks and does it, as :meth:`act`.
+
+        Raises:
+            VehicleUnavailable: the vehicle is not on the link.
+        """
+        args: dict[str, Any] = {"op": "direct", "action": action, "check": True}
+        args["battery_low_pct"] = battery_low_pct
+        if issued is not None:
+            args["issued"] = issued
+        try:
+            out = await self.call(args)
+        except VehicleUnavailable:
+            raise
+        except GraphError as exc:
+            raise VehicleUnavailable(f"{self.name} did not take {action}: {exc}") from exc
+        late = out.get("expired")
+        verdict = None
+        if isinstance(late, dict):
+            try:
+                verdict = Expired(float(late["age_s"]), float(late["deadline_s"]))
+            except (KeyError, TypeError, ValueError):
+                log.warning("%s: bad expiry in the answer to %s: %r", self.name, action, late)
+        accepted = bool(out.get("accepted", True)) and verdict is None
+        return DirectOutcome(accepted, str(out.get("detail", f"{action} sent")), verdict)
 
     def seen_markers(self) -> list[SeenMarker]:
         """From the last telemetry (the snapshot's ``markers``, ≤ 0.1 s old)."""
@@ -431,9 +462,15 @@ class RemoteDialog:
         self.stack.graph.publish("/console/reply", msg)
 
     async def handle_utterance(
-        self, text: str, confidence: float = 1.0, source: str = "text", role: str = "pilot"
+        self,
+        text: str,
+        confidence: float = 1.0,
+        source: str = "text",
+        role: str = "pilot",
+        issued: float | None = None,
     ) -> DialogResult:
-        """The vehicle's dialog's answer.
+        """The vehicle's dialog's answer (``issued``: when it was said, console clock; the
+        vehicle judges the deadline on its own clock).
 
         Raises:
             VehicleUnavailable: the vehicle has not joined within ``COMMAND_JOIN_WAIT_S``, is
@@ -444,6 +481,8 @@ class RemoteDialog:
             touch()
         args: dict[str, Any] = {"op": "utterance", "text": text, "source": source, "role": role}
         args["confidence"] = confidence if math.isfinite(confidence) else 0.0
+        if issued is not None:
+            args["issued"] = issued
         try:
             out = await self.stack.call(args, join_wait_s=COMMAND_JOIN_WAIT_S, silent_s=SILENT_S)
         except VehicleUnavailable:

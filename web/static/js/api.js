@@ -10,10 +10,16 @@ export class ApiError extends Error {
 }
 
 export class Api {
-  /** @param {string} base e.g. "/api/v1"; @param {string|null} token bearer token */
-  constructor(base, token) {
+  /**
+   * @param {string} base e.g. "/api/v1"; @param {string|null} token bearer token
+   * @param {(() => number)|null} clock the server's clock (Unix seconds) as the page knows it:
+   *   every POST says when it was issued (X-Command-Issued), so a command that reaches the
+   *   drone past its deadline is dropped, not flown late
+   */
+  constructor(base, token, clock = null) {
     this.base = base;
     this.token = token;
+    this.clock = clock;
     /** @type {string|null} the lease holder id of this page's rosbridge session, if it holds it */
     this.leaseHolder = null;
   }
@@ -24,6 +30,7 @@ export class Api {
     // The pilot lease this page holds on its rosbridge session: REST commands speak for it.
     if (this.leaseHolder) headers["X-Pilot-Lease"] = this.leaseHolder;
     if (body !== undefined) headers["Content-Type"] = "application/json";
+    if (method === "POST" && this.clock) headers["X-Command-Issued"] = this.clock().toFixed(3);
     const ctrl = new AbortController();
     const timer = setTimeout(() => ctrl.abort(), timeoutMs);
     let resp;

@@ -32,9 +32,11 @@ const STATUS_POLL_MS = 1000;
 class Console {
   constructor() {
     this.token = pageToken();
-    this.api = new Api("/api/v1", this.token);
-    this.ros = new RosbridgeClient(rosbridgeUrl(window.location, this.token));
     this.clockOffset = 0; // server time - local time, seconds
+    // Commands say when they were issued, on the server's clock (deadlines: docs/deadlines.md).
+    this.serverNow = () => Date.now() / 1000 + this.clockOffset;
+    this.api = new Api("/api/v1", this.token, this.serverNow);
+    this.ros = new RosbridgeClient(rosbridgeUrl(window.location, this.token));
     this.serverSpeaking = 0; // replies the server's voice is playing now (serverSpeak)
     this.drones = [];
     this.fleet = false;
@@ -478,7 +480,8 @@ class Console {
     // asked_by: a bare yes or no answers the drone that asked, whichever is selected.
     const askedBy = this.dialog.askedBy(drone || "");
     const msg = { text, confidence, source, drone: drone || "", asked_by: askedBy };
-    const id = this.ros.publish("/console/utterance", TOPIC_TYPES["/console/utterance"], msg);
+    const type = TOPIC_TYPES["/console/utterance"];
+    const id = this.ros.publish("/console/utterance", type, msg, { issued: this.serverNow() });
     if (!id) {
       this.flash("Not connected: the command was not sent.", "alert");
       return false;
@@ -490,7 +493,7 @@ class Console {
   publishTwist(twist) {
     if (!this.drone) return;
     const topic = droneTopic("/cmd_vel", this.drone, this.fleet);
-    if (!this.ros.publish(topic, TOPIC_TYPES["/cmd_vel"], twist)) {
+    if (!this.ros.publish(topic, TOPIC_TYPES["/cmd_vel"], twist, { issued: this.serverNow() })) {
       this.flash("Not connected: jog not sent.", "alert");
     }
   }

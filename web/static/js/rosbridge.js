@@ -222,12 +222,15 @@ export class RosbridgeClient extends EventTarget {
   /**
    * Publish ``msg`` on ``topic`` (advertising it first); returns the op id, or null when the
    * connection is down (the caller tells the operator: a control command must never vanish
-   * silently).
+   * silently). ``issued``: when the operator gave a command (server-clock Unix seconds), sent
+   * beside ``msg`` so the server can drop it if it arrives past its deadline.
    */
-  publish(topic, type, msg) {
+  publish(topic, type, msg, { issued } = {}) {
     this.advertise(topic, type);
     const id = this.nextId(`publish:${topic}`);
-    return this.send({ op: "publish", id, topic, msg }) ? id : null;
+    const op = { op: "publish", id, topic, msg };
+    if (Number.isFinite(issued)) op.issued = issued;
+    return this.send(op) ? id : null;
   }
 
   /** Call a service; resolves with its ``values``, rejects with ServiceCallError. */
