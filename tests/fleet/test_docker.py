@@ -25,12 +25,17 @@ def compose() -> dict:
 def test_compose_shape() -> None:
     c = compose()
     services = c["services"]
-    assert {"keys", "central", "sim1", "sim2", "vehicle1", "vehicle2"} <= set(services)
+    assert {"zenohd", "keys", "central", "sim1", "sim2", "vehicle1", "vehicle2"} <= set(services)
     nets = c["networks"]["fleet"]["ipam"]["config"][0]["subnet"]
     assert nets == "172.28.0.0/24"
     for name, svc in services.items():
         assert list(svc["networks"]) == ["fleet"], name
-        assert svc["build"]["dockerfile"] == "docker/Dockerfile"
+        if name != "zenohd":  # Eclipse's own router image, unchanged
+            assert svc["build"]["dockerfile"] == "docker/Dockerfile"
+    # the bus: the central's router joins zenohd; the vehicles join the central's router
+    central = services["central"]["command"]
+    assert central[central.index("--bus-connect") + 1] == "tcp/zenohd:7447"
+    assert "--no-multicast-scouting" in services["zenohd"]["command"]
     # each vehicle flies its own simulator, addressed by that container's IP
     for k in (1, 2):
         sim_ip = services[f"sim{k}"]["networks"]["fleet"]["ipv4_address"]
@@ -42,6 +47,7 @@ def test_compose_shape() -> None:
         assert cmd[cmd.index("--key-file") + 1] == f"/central/vehicle-keys/uav{k}.key"
         assert f"uav{k}" in services["keys"]["command"]
         assert services[f"vehicle{k}"]["volumes"] == ["central-data:/central:ro"]
+        assert cmd[cmd.index("--bus-connect") + 1] == "tcp/central:7447"
 
 
 @pytest.mark.parametrize("service", ["keys", "central", "sim1", "sim2", "vehicle1", "vehicle2"])
