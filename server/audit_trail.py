@@ -1,5 +1,5 @@
 """Intent before, outcome after: audit rows for every action that moves a drone or changes who
-controls it (issue 14; before, direct actions left no row at all).
+controls it, whatever its door.
 
 Rows go to the same SQLite audit log as the dialog's (``server.store``), with ``source`` saying
 which door (``rest``, ``rosbridge``, ``lease``), ``action`` ``intent:<what>`` or

@@ -1,4 +1,4 @@
-"""Transport-level limits for uvicorn's HTTP/1.1 protocol (issue 14): per-IP connection caps and
+"""Transport-level limits for uvicorn's HTTP/1.1 protocol: per-IP connection caps and
 a deadline for the request headers, below anything ASGI middleware can see.
 
 uvicorn closes a keep-alive connection idle between requests after ``timeout_keep_alive``, but

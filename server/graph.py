@@ -256,7 +256,7 @@ class Graph:
         # callback that publishes in turn gets its own and ours back after.
         outer, self._issued = self._issued, issued
         try:
-            # One subscriber's bug must not cost the others their message (issue 14): each
+            # One subscriber's bug must not cost the others their message: each
             # callback is isolated, and the failure logged with the topic and the subscriber.
             for sub in subscriptions:
                 try:

@@ -6,8 +6,8 @@
 - :class:`PilotLease`: one pilot connection commands at a time; another pilot takes over only
   explicitly, and the previous holder is told (its revoke callback runs). Holder ids are not
   secret (rosapi lists connections); each holding gets a secret ``key``, told only to the
-  holder, which REST callers name in ``X-Pilot-Lease`` (issue 14: a second pilot used an id
-  an observer could read).
+  holder, which REST callers name in ``X-Pilot-Lease`` (an id alone would do for anyone:
+  observers can read it).
 - Only the server publishes ``/console/*`` and ``/fleet/*`` (replies, state, fleet status), but
   for ``/console/utterance``, which a pilot sends; a fake "battery critical" reply is refused.
 - A third role, ``vehicle``, exists only on ``/vehicle-link``: a vehicle process authenticated by

@@ -48,8 +48,8 @@ log = logging.getLogger(__name__)
 
 def _text(value: str) -> str:
     """``value`` storable as UTF-8: lone surrogates escaped (``\\ud800``). SQLite refuses
-    them with UnicodeEncodeError, which is not a sqlite3.Error: an utterance holding one flew
-    the drone and left no row (issue 14)."""
+    them with UnicodeEncodeError, which is not a sqlite3.Error: an utterance holding one would
+    fly the drone and leave no row."""
     try:
         value.encode("utf-8")
     except UnicodeEncodeError:

@@ -1,4 +1,4 @@
-"""A frame-size cap before authentication, enforced by the WebSocket transport (issue 14).
+"""A frame-size cap before authentication, enforced by the WebSocket transport.
 
 Before it authenticates a connection may send only a small ``auth`` frame. Checking that in the
 app is too late: uvicorn has by then read the whole frame (up to ``ws_max_size``, 64 MB) into

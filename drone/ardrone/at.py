@@ -352,8 +352,8 @@ _ARG_RE = re.compile(rb'-?\d+|"[^"\r\n]*"')
 
 
 def _parse_args(raw: bytes) -> list[str]:
-    # A quoted string may hold any byte but CR, LF and '"'; the protocol is ASCII (fuzz
-    # campaign, issue 14: a non-ASCII byte in a CONFIG value raised UnicodeDecodeError).
+    # A quoted string may hold any byte but CR, LF and '"'; the protocol is ASCII (a
+    # non-ASCII byte in a CONFIG value is refused here, not a UnicodeDecodeError later).
     if not raw.isascii():
         raise ATParseError(f"non-ASCII bytes in AT arguments {raw[:60]!r}")
     return [m.group(0).decode("ascii") for m in _ARG_RE.finditer(raw)]

@@ -1,6 +1,6 @@
 """ArUco marker localisation: detect DICT_4X4_50 markers, solve each pose, locate the drone.
 
-Pipeline per frame (issue 4 "Perception"): ``cv2.aruco.ArucoDetector`` → for each known marker
+Pipeline per frame: ``cv2.aruco.ArucoDetector`` → for each known marker
 ``cv2.solvePnP(..., SOLVEPNP_IPPE_SQUARE)`` with the front camera's intrinsics
 (``drone.camera.CameraModel``: 640×360, 92° diagonal, no distortion) → the drone's map-frame
 pose from the marker's known pose (``drone.sim.world.Marker``: centre, outward-normal yaw, side)

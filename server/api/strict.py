@@ -1,6 +1,6 @@
 """The base of every REST request body: bad input gets a 422 naming it, never a 500 later.
 
-Issue 14 found bodies that parsed but broke something downstream: ``NaN``/``Infinity`` (Python's
+It refuses bodies that parse but would break something downstream: ``NaN``/``Infinity`` (Python's
 JSON reader accepts them) in numbers, and lone surrogates (``"\\ud800"``, legal JSON but not
 encodable as UTF-8) in text, which made SQLite and the JSON response fail after the drone had
 already been told to move.

@@ -122,7 +122,7 @@ def not_understood(text: str, nlu: NLULike) -> str:
 
 
 # Validation messages of server.tasks (CommandError) are written for programmers; these say the
-# same to the operator (issue 18: "'turn' needs 'direction' left or right; got None" must never
+# same to the operator ("'turn' needs 'direction' left or right; got None" must never
 # reach a person).
 _RANGE = re.compile(
     r"^(?P<what>move distance|turn angle) must be in \(0, (?P<max>[\d.]+)\] (?P<unit>m|degrees), "

@@ -1,4 +1,4 @@
-"""Questions back to the operator and their answers (issue 13 item 6): "go to the chair" in a
+"""Questions back to the operator and their answers : "go to the chair" in a
 room with two chairs is answered "Which chair? The red one or the blue one?"; the next sentence,
 "the red one" (a ``choose`` command: ``colour``/``which``/``object`` slots), completes the
 command that asked, and the sentence it was part of ("take off and go to the chair") runs as if

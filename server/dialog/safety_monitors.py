@@ -1,4 +1,4 @@
-"""ANS monitors of issue 13: the estimator against the drone's own sensors, the clamped jog,
+"""ANS monitors: the estimator against the drone's own sensors, the clamped jog,
 and the ceiling the altitude monitor watches (the world's, not a global number).
 
 They follow :mod:`server.dialog.autonomic`'s contract (``name``, ``period_s``,
@@ -30,7 +30,7 @@ def ans_ceiling_m(setting: float | None, vehicle_port: Any) -> float:
 @dataclass
 class EstimatorMonitor:
     """The pose estimate disagrees with navdata (components gated out again and again), or the
-    EKF had to restart a part of its state from navdata: tell the operator (issue 13 §1)."""
+    EKF had to restart a part of its state from navdata: tell the operator."""
 
     period_s: float = 0.25
     # Not "estimator": that is server.dialog.monitors' (no position fix); the ANS runs each

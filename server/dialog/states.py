@@ -38,7 +38,7 @@ _FLYING_COMMON: dict[str, State] = {
     "failed": S.AIRBORNE_IDLE,
     "landing": S.LANDING,
     **{a: S.EXECUTING for a in MOTION},
-    "search": S.SEARCHING,  # tag search on request (issue 13 item 7)
+    "search": S.SEARCHING,  # tag search on request
 }
 
 TRANSITIONS: dict[State, dict[str, State]] = {

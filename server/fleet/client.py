@@ -125,7 +125,7 @@ class VehicleClient:
         ca_file: Path | None = None,
         fingerprint: str | None = None,
     ) -> None:
-        # wss:// (issue 15): verify the central's certificate with a CA file or a pinned
+        # wss://: verify the central's certificate with a CA file or a pinned
         # SHA-256 fingerprint; a wrong certificate stops the client with the reason.
         self.conn = CentralConnection(
             CentralServer(url, token, ca_file, fingerprint),
@@ -227,7 +227,7 @@ async def _vehicle(
         station = Enu(world.start.x, world.start.y, 0.0)
     from server.mavlink_stack import is_mavlink
 
-    if is_mavlink(drone):  # a PX4/ArduPilot drone (issue 16): tcp:…, udpin:…, sim-mavlink
+    if is_mavlink(drone):  # a PX4/ArduPilot drone: tcp:…, udpin:…, sim-mavlink
         await _mavlink_vehicle(central, name, drone, index, world, station, token)
         return
     sim = None

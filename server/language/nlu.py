@@ -134,7 +134,7 @@ class _Normaliser:
         digits = _HAS_DIGIT.search(s) is not None
         if digits and ("-" in s or "\u2212" in s or "\u2013" in s):
             # A sign is kept as the word "minus", which no rule accepts: "go forward -5
-            # meters" used to lose its sign and fly forward (issue 14); now it is refused.
+            # meters" is refused rather than flown forward without its sign.
             s = _SIGNED.sub(" minus ", s)
         if digits and "," in s:
             s = _DIGIT_COMMA.sub("", s)

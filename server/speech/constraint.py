@@ -7,7 +7,7 @@ part of a grammar word as Whisper's tokenizer spells it (" take", " Take", "take
 do not know by joining word pieces, but far less often, and a misheard word lands nearer to a
 grammar word for the snap ("Kill them more times" becomes "Kill them more time"; "Disc right
 machine" cannot be written at all). The mask costs nothing per step; bench/speech.py measures
-the gain (issue 15).
+the gain.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The world's objects as targets (issue 13 item 6; the multimodal paper's Fig. 3 rule 2 and its
+"""The world's objects as targets (the multimodal paper's Fig. 3 rule 2 and its
 OBJECTS mapping): "fly to the door", "go to the red chair", "face the window".
 
 A command names an object by kind (``object``), optionally ``colour`` and ``which`` (nearest,
