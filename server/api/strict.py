@@ -2,7 +2,7 @@
 
 It refuses bodies that parse but would break something downstream: ``NaN``/``Infinity`` (Python's
 JSON reader accepts them) in numbers, and lone surrogates (``"\\ud800"``, legal JSON but not
-encodable as UTF-8) in text, which made SQLite and the JSON response fail after the drone had
+encodable as UTF-8) in text, which would make SQLite and the JSON response fail after the drone had
 already been told to move.
 """
 
