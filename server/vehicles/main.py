@@ -1,7 +1,9 @@
 """``uav-console vehicle --central ws://HOST:PORT/vehicle-link --name NAME``: a whole vehicle.
 
 Settings come from ``UAVC_*`` (``serve`` passes all of its own to the vehicles it spawns) and
-the flags; the token from ``--token`` or ``UAVC_TOKEN``.
+the flags; the token from ``--token`` or ``UAVC_TOKEN``; the safety door's ticket secret from
+``UAVC_DOOR_SECRET`` (hex; ``serve`` gives each vehicle it spawns its own; without it the door
+takes the pilot token only).
 """
 
 from __future__ import annotations
@@ -28,6 +30,12 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
     digits = "".join(c for c in args.name if c.isdigit())
     index = args.index if args.index is not None else max(0, int(digits or 1) - 1)
     settings = Settings.from_env(drone=args.drone, world=args.world)
+    secret_hex = os.environ.get("UAVC_DOOR_SECRET", "")
+    try:
+        door_secret = bytes.fromhex(secret_hex) if secret_hex else None
+    except ValueError:
+        print("uav-console vehicle: UAVC_DOOR_SECRET is not hex", file=sys.stderr)
+        return 2
     options = VehicleOptions(
         central=args.central,
         name=args.name,
@@ -37,6 +45,7 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         safety_port=args.safety_port,
         safety_cert=args.safety_cert,
         safety_key=args.safety_key,
+        door_secret=door_secret,
         parent_pid=args.parent_pid,
         ca_file=args.ca,
         fingerprint=args.fingerprint,
