@@ -22,7 +22,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from drone.sim.probe import SimThread
-from tests.isolation.conftest import PILOT, Served, door_stop, reply_texts, serve, wait_for
+from tests.isolation.conftest import Served, door_stop, reply_texts, serve, wait_for
 
 pytestmark = pytest.mark.timeout(180)
 SIM_ADDR = "127.0.13.10"
