@@ -138,12 +138,18 @@ def flood(door_url: str) -> Iterator[None]:
             p.join(5)
 
 
-def reset(sim: SimThread, http: httpx.Client) -> None:
+def reset(sim: SimThread, http: httpx.Client, lease: str) -> None:
+    """Out of the emergency state (``reset`` needs the pilot lease: the page's, named)."""
     wait_for(lambda: sim.truth.emergency, "the emergency state", 30)
     # The bit toggles on a rising edge and the driver holds it a while after the state changed.
     time.sleep(1.0)
+    headers = {"X-Pilot-Lease": lease}
     for _ in range(5):
-        wait_for(lambda: http.post("/api/v1/drones/uav1/reset").status_code == 200, "reset", 60)
+        wait_for(
+            lambda: http.post("/api/v1/drones/uav1/reset", headers=headers).status_code == 200,
+            "reset",
+            60,
+        )
         with contextlib.suppress(RuntimeError):
             wait_for(lambda: not sim.truth.emergency, "leaving the emergency state", 5)
             break
@@ -187,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         page.goto(f"http://{HOST}:{port}/?token={TOKEN}")
         wait_for(lambda: page.evaluate("document.body.dataset.doorRoad === 'ok'"), "the door", 30)
         wait_for(lambda: page.evaluate("uavConsole.haveLease === true"), "the lease", 30)
+        lease = str(page.evaluate("uavConsole.api.leaseHolder"))
         box = page.locator("#btn-emergency").bounding_box()
         assert box is not None
         at = (box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
@@ -210,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
                     by[road] = by.get(road, 0) + 1
                 finally:
                     after()
-                reset(sim, http)
+                reset(sim, http, lease)
             results[label], roads[label] = xs, by
 
         nothing = lambda: None  # noqa: E731

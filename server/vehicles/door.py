@@ -344,7 +344,7 @@ class _Connection:
         try:
             return self.session.receive(text)
         except DoorProtocolError as exc:
-            if self.session.phase is Phase.CLOSED:
+            if self.session.closed:  # before auth: anything wrong ends the connection
                 self.door.counts.auth_failed += 1
                 self._close(CLOSE_POLICY, str(exc))
             else:

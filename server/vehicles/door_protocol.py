@@ -336,6 +336,10 @@ class DoorSession:
     def refuse(self) -> None:
         self.phase = Phase.CLOSED
 
+    @property
+    def closed(self) -> bool:
+        return self.phase is Phase.CLOSED
+
     def overdue(self, now: float) -> bool:
         """Whether the connection is still unauthenticated past its deadline."""
         return self.phase is Phase.AWAITING_AUTH and now >= self.auth_deadline

@@ -290,7 +290,14 @@ class VehicleHost:
             ),
             tls=tls,
         )
-        await self.door.start()
+        try:
+            await self.door.start()
+        except OSError as exc:  # the port serve chose was taken meanwhile: any free one
+            log.warning(
+                "%s: safety door port %d: %s; on any free port", self.name, o.safety_port, exc
+            )
+            self.door.port = 0
+            await self.door.start()
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         self._tasks = [
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
