@@ -154,11 +154,11 @@ def test_a_stop_pending_on_both_roads_is_dropped_by_a_newer_command(
         os.kill(vehicle_pid, signal.SIGCONT)
         srv.resume()
     try:
-        js(page, "document.body.dataset.doorRoad === 'ok'", "the door back", 15)
-        js(page, "document.querySelector('#conn').textContent === 'Connected'", "Connected", 15)
+        js(page, "document.body.dataset.doorRoad === 'ok'", "the door back", 30)
+        js(page, "document.querySelector('#conn').textContent === 'Connected'", "Connected", 30)
         # the server has worked off what waited in its sockets (the page's REST retries of the
         # stop among them) once it answers a request sent after them
-        wait_for(lambda: srv.drone()["link_ok"], "the server to answer", 15)
+        wait_for(lambda: srv.drone()["link_ok"], "the server to answer", 30)
         assert sim.sim.first_emergency_after(t0) is None, "the dropped stop fired from the past"
         assert not sim.truth.emergency
         assert violations == []
