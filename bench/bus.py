@@ -242,11 +242,12 @@ def main(argv: list[str] | None = None) -> int:
     if len(rows) > 1:
         first, last = rows[0], rows[-1]
         growth = last["central_cores"] / max(first["central_cores"], 1e-9)
+        peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
         print(
             f"\ncentral CPU grows {growth:.1f}x from N={first['n']} to N={last['n']} "
             f"({last['n'] / first['n']:.0f}x the vehicles); p99 ratio "
             f"{last['p99_ms'] / max(first['p99_ms'], 1e-9):.2f}; "
-            f"peak RSS of this process {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3:.0f} MB"
+            f"peak RSS of this process {peak_mb:.0f} MB"
         )
     return 0
 

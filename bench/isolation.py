@@ -8,8 +8,8 @@ taken where it matters: from the moment a client sends the stop to the moment th
 ``AT*REF`` with the emergency bit reaches the simulator's AT socket.
 
 Rows:
-  emergency idle          REST ``POST /drones/uav1/emergency`` (and, in process mode, the
-                          vehicle's safety port) -> AT*REF emergency bit; p50/p99/max.
+  emergency idle          REST ``POST /drones/uav1/emergency`` (and, in process mode, a stop
+                          on the vehicle's safety door, held open) -> AT*REF emergency bit.
   emergency under attack  the same while the web process decodes a ``png`` rosbridge frame sent
                           *before authenticating* whose PNG has N one-byte IDAT chunks (the
                           quadratic ``png_decode`` of issue 14; N = 900 000 froze the loop 12 s);
@@ -205,9 +205,18 @@ def clicks(http: httpx.Client, mode: str) -> dict[str, Callable[[], Any]]:
         "REST": lambda: http.post("/api/v1/drones/uav1/emergency"),
     }
     if mode == "process":
-        url = http.get("/api/v1/drones/uav1").json()["vehicle"]["safety_url"]
-        safety = httpx.Client(headers={"Authorization": f"Bearer {TOKEN}"}, timeout=30)
-        out["safety port"] = lambda: safety.post(f"{url}/emergency")
+        url = http.get("/api/v1/drones/uav1").json()["vehicle"]["door_url"]
+        door = connect(url)  # held open, as the console page holds it
+        door.send(json.dumps({"op": "auth", "token": TOKEN}))
+        assert json.loads(door.recv(timeout=10))["op"] == "hello"
+        # read its heartbeats and acks (a client that does not read is closed by the door)
+        threading.Thread(target=_quiet(lambda: [None for _ in door]), daemon=True).start()
+        count = itertools.count()
+
+        def stop() -> None:
+            door.send(json.dumps({"op": "stop", "action": "emergency", "id": f"b{next(count)}"}))
+
+        out["safety door"] = stop
     return out
 
 

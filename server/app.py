@@ -19,9 +19,10 @@ from server.api import drones, flights, language, sim, speech, strict, system, t
 from server.api.deps import fleet_access, fleet_deadline
 from server.audit_trail import RestAuditMiddleware
 from server.deadlines import CommandExpired
-from server.http_guard import HttpGuard
+from server.http_guard import HttpGuard, content_security_policy
 from server.runtime import Runtime
 from server.settings import Settings
+from server.vehicles.door import advertised_url
 from server.vehicles.errors import VehicleUnavailable
 
 WEB = share_dir("web")
@@ -106,9 +107,16 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
 
     @app.get("/", response_class=HTMLResponse, include_in_schema=False)
     def console(request: Request) -> HTMLResponse:
-        return templates.TemplateResponse(
+        page = templates.TemplateResponse(
             request, "index.html", {"version": __version__, "settings": settings}
         )
+        # The page connects to this origin and to the vehicles' safety doors, at the host this
+        # request named (a phone on the LAN): its policy names exactly those doors.
+        host = request.headers.get("host")
+        doors = [advertised_url(url, host) for url in runtime.vehicles.door_urls()]
+        csp = content_security_policy(d for d in doors if d)
+        page.headers["content-security-policy"] = csp
+        return page
 
     @app.get("/favicon.ico", include_in_schema=False)
     def favicon() -> RedirectResponse:

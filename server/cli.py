@@ -104,10 +104,10 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--fingerprint", default=None, help="pinned SHA-256 of the central's cert")
     v.add_argument("--prefix", default=None, help="topic prefix (default /NAME; '' for one drone)")
     v.add_argument("--index", type=int, default=None, help="simulator address / station index")
-    v.add_argument("--safety-host", default="127.0.0.1", help="the safety port's address")
-    v.add_argument("--safety-port", type=int, default=0, help="the safety port (0: any free)")
-    v.add_argument("--safety-cert", type=Path, default=None, help="HTTPS safety port: its cert")
-    v.add_argument("--safety-key", type=Path, default=None, help="HTTPS safety port: its key")
+    v.add_argument("--safety-host", default="127.0.0.1", help="the safety door's address")
+    v.add_argument("--safety-port", type=int, default=0, help="the safety door (0: any free)")
+    v.add_argument("--safety-cert", type=Path, default=None, help="wss: safety door: its cert")
+    v.add_argument("--safety-key", type=Path, default=None, help="wss: safety door: its key")
     v.add_argument("--parent-pid", type=int, default=None, help=argparse.SUPPRESS)
 
     from server.vehicles.key_cli import add_parser as add_vehicle_key

@@ -10,6 +10,10 @@ like a spoken command.
 An action issued at ``issued`` (Unix seconds) and handed over past the deadline is not sent
 (drone/deadline.py; stops never expire): ``accepted: false`` with "Not flown: …", said by the
 dialog and audited as ``expired``.
+
+A stop (land, hover, emergency) that carries an ``id`` comes down two roads from the page (this
+one and the vehicle's safety door): :func:`perform_stop` runs each id once, whichever road
+brings it first, and not at all once the operator superseded it (server.vehicles.stops).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from drone.deadline import (
     not_flown,
 )
 from server.dialog.preflight import DroneFacts, refusal
+from server.vehicles.stops import StopVerdict
 
 # Where a direct action came from: the page says which (X-Command-Source); anything else is
 # recorded as "rest". Kept to a fixed set so the audit log holds no client-chosen text.
@@ -137,6 +142,76 @@ async def perform_async(
     outcome = DirectOutcome(accepted, detail)
     _audit(audit, stack, dialog, action, source, outcome)
     return outcome
+
+
+def perform_stop(
+    stack: Any,
+    dialog: Any,
+    audit: Any,
+    action: str,
+    stop_id: str,
+    issued: float | None,
+    road: str,
+    *,
+    source: str,
+    battery_low_pct: float,
+    now: float,
+) -> StopVerdict:
+    """A stop with an id, where the drone is driven (the web process inline, or a vehicle
+    process): run at once on its first arrival (:func:`perform`), answered with that first
+    delivery when it comes again by the other road, dropped when superseded.
+
+    Args:
+        road: ``server`` (REST, the console's ``direct`` call) or ``door``.
+        now: unix seconds, the clock ``issued`` is on.
+    """
+    verdict: StopVerdict = stack.stops.admit(stop_id, action, issued, road, now)
+    if verdict.run:
+        perform(stack, dialog, audit, action, source=source, battery_low_pct=battery_low_pct)
+    elif not verdict.accepted:
+        _audit(audit, stack, dialog, action, source, DirectOutcome(False, verdict.detail))
+    return verdict
+
+
+async def perform_stop_async(
+    stack: Any,
+    dialog: Any,
+    audit: Any,
+    action: str,
+    stop_id: str,
+    issued: float | None,
+    *,
+    source: str,
+    battery_low_pct: float,
+) -> StopVerdict:
+    """:func:`perform_stop` down the server road for any drone: a drone in its own vehicle
+    process (``act_stop``) gets the stop with its id and decides there (its door may have
+    brought it first); the audit row is written here.
+
+    Raises:
+        VehicleUnavailable: that vehicle is not on the link (the stop is still sent).
+    """
+    act_stop = getattr(stack, "act_stop", None)
+    if act_stop is None:
+        return perform_stop(
+            stack,
+            dialog,
+            audit,
+            action,
+            stop_id,
+            issued,
+            "server",
+            source=source,
+            battery_low_pct=battery_low_pct,
+            now=time.time(),
+        )
+    try:
+        verdict: StopVerdict = await act_stop(action, stop_id, issued)
+    except Exception as exc:
+        _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
+        raise
+    _audit(audit, stack, dialog, action, source, DirectOutcome(verdict.accepted, verdict.detail))
+    return verdict
 
 
 def perform(

@@ -10,7 +10,9 @@ Before any route, token check or body parsing runs:
   (a 400 MB POST without a token used to be parsed before the 401).
 - Every response carries security headers: a Content-Security-Policy (scripts, styles and
   connections from this origin only; no framing), ``X-Frame-Options``, ``Referrer-Policy:
-  no-referrer`` (the first-load ``?token=`` never leaks in a Referer) and ``nosniff``.
+  no-referrer`` (the first-load ``?token=`` never leaks in a Referer) and ``nosniff``. A
+  response that sets its own policy keeps it: the console page names, in ``connect-src``, the
+  vehicles' safety doors it holds connections to (:func:`content_security_policy`).
 - The console's first load with a valid ``?token=`` sets an HttpOnly, SameSite=Strict cookie,
   so the page can drop the token from its address (``history.replaceState``) and REST and the
   WebSocket keep working with the cookie.
@@ -19,7 +21,8 @@ Before any route, token check or body parsing runs:
 from __future__ import annotations
 
 import json
-from collections.abc import Awaitable, Callable, MutableMapping
+import re
+from collections.abc import Awaitable, Callable, Iterable, MutableMapping
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qs
@@ -40,11 +43,21 @@ BODY_LIMITS: tuple[tuple[str, int], ...] = (
     ("/", 64 * 1024),
 )
 
-CSP = (
-    "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
-    "media-src 'self' blob:; connect-src 'self'; object-src 'none'; base-uri 'none'; "
-    "form-action 'self'; frame-ancestors 'none'"
-)
+
+def content_security_policy(connect: Iterable[str] = ()) -> str:
+    """The policy, with ``connect`` (e.g. ``ws://127.0.0.1:41234``, a safety door) allowed
+    besides this origin. Sources with characters a policy cannot carry are left out."""
+    extra = "".join(f" {src}" for src in connect if _SOURCE_RE.match(src))
+    return (
+        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
+        f"media-src 'self' blob:; connect-src 'self'{extra}; object-src 'none'; "
+        "base-uri 'none'; form-action 'self'; frame-ancestors 'none'"
+    )
+
+
+# A host-source of CSP Level 3 §2.3.1 with scheme and port: wss://host:port (no paths).
+_SOURCE_RE = re.compile(r"^(ws|wss|http|https)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):\d{1,5}$")
+CSP = content_security_policy()
 # FastAPI's /docs and /redoc pages load Swagger UI / ReDoc from a CDN with inline scripts: they
 # keep every header but a CSP that would break them (they are no place to type a token into).
 DOCS_PATHS = ("/docs", "/redoc")
@@ -150,7 +163,10 @@ class HttpGuard:
             if message["type"] == "http.response.start":
                 started = True
                 extra = list(SECURITY_HEADERS)
-                if not path.startswith(DOCS_PATHS):
+                own = any(
+                    k.lower() == b"content-security-policy" for k, _ in message.get("headers", [])
+                )
+                if not path.startswith(DOCS_PATHS) and not own:
                     extra.append((b"content-security-policy", CSP.encode()))
                 if cookie is not None:
                     extra.append((b"set-cookie", cookie))

@@ -48,6 +48,7 @@ from server.tasks.manager import TaskManager
 from server.tls import TLSFiles, display_host
 from server.vehicle_node import VehicleNode
 from server.vehicles.central import VehicleCentral
+from server.vehicles.stops import StopLedger
 
 log = logging.getLogger("uav_console")
 
@@ -63,6 +64,8 @@ class DroneStack:
     sim: SimServer | None = None
     tasks: TaskManager | None = None
     node: VehicleNode | None = None
+    # stop ids run and superseded: each stop runs once, whichever road brings it first
+    stops: StopLedger = field(default_factory=StopLedger)
 
     def link_ok(self) -> bool:
         return bool(self.vehicle.snapshot().link_ok)

@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, Body, HTTPException, Request
 from fastapi.responses import StreamingResponse
 
 from server.api.deps import DroneDep, IssuedDep, PilotDep, RoleDep, RuntimeDep, check_lease
-from server.api.models import ActionResult, Describe
-from server.direct_actions import command_source, perform_async
-from server.vehicles.safety import advertised_url
+from server.api.models import ActionBody, ActionResult, Describe
+from server.direct_actions import command_source, perform_async, perform_stop_async
+from server.runtime import Runtime
+from server.vehicles.door import advertised_url
+from server.vehicles.door_protocol import STOP_ACTIONS
 
 router = APIRouter(prefix="/drones", tags=["drones"])
 
@@ -20,28 +22,38 @@ Action = Literal["takeoff", "land", "hover", "emergency", "reset"]
 MJPEG_BOUNDARY = "frame"
 
 
-def _for_caller(out: dict[str, Any], request: Request) -> dict[str, Any]:
-    """A vehicle process's ``safety_url`` as this caller can call it (the host it reached us
-    by: a phone on the LAN gets the LAN address, not the vehicle's loopback or wildcard)."""
+def _for_caller(
+    out: dict[str, Any], request: Request, runtime: Runtime, role: str
+) -> dict[str, Any]:
+    """A vehicle process's ``door_url`` as this caller can open it (the host it reached us
+    by: a phone on the LAN gets the LAN address, not the vehicle's loopback or wildcard), and
+    for a pilot a ``door_ticket`` that opens it (also while this server is down)."""
     vehicle = out.get("vehicle")
-    if isinstance(vehicle, dict) and vehicle.get("safety_url"):
-        vehicle["safety_url"] = advertised_url(vehicle["safety_url"], request.headers.get("host"))
+    if isinstance(vehicle, dict) and vehicle.get("door_url"):
+        vehicle["door_url"] = advertised_url(vehicle["door_url"], request.headers.get("host"))
+        name = str(out.get("name", ""))
+        vehicle["door_ticket"] = runtime.vehicles.door_ticket(name) if role == "pilot" else None
     return out
 
 
 @router.get("")
-def list_drones(request: Request, runtime: RuntimeDep, _role: RoleDep) -> list[dict[str, Any]]:
+def list_drones(request: Request, runtime: RuntimeDep, role: RoleDep) -> list[dict[str, Any]]:
     """Every drone with its telemetry, state, task and link."""
-    return [_for_caller(stack.telemetry(), request) for stack in runtime.drones.values()]
+    return [
+        _for_caller(stack.telemetry(), request, runtime, role) for stack in runtime.drones.values()
+    ]
 
 
 @router.get("/{drone_id}")
-def get_drone(request: Request, stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
+def get_drone(
+    request: Request, stack: DroneDep, runtime: RuntimeDep, role: RoleDep
+) -> dict[str, Any]:
     """One drone: telemetry, pose estimate, control state, task, link and controller timing.
 
-    ``vehicle.safety_url`` (a drone in its own process): its safety port, at the host this
-    request named, for ``POST …/emergency`` and ``…/land`` that no web traffic can delay."""
-    return _for_caller(stack.telemetry(), request)
+    ``vehicle.door_url`` (a drone in its own process): its safety door, at the host this
+    request named: a WebSocket for emergency, land and hover that no web traffic can delay
+    (docs/safety-door.md); ``vehicle.door_ticket`` (pilots): what opens it."""
+    return _for_caller(stack.telemetry(), request, runtime, role)
 
 
 @router.post("/{drone_id}/describe", response_model=Describe)
@@ -62,8 +74,9 @@ async def act(
     runtime: RuntimeDep,
     _role: PilotDep,
     issued: IssuedDep,
+    body: Annotated[ActionBody | None, Body()] = None,
 ) -> ActionResult:
-    """Direct control; land and emergency reach the wire ahead of anything queued.
+    """Direct control; land, hover and emergency reach the wire ahead of anything queued.
 
     Anything but land, emergency and hover needs the pilot lease to be free (409 otherwise).
     A take-off the drone cannot do now is not sent: ``accepted: false`` and ``detail`` says why
@@ -72,14 +85,41 @@ async def act(
     it; a take-off or reset that reaches the drone more than ``command_deadline_s`` later is
     not sent (``accepted: false``, "Not flown: …"); a stop never expires, and a bad stamp
     (422 for the others) never holds it back.
+
+    A stop may carry ``{"id", "issued"}`` (the page sends both roads one id): the drone runs it
+    once, whichever road brings it first, and not at all if the operator superseded it on the
+    safety door; the answer says when it ran (``delivered``), by which ``road``, and ``late_s``
+    after ``issued``. ``delivered`` null: sent, not confirmed yet (try again with the same id).
     """
     check_lease(request, runtime, {action})
+    source = command_source(request.headers.get("x-command-source"))
+    if action in STOP_ACTIONS and body is not None and body.id is not None:
+        verdict = await perform_stop_async(
+            stack,
+            runtime.dialogs.get(stack.name),
+            runtime.audit,
+            action,
+            body.id,
+            body.issued if body.issued is not None else issued.of([action]),
+            source=source,
+            battery_low_pct=runtime.settings.battery_low_pct,
+        )
+        return ActionResult(
+            drone=stack.name,
+            action=action,
+            accepted=verdict.accepted,
+            detail=verdict.detail,
+            id=body.id,
+            delivered=verdict.delivered,
+            road=verdict.road,
+            late_s=verdict.late_s,
+        )
     out = await perform_async(
         stack,
         runtime.dialogs.get(stack.name),
         runtime.audit,
         action,
-        source=command_source(request.headers.get("x-command-source")),
+        source=source,
         battery_low_pct=runtime.settings.battery_low_pct,
         issued=issued.of([action]),
         deadline_s=runtime.settings.command_deadline_s,

@@ -69,11 +69,26 @@ class FaultRequest(StrictBody):
     wind_mps: tuple[WindComponent, WindComponent] | None = None
 
 
+class ActionBody(StrictBody):
+    """Optional body of ``POST /drones/{id}/{action}``: a stop's id (the same on both roads
+    from the page, so the vehicle runs it once) and when it was issued (unix seconds, the
+    server's clock). Scripts may omit both."""
+
+    id: str | None = Field(default=None, pattern=r"^[A-Za-z0-9_.:-]{1,64}$")
+    issued: float | None = Field(default=None, ge=0, lt=1e11)
+
+
 class ActionResult(BaseModel):
     drone: str
     action: str
     accepted: bool
     detail: str = ""
+    # A stop with an id: when the vehicle ran it (unix s; None: not confirmed yet), the road
+    # that brought it first (server or door), and how long after ``issued`` that was.
+    id: str | None = None
+    delivered: float | None = None
+    road: str | None = None
+    late_s: float | None = None
 
 
 class Describe(BaseModel):

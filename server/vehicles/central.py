@@ -17,6 +17,9 @@
   or PX4, is started and owned by its vehicle); when one exits (a crash, ``kill -9``) the
   console is told on ``/console/reply`` (level ``alert``) and the child is started again
   (backoff 0.5 s doubling to 5 s, reset after 30 s up).
+- Safety doors: each spawned vehicle gets its door's port (the same across restarts, so a
+  page's Content-Security-Policy keeps naming it) and its door secret (``UAVC_DOOR_SECRET``),
+  with which :meth:`VehicleCentral.door_ticket` mints the tickets pages open the door with.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from server.vehicles import names
 from server.vehicles.access import VehicleLinkSecurity
 from server.vehicles.keys import VehicleKeys, vehicle_env
 from server.vehicles.relay import DialogRelay
+from server.vehicles.tickets import TICKET_TTL_S, DoorSecrets, mint
 
 if TYPE_CHECKING:
     from server.runtime import Runtime
@@ -182,6 +186,8 @@ class VehicleCentral:
         self._misnamed: set[str] = set()
         self._utterances: Any = None
         self.bus: ConsoleBus | None = None
+        self.door_secrets = DoorSecrets(pid_dir_of(s))
+        self.door_ports: dict[str, int] = {}  # spawned vehicles' door ports
 
     def router(self) -> APIRouter:
         router = APIRouter()
@@ -234,10 +240,13 @@ class VehicleCentral:
             kind = drone_kind(s.drone, index)  # its own entry of a comma-separated --drone
             argv += ["--prefix", prefix, "--index", str(index), "--drone", kind]
             argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
+            self.door_ports[name] = free_door_port(s.host)
+            argv += ["--safety-port", str(self.door_ports[name])]
             if tls is not None:  # our own certificate, pinned (whatever names it carries)
                 argv += ["--fingerprint", tls.fingerprint]
             self.prefixes[name] = prefix
             child = {**vehicle_env(env, self.keys, name), **self._bus_env(name)}
+            child["UAVC_DOOR_SECRET"] = self.door_secrets.get_or_create(name).hex()
             self.processes[name] = VehicleProcess(argv, child, name)
             self._register(name, prefix, simulated=kind in ("sim", SIM_MAVLINK))
             self._expect(name)
@@ -273,6 +282,29 @@ class VehicleCentral:
             "UAVC_BUS_CONNECT": ",".join(cred.connect),
             "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
         }
+
+    def door_ticket(self, name: str, now: float | None = None) -> str | None:
+        """A pilot's ticket for ``name``'s safety door (None: a vehicle we gave no secret)."""
+        secret = self.door_secrets.get(name)
+        if secret is None:
+            return None
+        expires = (time.time() if now is None else now) + TICKET_TTL_S
+        return mint(secret, name, "pilot", expires)
+
+    def door_urls(self) -> list[str]:
+        """Every safety door this console knows, as bound (scheme, host, port): those of the
+        vehicles it spawned, whether they have joined yet or not, and those that announced
+        one (a vehicle adopted, or joined from another host)."""
+        from server.vehicles.remote import RemoteDroneStack
+
+        s = self.runtime.settings
+        scheme = "wss" if self.runtime.tls is not None else "ws"
+        host = f"[{s.host}]" if ":" in s.host else s.host
+        found = {f"{scheme}://{host}:{port}" for port in self.door_ports.values()}
+        for stack in self.runtime.drones.values():
+            if isinstance(stack, RemoteDroneStack) and stack.info.get("door_url"):
+                found.add(str(stack.info["door_url"]))
+        return sorted(found)
 
     async def _launch(self) -> None:
         orphans = await self._orphans(set(self.processes))
@@ -464,6 +496,17 @@ class VehicleCentral:
                 self.alert(f"{vp.name}'s flight process cannot be started: {exc}")
                 continue
             log.warning("%s: vehicle process restarted (pid %s)", vp.name, vp.pid)
+
+
+def free_door_port(host: str) -> int:
+    """A TCP port free on ``host`` now, for a vehicle's safety door (kept across restarts)."""
+    import socket
+
+    bind = "0.0.0.0" if host in ("", "0.0.0.0") else host
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    with socket.socket(family) as sock:
+        sock.bind((bind, 0))
+        return int(sock.getsockname()[1])
 
 
 def flight_stacks_line(remote: list[str], local: list[str]) -> str:

@@ -5,8 +5,11 @@
     VehicleError
     ├── LinkError             the vehicle link cannot be used (bad URL, closed)
     ├── VehicleKeyError       a vehicle key or its name is missing, unreadable or malformed
-    └── RemoteCallError       a call over the link was refused or not answered
-        └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
+    ├── RemoteCallError       a call over the link was refused or not answered
+    │   └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
+    └── DoorError             the safety door (server.vehicles.door)
+        ├── DoorProtocolError     a frame the door protocol refuses (bad JSON, op, field)
+        └── TicketError           a door ticket that is malformed, forged, expired or not ours
 """
 
 from __future__ import annotations
@@ -37,3 +40,15 @@ class VehicleUnavailable(RemoteCallError):
         super().__init__(message)
         self.drone = drone
         self.retry_after_s = retry_after_s
+
+
+class DoorError(VehicleError):
+    """Base of the safety door's errors."""
+
+
+class DoorProtocolError(DoorError):
+    """A frame that is not a message of the door protocol; the message says what is wrong."""
+
+
+class TicketError(DoorError):
+    """A door ticket that cannot be used: malformed, forged, expired, or for another drone."""

@@ -5,15 +5,16 @@ process`` spawns one per drone) runs, on its own event loop and its own graph: t
 (``--drone sim``) or the driver of a real drone, the vehicle (EKF, 100 Hz controller thread,
 perception), the task manager, the vehicle node (navdata, camera, pose, markers, task, jog,
 operator watchdog), the dialog manager with its ANS monitors, the fleet's LTM, and the safety
-port. :class:`~server.vehicles.link.GraphLink` mirrors that graph onto the central one, so the
+door. :class:`~server.vehicles.link.GraphLink` mirrors that graph onto the central one, so the
 central server and its clients see the drone exactly as an in-process one. The link opens with
 the vehicle's own key (``--key-file`` or ``UAVC_VEHICLE_KEY``: :mod:`server.vehicles.keys`),
 never the pilot token; the central server lets it publish only this drone's topics.
 
 The drone stays safe without the central server: :class:`CentralWatch` hovers it after
 ``heartbeat_timeout_s`` of silence and lands it after ``central_loss_land_s``; the link
-reconnects on its own. ``emergency`` and ``land`` also reach the drone through the safety port
-(:mod:`server.vehicles.safety`), which no web traffic can delay.
+reconnects on its own. ``emergency``, ``land`` and ``hover`` also reach the drone through the
+safety door (:mod:`server.vehicles.door`), the page's standing connection that no web traffic
+can delay; each stop id runs once, whichever road brings it first (:meth:`deliver_stop`).
 
 Deadlines (drone/deadline.py): a command from the central server carries when the operator
 gave it, on the console's clock; the vehicle moves it onto its own clock with the offset it
@@ -47,15 +48,24 @@ from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
 from server.tls import TLSError, server_context
 from server.vehicles import names
-from server.vehicles.errors import RemoteCallError, VehicleError
+from server.vehicles.door import SafetyDoor, door_authenticator, loopback_origin, page_origin
+from server.vehicles.door_protocol import (
+    STOP_ACTIONS,
+    Ack,
+    Stop,
+    Supersede,
+    Superseded,
+    stop_message,
+)
+from server.vehicles.errors import DoorProtocolError, RemoteCallError, VehicleError
 from server.vehicles.link import GraphLink
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
 from server.vehicles.relay import dialog_out
-from server.vehicles.safety import SafetyPort, loopback_origin
 from server.vehicles.watch import CentralWatch, LossAction
 
 if TYPE_CHECKING:
     from server.direct_actions import DirectOutcome
+    from server.vehicles.stops import StopVerdict
 
 log = logging.getLogger("uav_console.vehicle")
 
@@ -80,9 +90,10 @@ class VehicleOptions:
     prefix: str  # "" for a single drone, "/uav2" in a fleet
     index: int = 0  # which simulator address and station
     safety_host: str = "127.0.0.1"
-    safety_port: int = 0  # 0: any free port (announced in /NAME/vehicle/info)
-    safety_cert: Path | None = None  # with safety_key: the safety port speaks HTTPS
+    safety_port: int = 0  # the safety door's port; 0: any free (announced in vehicle/info)
+    safety_cert: Path | None = None  # with safety_key: the safety door speaks wss:
     safety_key: Path | None = None
+    door_secret: bytes | None = None  # the console's key for door tickets (None: token only)
     parent_pid: int | None = None  # the supervising serve (None: a standalone vehicle)
     ca_file: Path | None = None  # wss:// central: verify its certificate with this CA
     fingerprint: str | None = None  # wss:// central: or accept exactly this certificate
@@ -293,18 +304,34 @@ class VehicleHost:
             try:
                 tls = server_context(o.safety_cert, o.safety_key)
             except TLSError as exc:
-                raise VehicleError(f"safety port: {exc}") from exc
-        self.safety = SafetyPort(
+                raise VehicleError(f"safety door: {exc}") from exc
+        self.door = SafetyDoor(
             o.safety_host,
             o.safety_port,
-            self.safety_token or secrets.token_urlsafe(24),  # none given: nobody opens it
-            lambda action: self.direct(action).detail,
-            name=self.name,
-            origin_allowed=lambda origin: origin in allowed or loopback_origin(origin),
-            console_port=s.port,  # the console's page on whatever address the phone used
+            drone=self.name,
+            authenticate=door_authenticator(
+                # none given: nobody opens it with a token (tickets still work)
+                self.safety_token or secrets.token_urlsafe(24),
+                o.door_secret,
+                self.name,
+            ),
+            on_stop=self._door_stop,
+            on_supersede=self._door_supersede,
+            status=self._door_status,
+            # the console's page on whatever address the phone used (the token still decides)
+            origin_allowed=lambda origin, host: (
+                origin in allowed or loopback_origin(origin) or page_origin(origin, host, s.port)
+            ),
             tls=tls,
         )
-        await self.safety.start()
+        try:
+            await self.door.start()
+        except OSError as exc:  # the port serve chose was taken meanwhile: any free one
+            log.warning(
+                "%s: safety door port %d: %s; on any free port", self.name, o.safety_port, exc
+            )
+            self.door.port = 0
+            await self.door.start()
         self.bus = join_bus(s, self.name, self.key)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         self._tasks = [
@@ -317,7 +344,8 @@ class VehicleHost:
             "name": self.name,
             "prefix": self.options.prefix,
             "simulated": self.stack.sim is not None,
-            "safety_url": self.safety.url,
+            "door_url": self.door.url,
+            "door_tickets": self.options.door_secret is not None,
             "pid": os.getpid(),
         }
 
@@ -385,6 +413,57 @@ class VehicleHost:
             log.warning("%s: %s: no deadline judged here", self.name, exc)
             return None
 
+    # ------------------------------------------------------------------ stops, both roads
+    def deliver_stop(
+        self, action: str, stop_id: str, issued: float | None, road: str
+    ) -> StopVerdict:
+        """A stop from either road (the door, or the console's ``direct`` with an ``id``):
+        run once per id, never once superseded. A door stop is audited here (the console may
+        be stopped); the console audits what it forwards."""
+        from server.direct_actions import perform_stop
+
+        return perform_stop(
+            self.stack,
+            self.dialog,
+            self.audit if road == "door" else None,
+            action,
+            stop_id,
+            issued,
+            road,
+            source="door" if road == "door" else "rest",
+            battery_low_pct=self.settings.battery_low_pct,
+            now=time.time(),
+        )
+
+    def _door_stop(self, stop: Stop) -> Ack:
+        v = self.deliver_stop(stop.action, stop.id, stop.issued, "door")
+        return Ack(stop.id, stop.action, v.accepted, v.detail, v.delivered, v.road, v.late_s)
+
+    def _door_supersede(self, msg: Supersede) -> Superseded:
+        dropped, too_late = self.stack.stops.supersede(msg.ids, time.time())
+        if dropped:
+            log.info("%s: stops superseded before they arrived: %s", self.name, dropped)
+        return Superseded(dropped, too_late)
+
+    def _door_status(self) -> tuple[str, bool]:
+        snap = self.stack.vehicle.snapshot()
+        return str(snap.ctrl_state), bool(snap.link_ok)
+
+    def _server_stop(self, action: str, args: dict[str, Any]) -> dict[str, Any]:
+        try:
+            stop = stop_message(action, args.get("id"), args.get("issued"))
+        except DoorProtocolError as exc:
+            raise VehicleError(str(exc)) from exc
+        v = self.deliver_stop(action, stop.id, stop.issued, "server")
+        return {
+            "accepted": v.accepted,
+            "detail": v.detail,
+            "ran": v.run,
+            "delivered": v.delivered,
+            "road": v.road,
+            "late_s": v.late_s,
+        }
+
     async def _control(self, args: dict[str, Any]) -> dict[str, Any]:
         """``/NAME/vehicle/control`` (see :mod:`server.vehicles.names`)."""
         op = args.get("op")
@@ -392,6 +471,8 @@ class VehicleHost:
             action = str(args.get("action", ""))
             if action not in ("takeoff", "land", "hover", "emergency", "reset"):
                 raise VehicleError(f"unknown action {action!r}")
+            if action in STOP_ACTIONS and args.get("id") is not None:
+                return self._server_stop(action, args)
             low = args.get("battery_low_pct")
             low_pct = float(low) if isinstance(low, int | float) else None
             out = self.direct(action, low_pct, self._issued_arg(args))
@@ -504,7 +585,7 @@ class VehicleHost:
             t.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await t
-        await self.safety.stop()
+        await self.door.stop()
         if self.bus is not None:
             self.bus.close()
         self._heartbeat_sub.close()
@@ -592,7 +673,7 @@ async def run_vehicle(
         options.name,
         gc.get_freeze_count(),
     )
-    log.info("%s: vehicle up; safety port %s", options.name, host.safety.url)
+    log.info("%s: vehicle up; safety door %s", options.name, host.door.url)
     pid_file = settings.data_dir / "vehicles" / f"{options.name}.pid"
     with contextlib.suppress(OSError):  # lets a restarted serve find (and adopt) this vehicle
         pid_file.parent.mkdir(parents=True, exist_ok=True)

@@ -4,8 +4,9 @@ Settings come from ``UAVC_*`` (``serve`` passes all of its own to the vehicles i
 the flags. The link opens with the vehicle's own key: ``--key-file PATH`` or ``UAVC_VEHICLE_KEY``
 (``serve`` puts it there for the vehicles it spawns; for a vehicle on another computer the
 console's operator makes it with ``uav-console vehicle-key NAME``). The pilot token
-(``--token`` or ``UAVC_TOKEN``) only lets pages call the vehicle's safety port; without it that
-port refuses every request.
+(``--token`` or ``UAVC_TOKEN``) and the safety door's ticket secret ``UAVC_DOOR_SECRET`` (hex;
+``serve`` gives each vehicle it spawns its own) let pages open the vehicle's safety door;
+without either the door refuses everyone.
 """
 
 from __future__ import annotations
@@ -36,7 +37,9 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         log.warning("%s: others may read the vehicle key file (chmod 600 it)", args.key_file)
     safety_token = args.token or os.environ.get("UAVC_TOKEN")
     if not safety_token:
-        log.warning("no pilot token (--token or UAVC_TOKEN): the safety port refuses every request")
+        log.warning(
+            "no pilot token (--token or UAVC_TOKEN): the safety door takes console tickets only"
+        )
     digits = "".join(c for c in args.name if c.isdigit())
     index = args.index if args.index is not None else max(0, int(digits or 1) - 1)
     settings = Settings.from_env(
@@ -45,6 +48,12 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
         fleet_name=args.fleet_name,
     )
+    secret_hex = os.environ.get("UAVC_DOOR_SECRET", "")
+    try:
+        door_secret = bytes.fromhex(secret_hex) if secret_hex else None
+    except ValueError:
+        print("uav-console vehicle: UAVC_DOOR_SECRET is not hex", file=sys.stderr)
+        return 2
     options = VehicleOptions(
         central=args.central,
         name=args.name,
@@ -54,6 +63,7 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         safety_port=args.safety_port,
         safety_cert=args.safety_cert,
         safety_key=args.safety_key,
+        door_secret=door_secret,
         parent_pid=args.parent_pid,
         ca_file=args.ca,
         fingerprint=args.fingerprint,

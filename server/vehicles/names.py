@@ -5,7 +5,8 @@ A vehicle process puts its drone on the central graph through the vehicle link
 (``/ardrone/navdata``, ``/uav/pose``, ``/console/reply`` …, prefixed in a fleet) plus these:
 
 - ``/NAME/vehicle/info`` (std_msgs/String, latched; ``data`` = JSON ``{name, prefix,
-  simulated, safety_url, pid}``): announces the vehicle; the central registry makes a drone of it;
+  simulated, door_url, door_tickets, pid}``): announces the vehicle; the central registry
+  makes a drone of it;
 - ``/NAME/vehicle/telemetry`` (std_msgs/String, 10 Hz; ``data`` = the JSON of
   ``GET /drones/{id}``, plus ``truth`` for a simulated drone);
 - ``/NAME/vehicle/control`` (service ``uav_console/VehicleControl``; args ``{op, ...}``): ``op``

@@ -38,6 +38,7 @@ from server.msgs import header
 from server.runtime import DroneStack
 from server.vehicles import names
 from server.vehicles.errors import RemoteCallError, VehicleUnavailable
+from server.vehicles.stops import StopVerdict
 
 if TYPE_CHECKING:
     from drone.ardrone.driver import ARDroneDriver
@@ -55,7 +56,10 @@ JOIN_POLL_S = 0.05
 # a joined one may publish no telemetry (10 Hz) before it counts as unreachable.
 COMMAND_JOIN_WAIT_S = 3.0
 SILENT_S = 2.0
-STOPS = ("land", "emergency")
+STOPS = ("land", "emergency", "hover")
+# How long a stop with an id (the page's, down the server road) waits for the vehicle's verdict
+# before the answer says "sent, not confirmed" (the stop itself still goes: see act_stop).
+STOP_CONFIRM_S = 2.0
 
 
 class _Frames:
@@ -185,7 +189,7 @@ class RemoteDroneStack(DroneStack):
             "mode": "process",
             "connected": connected,
             "pid": self.info.get("pid"),
-            "safety_url": self.info.get("safety_url"),
+            "door_url": self.info.get("door_url"),
             "age_s": None if self.last_t is None else round(time.monotonic() - self.last_t, 3),
         }
         return out
@@ -244,6 +248,46 @@ class RemoteDroneStack(DroneStack):
                 log.warning("%s: bad expiry in the answer to %s: %r", self.name, action, late)
         accepted = bool(out.get("accepted", True)) and verdict is None
         return DirectOutcome(accepted, str(out.get("detail", f"{action} sent")), verdict)
+
+    async def act_stop(self, action: str, stop_id: str, issued: float | None) -> StopVerdict:
+        """A stop with the page's id: sent at once; the vehicle runs it unless its door brought
+        it first (or it was superseded) and says which. Its answer is awaited
+        ``STOP_CONFIRM_S``; after that the call goes on (up to ``CALL_TIMEOUT_S``) and this
+        answers "sent, not confirmed" (``delivered`` None), so the page keeps trying.
+
+        Raises:
+            VehicleUnavailable: the vehicle is not on the link (the stop is still sent).
+        """
+        args: dict[str, Any] = {"op": "direct", "action": action, "id": stop_id}
+        args["issued"] = issued
+        call = asyncio.ensure_future(self.call(args))
+        self._pending.add(call)
+        call.add_done_callback(self._pending.discard)
+        call.add_done_callback(_log_stop_failure(self.name, action))
+        try:
+            out = await asyncio.wait_for(asyncio.shield(call), STOP_CONFIRM_S)
+        except VehicleUnavailable:
+            raise
+        except (TimeoutError, GraphError, RemoteCallError) as exc:
+            why = "no answer yet" if isinstance(exc, TimeoutError) else str(exc)
+            return StopVerdict(
+                False,
+                True,
+                f"{action} sent to {self.name}; not confirmed ({why})",
+                None,
+                "server",
+                None,
+            )
+        delivered = out.get("delivered")
+        late = out.get("late_s")
+        return StopVerdict(
+            bool(out.get("ran", False)),
+            bool(out.get("accepted", True)),
+            str(out.get("detail", f"{action} sent")),
+            float(delivered) if isinstance(delivered, int | float) else None,
+            str(out.get("road", "server")),
+            float(late) if isinstance(late, int | float) else None,
+        )
 
     def seen_markers(self) -> list[SeenMarker]:
         """From the last telemetry (the snapshot's ``markers``, ≤ 0.1 s old)."""
@@ -437,6 +481,14 @@ class RemoteDroneStack(DroneStack):
         for s in self._subs:
             s.close()
         self._subs = []
+
+
+def _log_stop_failure(name: str, action: str) -> Callable[[asyncio.Future[Any]], None]:
+    def done(fut: asyncio.Future[Any]) -> None:
+        if not fut.cancelled() and fut.exception() is not None:
+            log.error("%s: %s not delivered: %s", name, action, fut.exception())
+
+    return done
 
 
 class RemoteDialog:

@@ -17,7 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+from websockets.sync.client import connect as ws_connect
 
+from server.vehicles.door_protocol import Ack, Auth, Hello, Stop, encode, parse_door
 from tests.loopback import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -65,7 +67,7 @@ class Served:
 
         def ready() -> dict[str, Any] | None:
             d = self.drone(name)
-            ok = d["vehicle"]["connected"] and d["link_ok"] and d["vehicle"]["safety_url"]
+            ok = d["vehicle"]["connected"] and d["link_ok"] and d["vehicle"]["door_url"]
             return d["vehicle"] if ok else None
 
         return dict(wait_for(ready, f"{name}'s vehicle process", timeout))
@@ -126,6 +128,18 @@ def serve(
             proc.kill()
             proc.wait()
         http.close()
+
+
+def door_stop(url: str, token: str, action: str, stop_id: str, issued: float | None = None) -> Ack:
+    """Open the vehicle's safety door (``websockets``), send one stop, return its ack."""
+    with ws_connect(url, open_timeout=10) as ws:
+        ws.send(encode(Auth(token)))
+        assert isinstance(parse_door(ws.recv(timeout=10)), Hello)
+        ws.send(encode(Stop(action, stop_id, issued)))
+        while True:
+            msg = parse_door(ws.recv(timeout=10))
+            if isinstance(msg, Ack):
+                return msg
 
 
 def reply_texts(frames: list[str]) -> list[str]:

@@ -1,5 +1,5 @@
 """A MAVLink drone in its own vehicle process stays safe (issue 14), as an AR.Drone does
-(tests/isolation/test_processes.py): an emergency through the vehicle's safety port force-disarms
+(tests/isolation/test_processes.py): an emergency through the vehicle's safety door force-disarms
 the simulated PX4 while the web process is stopped; a killed vehicle process is reported and
 restarted, with its PX4; a stopped web process makes the vehicle hold the PX4 where it is (a
 position setpoint streamed in OFFBOARD, as the hover task does for any localised drone), then
@@ -24,13 +24,13 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import httpx
 import pytest
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from drone.mavlink.codec import Codec, Message, mav
 from drone.mavlink.modes import mode_name
-from tests.isolation.conftest import PILOT, Served, reply_texts, serve, wait_for
+from tests.isolation.conftest import PILOT, Served, door_stop, reply_texts, serve, wait_for
 from tests.isolation.test_mavlink_process import assert_own_process
 from tests.isolation.test_processes import Listener
 
@@ -224,11 +224,11 @@ def test_stalled_web_process_px4_holds_then_lands(rig: tuple[Px4Wire, Served]) -
     srv.assert_rejoined_after_long_loss(pid)
 
 
-def test_emergency_through_the_safety_port_force_disarms_the_px4(
+def test_emergency_through_the_safety_door_force_disarms_the_px4(
     rig: tuple[Px4Wire, Served],
 ) -> None:
     wire, srv = rig
-    safety = srv.vehicle()["safety_url"]
+    door = srv.vehicle()["door_url"]
     take_off(wire, srv)
     # the vehicle's MAVROS topics cross the link: /mavros/state (latched) says armed
     with connect(srv.ws) as ws:
@@ -243,15 +243,15 @@ def test_emergency_through_the_safety_port_force_disarms_the_px4(
     srv.pause()
     try:
         t0 = time.monotonic()
-        r = httpx.post(f"{safety}/emergency", headers={"Authorization": f"Bearer {PILOT}"})
-        assert r.status_code == 200, r.text
-        assert r.json()["action"] == "emergency" and r.json()["accepted"], r.text
+        ack = door_stop(door, PILOT, "emergency", "px4-1")
+        assert ack.action == "emergency" and ack.accepted, ack
         # motors off in the air: the PX4 accepted a forced disarm, and is on the ground
         wait_for(lambda: on_ground(wire) and wire.now(t0), "the PX4 to disarm", 10)
         after = [mode for t, _, mode in wire.history if t > t0]
         assert "AUTO.LAND" not in after, f"it landed instead of stopping its motors: {after}"
         assert srv.proc.poll() is None  # still stopped, not gone: the path never touched it
-        assert httpx.post(f"{safety}/emergency").status_code == 401  # the pilot token only
+        with pytest.raises(ConnectionClosed):  # the pilot token only
+            door_stop(door, "not-the-token", "emergency", "px4-2")
     finally:
         srv.resume()
     wait_for(lambda: srv.drone()["emergency"], "the console to show the emergency")

@@ -17,12 +17,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from drone.sim.probe import SimThread
-from tests.isolation.conftest import PILOT, Served, reply_texts, serve, wait_for
+from tests.isolation.conftest import Served, door_stop, reply_texts, serve, wait_for
 
 pytestmark = pytest.mark.timeout(180)
 SIM_ADDR = "127.0.13.10"
@@ -199,27 +199,27 @@ def test_emergency_reaches_the_wire_while_the_web_process_is_stalled(
     rig: tuple[SimThread, Served],
 ) -> None:
     sim, srv = rig
-    safety = srv.vehicle()["safety_url"]
+    vehicle = srv.vehicle()
+    door, ticket = vehicle["door_url"], vehicle["door_ticket"]
     take_off(sim, srv, localise=False)
     srv.pause()
     try:
         t0 = time.monotonic()
-        r = httpx.post(f"{safety}/emergency", headers={"Authorization": f"Bearer {PILOT}"})
-        assert r.status_code == 200, r.text
-        assert r.json()["action"] == "emergency"
+        # a fresh connection with the console's ticket: the vehicle checks it on its own
+        ack = door_stop(door, ticket, "emergency", "stalled-1", time.time())
+        assert ack.accepted and ack.road == "door" and ack.action == "emergency", ack
         arrived = wait_for(lambda: sim.sim.first_emergency_after(t0), "AT*REF emergency", 10)
         assert arrived >= t0
         wait_for(lambda: sim.truth.emergency, "the simulator's emergency state", 10)
         assert srv.proc.poll() is None  # still stopped, not gone: the path never touched it
-        refused = httpx.post(f"{safety}/emergency")
-        assert refused.status_code == 401
-        evil = httpx.post(
-            f"{safety}/land",
-            headers={"Authorization": f"Bearer {PILOT}", "Origin": "http://evil.example"},
-        )
-        assert evil.status_code == 403
+        with pytest.raises(ConnectionClosed):  # no token, no stop
+            door_stop(door, "not-the-token", "emergency", "stalled-2")
     finally:
         srv.resume()
+    # the same stop id down the server road, late: answered with the door's delivery
+    r = srv.http.post("/api/v1/drones/uav1/emergency", json={"id": "stalled-1"})
+    assert r.status_code == 200 and r.json()["road"] == "door", r.text
+    assert "already delivered by the door road" in r.json()["detail"]
     leave_emergency(sim, srv)
 
 

@@ -244,20 +244,25 @@ async def test_rest_command_and_speech_answer_503_with_retry_after(
         assert not r.json()["accepted"]
 
 
-async def test_rest_advertises_the_safety_port_at_the_host_the_caller_used(
+async def test_rest_advertises_the_safety_door_at_the_host_the_caller_used(
     tmp_path: Any,
 ) -> None:
-    """A vehicle's safety port bound to every interface (``serve --host 0.0.0.0``) is
-    advertised at the address the caller reached the console by, with the port's scheme."""
+    """A vehicle's safety door bound to every interface (``serve --host 0.0.0.0``) is
+    advertised at the address the caller reached the console by, with the door's scheme; a
+    pilot gets a ticket for it, an observer none; the console page's CSP names the door."""
     from server.settings import Settings
+    from server.vehicles.tickets import verify
     from tests.app_client import app_client
 
-    settings = Settings(data_dir=tmp_path, token="units-pilot", drone="none")
+    settings = Settings(
+        data_dir=tmp_path, token="units-pilot", observer_token="units-obs", drone="none"
+    )
     async with app_client(settings) as client:
         rt = client.app.state.runtime  # type: ignore[attr-defined]
         stack = RemoteDroneStack(rt.graph, "uav1", "", simulated=True)
-        stack.info = {"safety_url": "https://0.0.0.0:47001", "pid": 4242}
+        stack.info = {"door_url": "wss://0.0.0.0:47001", "pid": 4242}
         rt.drones["uav1"] = stack
+        secret = rt.vehicles.door_secrets.get_or_create("uav1")
 
         async def control(args: dict[str, Any]) -> dict[str, Any]:
             return {"mode": "idle", "link_ok": True}
@@ -265,9 +270,61 @@ async def test_rest_advertises_the_safety_port_at_the_host_the_caller_used(
         rt.graph.advertise_service(names.control_service("uav1"), names.CONTROL_TYPE, control)
         phone = await client.get("https://192.168.1.7:8000/api/v1/drones/uav1")
         assert phone.status_code == 200, phone.text
-        assert phone.json()["vehicle"]["safety_url"] == "https://192.168.1.7:47001"
+        vehicle = phone.json()["vehicle"]
+        assert vehicle["door_url"] == "wss://192.168.1.7:47001"
+        assert verify(secret, vehicle["door_ticket"], "uav1", time.time() + 11 * 3600) == "pilot"
         listed = await client.get("https://laptop:8000/api/v1/drones")
-        assert listed.json()[0]["vehicle"]["safety_url"] == "https://laptop:47001"
-        stack.info = {"safety_url": "http://127.0.0.1:47002", "pid": 4242}  # loopback-bound
+        assert listed.json()[0]["vehicle"]["door_url"] == "wss://laptop:47001"
+        observer = await client.get(
+            "/api/v1/drones/uav1", headers={"Authorization": "Bearer units-obs"}
+        )
+        assert observer.json()["vehicle"]["door_ticket"] is None
+        page = await client.get("https://192.168.1.7:8000/?token=units-pilot")
+        csp = page.headers["content-security-policy"]
+        assert "connect-src 'self' wss://192.168.1.7:47001;" in csp
+        stack.info = {"door_url": "ws://127.0.0.1:47002", "pid": 4242}  # loopback-bound
         local = await client.get("/api/v1/drones/uav1")
-        assert local.json()["vehicle"]["safety_url"] == "http://127.0.0.1:47002"
+        assert local.json()["vehicle"]["door_url"] == "ws://127.0.0.1:47002"
+        page = await client.get("/?token=units-pilot")
+        assert "connect-src 'self' ws://127.0.0.1:47002;" in page.headers["content-security-policy"]
+        api = await client.get("/api/v1/health")  # every other response: this origin only
+        assert "connect-src 'self';" in api.headers["content-security-policy"]
+
+
+async def test_a_stop_with_an_id_goes_to_the_vehicle_and_its_verdict_comes_back(
+    tmp_path: Any,
+) -> None:
+    """REST ``POST /drones/uav1/emergency {"id", "issued"}``: the vehicle gets the id and
+    issued time; its verdict (here: its door had brought the stop first) is the answer."""
+    from server.settings import Settings
+    from tests.app_client import app_client
+
+    settings = Settings(data_dir=tmp_path, token="units-pilot", drone="none")
+    async with app_client(settings) as client:
+        rt = client.app.state.runtime  # type: ignore[attr-defined]
+        stack = RemoteDroneStack(rt.graph, "uav1", "", simulated=True)
+        rt.drones["uav1"] = stack
+        calls: list[dict[str, Any]] = []
+
+        async def control(args: dict[str, Any]) -> dict[str, Any]:
+            calls.append(args)
+            return {
+                "accepted": True,
+                "ran": False,
+                "detail": "emergency s1 was already delivered by the door road",
+                "delivered": 1000.5,
+                "road": "door",
+                "late_s": 0.01,
+            }
+
+        rt.graph.advertise_service(names.control_service("uav1"), names.CONTROL_TYPE, control)
+        r = await client.post("/api/v1/drones/uav1/emergency", json={"id": "s1", "issued": 1000.49})
+        assert r.status_code == 200, r.text
+        body = r.json()
+        assert body["accepted"] and body["road"] == "door" and body["delivered"] == 1000.5
+        assert body["id"] == "s1" and "already delivered by the door" in body["detail"]
+        assert calls == [{"op": "direct", "action": "emergency", "id": "s1", "issued": 1000.49}]
+        # a bad id or issued is refused before anything is sent
+        for bad in ({"id": "a b"}, {"id": "x", "issued": -1}, {"id": "x", "extra": 1}):
+            assert (await client.post("/api/v1/drones/uav1/land", json=bad)).status_code == 422
+        assert len(calls) == 1

@@ -1,31 +1,20 @@
-"""Unit tests of the isolation parts: the central-loss watch, the safety port's parser and
-server, the graph link's frames, the children's environment."""
+"""Unit tests of the isolation parts: the central-loss watch, the safety door's URLs and
+origins (the door itself: test_door.py), the graph link's frames, the children's environment."""
 
 from __future__ import annotations
 
 import asyncio
 import json
-import ssl
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
 
 from server.graph import Graph
 from server.settings import Settings, SettingsError
-from server.tls import ensure_server_cert, server_context
 from server.vehicles.central import child_env
+from server.vehicles.door import advertised_url, page_origin
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
-from server.vehicles.safety import (
-    SafetyPort,
-    SafetyRequestError,
-    advertised_url,
-    page_origin,
-    parse_request,
-)
 from server.vehicles.watch import CentralWatch, LossAction
 
 # ------------------------------------------------------------------------------ CentralWatch
@@ -53,94 +42,21 @@ def test_watch_rejects_inverted_times() -> None:
         CentralWatch(hover_after_s=3.0, land_after_s=2.0)
 
 
-# ------------------------------------------------------------------------------ safety port
-
-HEAD = "POST /emergency HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer tok"
-
-
-def test_parse_request_reads_action_token_origin() -> None:
-    req = parse_request(HEAD.encode())
-    assert (req.method, req.action, req.token, req.origin) == ("POST", "emergency", "tok", None)
-    req = parse_request(b"POST /land?token=t2 HTTP/1.1\r\nOrigin: http://127.0.0.1:8000")
-    assert (req.action, req.token, req.origin) == ("land", "t2", "http://127.0.0.1:8000")
-    assert parse_request(b"OPTIONS /land HTTP/1.1").method == "OPTIONS"
-
-
-@pytest.mark.parametrize(
-    ("head", "status"),
-    [
-        (b"POST /takeoff HTTP/1.1", 404),
-        (b"GET /emergency HTTP/1.1", 405),
-        (b"POST /emergency HTTP/1.1\r\nContent-Length: 5", 413),
-        (b"POST /emergency HTTP/1.1\r\nTransfer-Encoding: chunked", 413),
-        (b"POST /emergency HTTP/1.1\r\nContent-Length: -1", 400),
-        (b"POST /emergency", 400),
-        (b"POST /emergency HTTP/1.1\r\nno colon", 400),
-        ("POST /emergency HTTP/1.1\r\nX: \u00e9".encode(), 400),
-        (b"POST /emergency HTTP/1.1\r\nX: " + b"a" * 5000, 431),
-    ],
-)
-def test_parse_request_refusals(head: bytes, status: int) -> None:
-    with pytest.raises(SafetyRequestError) as info:
-        parse_request(head)
-    assert info.value.status == status
-
-
-@given(st.binary(max_size=600))
-def test_parse_request_never_crashes(head: bytes) -> None:
-    try:
-        parse_request(head)
-    except SafetyRequestError as exc:
-        assert 400 <= exc.status < 500
-
-
-async def test_safety_port_over_loopback() -> None:
-    acted: list[str] = []
-
-    def act(action: str) -> str:
-        acted.append(action)
-        return f"{action} sent"
-
-    port = SafetyPort("127.0.13.2", 0, "tok", act)
-    await port.start()
-    try:
-        async with httpx.AsyncClient(base_url=port.url) as c:
-            ok = await c.post("/emergency", headers={"Authorization": "Bearer tok"})
-            assert ok.status_code == 200 and ok.json()["detail"] == "emergency sent"
-            assert (await c.post("/land")).status_code == 401
-            assert (
-                await c.post("/land", headers={"Authorization": "Bearer nope"})
-            ).status_code == 401
-            evil = {"Authorization": "Bearer tok", "Origin": "http://evil.example"}
-            assert (await c.post("/land", headers=evil)).status_code == 403
-            pre = await c.options("/land", headers={"Origin": "http://127.0.0.1:8000"})
-            assert pre.status_code == 204
-            assert pre.headers["access-control-allow-origin"] == "http://127.0.0.1:8000"
-            body = await c.post("/land", headers={"Authorization": "Bearer tok"}, content=b"x")
-            assert body.status_code == 413
-        # a client that never finishes its head is cut off, not waited for
-        reader, writer = await asyncio.open_connection("127.0.13.2", port.port)
-        writer.write(b"POST /land HTTP/1.1\r\n")
-        answer = await asyncio.wait_for(reader.read(), 10)
-        assert answer.startswith(b"HTTP/1.1 408")
-        writer.close()
-    finally:
-        await port.stop()
-    assert acted == ["emergency"]
+# ------------------------------------------------------------------------------ safety door URLs
 
 
 def test_the_advertised_url_names_the_host_the_page_came_from() -> None:
     # bound to loopback: as bound (the page is on this machine)
-    assert advertised_url("http://127.0.13.2:5001", "localhost:8000") == "http://127.0.13.2:5001"
+    assert advertised_url("ws://127.0.13.2:5001", "localhost:8000") == "ws://127.0.13.2:5001"
     # bound to every interface or a LAN address: the host the request named, the port's own
-    # scheme and port
-    assert advertised_url("https://0.0.0.0:5001", "192.168.1.7:8000") == "https://192.168.1.7:5001"
-    assert advertised_url("https://[::]:5001", "[fe80::2]:8000") == "https://[fe80::2]:5001"
-    assert advertised_url("https://192.168.1.7:5001", "laptop:8000") == "https://laptop:5001"
+    # scheme (ws/wss) and port
+    assert advertised_url("wss://0.0.0.0:5001", "192.168.1.7:8000") == "wss://192.168.1.7:5001"
+    assert advertised_url("wss://[::]:5001", "[fe80::2]:8000") == "wss://[fe80::2]:5001"
+    assert advertised_url("wss://192.168.1.7:5001", "laptop:8000") == "wss://laptop:5001"
     # nothing usable
-    assert advertised_url("http://0.0.0.0:5001", None) is None
-    assert advertised_url("http://0.0.0.0:5001", "bad host") is None
-    assert advertised_url("http://192.168.1.7:5001", None) == "http://192.168.1.7:5001"
+    assert advertised_url("ws://0.0.0.0:5001", None) is None
+    assert advertised_url("ws://0.0.0.0:5001", "bad host") is None
+    assert advertised_url("ws://192.168.1.7:5001", None) == "ws://192.168.1.7:5001"
     assert advertised_url(None, "192.168.1.7:8000") is None
 
 
@@ -153,52 +69,6 @@ def test_the_console_page_on_the_requested_host_is_an_allowed_origin() -> None:
     assert not page_origin("http://evil.example:8000", "evil.example:5001", 8000)
     assert not page_origin("https://192.168.1.7:8000", None, 8000)
     assert not page_origin("https://192.168.1.7:8000.evil", "192.168.1.7:5001", 8000)
-
-
-async def test_safety_port_over_tls_for_a_page_on_the_lan(tmp_path: Path) -> None:
-    host = "127.0.78.4"  # stands for a LAN address: the port answers at the name it is called
-    files = ensure_server_cert(tmp_path / "tls", host)
-    assert files.ca is not None
-    port = SafetyPort(
-        host,
-        0,
-        "tok",
-        lambda action: f"{action} sent",
-        origin_allowed=lambda origin: False,  # as for a LAN address: no loopback leniency
-        console_port=8443,
-        tls=server_context(files.cert, files.key),
-        max_open=2,
-    )
-    await port.start()
-    try:
-        assert port.url.startswith(f"https://{host}:")
-        verify = ssl.create_default_context(cafile=str(files.ca))
-        async with httpx.AsyncClient(base_url=port.url, verify=verify) as c:
-            page = {"Authorization": "Bearer tok", "Origin": f"https://{host}:8443"}
-            ok = await c.post("/emergency", headers=page)
-            assert ok.status_code == 200, ok.text
-            assert ok.headers["access-control-allow-origin"] == f"https://{host}:8443"
-            other = {**page, "Origin": f"https://{host}:9999"}
-            assert (await c.post("/land", headers=other)).status_code == 403
-        # a flood: beyond max_open connections the next is closed unread
-        held = [await asyncio.open_connection(host, port.port, ssl=verify) for _ in range(2)]
-        for _ in range(250):  # (the server's side of each handshake ends a moment later)
-            if port.open == 2:
-                break
-            await asyncio.sleep(0.02)
-        assert port.open == 2
-        refused = port.refused
-        reader, writer = await asyncio.open_connection(host, port.port, ssl=verify)
-        try:
-            answer = await asyncio.wait_for(reader.read(), 10)
-        except OSError:  # a reset
-            answer = b""
-        assert answer == b"" and port.refused == refused + 1
-        writer.close()
-        for _, w in held:
-            w.close()
-    finally:
-        await port.stop()
 
 
 # ------------------------------------------------------------------------------ graph link

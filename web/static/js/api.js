@@ -24,7 +24,7 @@ export class Api {
     this.leaseHolder = null;
   }
 
-  async request(method, path, body, { timeoutMs = 8000, headers: extra = {} } = {}) {
+  async request(method, path, body, { timeoutMs = 8000, headers: extra = {}, signal = null } = {}) {
     const headers = { Accept: "application/json", ...extra };
     if (this.token) headers.Authorization = `Bearer ${this.token}`;
     // The pilot lease this page holds on its rosbridge session: REST commands speak for it.
@@ -33,6 +33,8 @@ export class Api {
     if (method === "POST" && this.clock) headers["X-Command-Issued"] = this.clock().toFixed(3);
     const ctrl = new AbortController();
     const timer = setTimeout(() => ctrl.abort(), timeoutMs);
+    if (signal?.aborted) ctrl.abort();
+    signal?.addEventListener("abort", () => ctrl.abort(), { once: true }); // the caller gave up
     let resp;
     try {
       resp = await fetch(this.base + path, {
@@ -92,6 +94,18 @@ export class Api {
     return this.post(`/drones/${encodeURIComponent(id)}/${action}`, {}, {
       timeoutMs: 4000,
       headers: { "X-Command-Source": source },
+    });
+  }
+
+  /**
+   * A stop down the server road: POST /drones/{id}/{land|hover|emergency} with the stop's
+   * ``{id, issued}`` (the same id as on the safety door, so the vehicle runs it once).
+   */
+  stop(id, action, body, signal, source = "button") {
+    return this.post(`/drones/${encodeURIComponent(id)}/${action}`, body, {
+      timeoutMs: 3000,
+      headers: { "X-Command-Source": source },
+      signal,
     });
   }
 

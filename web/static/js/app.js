@@ -8,6 +8,7 @@ import { Api, ApiError } from "./api.js";
 import { CameraPanel } from "./camera.js";
 import { Controls } from "./controls.js";
 import { DialogPanel } from "./dialog.js";
+import { DOOR_DEAD_MS, Doors } from "./door.js";
 import { MapPanel } from "./map.js";
 import { RosbridgeClient, STATES, rosbridgeUrl } from "./rosbridge.js";
 import {
@@ -22,12 +23,17 @@ import {
 import { RecordingsMenu } from "./recordings.js";
 import { ReplayBar } from "./replay.js";
 import { StatusBar, flightLabel, lostWhileAway } from "./status.js";
+import { STOP_ACTIONS, StopSender, stopText } from "./stops.js";
 import { VoiceInput } from "./voice.js";
 import { TelemetryPanel } from "./telemetry.js";
 import { droneTopic, quaternionYaw, stampSeconds } from "./util.js";
 
 const $ = (id) => document.getElementById(id);
 const STATUS_POLL_MS = 1000;
+const ROADS_CHECK_MS = 250;
+// The console's own heartbeat on rosbridge (server/vehicles/central.py, 10 Hz): the page calls
+// the server road down when none came for DOOR_DEAD_MS, though its socket may look open.
+const SERVER_HEARTBEAT = "/vehicles/heartbeat";
 
 class Console {
   constructor() {
@@ -45,6 +51,19 @@ class Console {
     this.haveLease = null;
     this.droneSubs = [];
     this.everOpened = false;
+    this.serverBeatAt = null; // performance.now() of the server's last heartbeat
+    this.serverStalled = false;
+    // Stops go down two roads (docs/safety-door.md): REST and each drone's safety door.
+    this.doors = new Doors();
+    this.stops = new StopSender({
+      rest: (stop, body, signal) => this.api.stop(stop.drone, stop.action, body, signal, stop.source),
+      door: (drone) => this.doors.get(drone),
+      serverNow: () => Date.now() / 1000 + this.clockOffset,
+      fleet: () => this.fleet,
+    });
+    this.doors.addEventListener("ack", (ev) => this.stops.doorAck(ev.detail.msg));
+    this.doors.addEventListener("open", (ev) => this.stops.doorOpened(ev.detail.drone));
+    this.stops.addEventListener("change", (ev) => this.onStopChange(ev.detail));
 
     this.camera = new CameraPanel(
       { img: $("camera"), empty: $("camera-empty"), fps: $("cam-fps"), latency: $("cam-latency") },
@@ -165,6 +184,7 @@ class Console {
     this.ros.connect();
     this.checkVoice();
     setInterval(() => this.pollDrone(), STATUS_POLL_MS);
+    setInterval(() => this.checkRoads(), ROADS_CHECK_MS);
   }
 
   /** World and drones: fetched at start and again after every reconnection. */
@@ -173,6 +193,8 @@ class Console {
       const [world, drones] = await Promise.all([this.api.world(), this.api.drones()]);
       this.map.setWorld(world);
       this.setDrones(droneNames(drones));
+      // A standing connection to every drone's safety door, from the first load on.
+      for (const d of Array.isArray(drones) ? drones : []) this.learnDoor(d.name, d.vehicle);
       if ($("banner").dataset.source === "rest") this.banner(null);
       this.pollDrone();
     } catch (err) {
@@ -193,7 +215,12 @@ class Console {
   onConnState(state) {
     const el = $("conn");
     el.dataset.state = state;
-    if (state === STATES.OPEN) {
+    if (state === STATES.OPEN && this.serverStalled) {
+      // The socket is open but the server sends nothing: never "Connected" then.
+      el.textContent = "Server not answering";
+      el.className = "pill pill-alert";
+      el.dataset.state = "stalled";
+    } else if (state === STATES.OPEN) {
       el.textContent = "Connected";
       el.className = "pill pill-ok";
     } else if (state === STATES.CONNECTING) {
@@ -214,6 +241,7 @@ class Console {
   async onOpen() {
     const again = this.everOpened;
     this.everOpened = true;
+    this.serverBeatAt = performance.now(); // its first heartbeat is on the way
     // The connection is already authenticated by ?token=; the auth op makes the server say as
     // whom ("authenticated as pilot"), which is how the page learns its role.
     // Status messages default to errors only (ROSBRIDGE_PROTOCOL.md §3.2); lease warnings and the
@@ -265,7 +293,8 @@ class Console {
     this.renderEnabled();
   }
 
-  /** Observer, or a pilot without the lease, or no connection: controls off (emergency stays). */
+  /** Observer, or a pilot without the lease: controls off; any pilot keeps Land, Hover and
+   *  EMERGENCY STOP (the server lets any pilot stop, lease or not: DESIGN §5). */
   renderEnabled() {
     const connected = this.ros.state === STATES.OPEN;
     const observer = this.role === "observer";
@@ -274,10 +303,10 @@ class Console {
     for (const el of document.querySelectorAll("[data-control], #text-input, #mic")) {
       el.disabled = !can;
     }
-    // The emergency stop is never disabled for a pilot: even without the lease a pilot may stop
-    // the drone (the server decides); observers cannot command at all.
-    $("btn-emergency").disabled = observer;
-    this.controls.setEnabled(can);
+    // The stops are never disabled for a pilot: even without the lease a pilot may stop the
+    // drone; observers cannot command at all.
+    for (const id of ["btn-emergency", "btn-land", "btn-hover"]) $(id).disabled = observer;
+    this.controls.setEnabled(can, !observer);
     this.speech?.setAllowed(can); // hands-free too: the server refuses an observer's speech
     $("takeover").hidden = !lostLease;
     document.body.dataset.role = this.role || "";
@@ -423,6 +452,51 @@ class Console {
     this.ros.subscribe("/fleet/status", TOPIC_TYPES["/fleet/status"], (m) => this.onFleet(m), {
       throttle_rate: 200,
     });
+    // 5 Hz is enough to call the road down after 1 s of silence.
+    this.ros.subscribe(SERVER_HEARTBEAT, "std_msgs/String", () => this.onServerBeat(), {
+      throttle_rate: 200,
+    });
+  }
+
+  onServerBeat() {
+    this.serverBeatAt = performance.now();
+    if (this.serverStalled) this.checkRoads();
+  }
+
+  /** A drone's safety door as GET /drones tells it: its URL and this pilot's ticket. */
+  learnDoor(name, vehicle) {
+    // Without a ticket (a vehicle this console did not spawn) a pilot opens it with the token.
+    this.doors.learn(name, vehicle, this.role === "pilot" ? this.token : null);
+  }
+
+  /**
+   * Both roads' health, every 250 ms: the server's heartbeat and the selected drone's door.
+   * A road silent for 1 s turns red, and the connection pill never says "Connected" while the
+   * server is stalled.
+   */
+  checkRoads() {
+    const now = performance.now();
+    const open = this.ros.state === STATES.OPEN;
+    // `uav-console replay` plays recorded heartbeats: a paused replay is not a stalled server.
+    const replay = !$("replay-bar").hidden;
+    const silentMs = this.serverBeatAt === null ? Infinity : now - this.serverBeatAt;
+    const stalled = open && !replay && silentMs > DOOR_DEAD_MS;
+    if (stalled !== this.serverStalled) {
+      this.serverStalled = stalled;
+      this.onConnState(this.ros.state);
+    }
+    let server = { text: "ok", level: "ok" };
+    if (!open) server = { text: "down", level: "alert" };
+    else if (stalled) server = { text: `silent ${(silentMs / 1000).toFixed(1)} s`, level: "alert" };
+    const door = this.drone ? this.doors.get(this.drone) : null;
+    let road = { text: "none", level: "unknown" }; // inline drones have no door
+    if (door && door.healthy(now)) road = { text: "ok", level: "ok" };
+    else if (door && door.authenticated) {
+      road = { text: `silent ${((now - door.lastBeat) / 1000).toFixed(1)} s`, level: "alert" };
+    } else if (door) road = { text: "down", level: "alert" };
+    this.status.setRoads(server, road);
+    document.body.dataset.serverRoad = server.level;
+    document.body.dataset.doorRoad = road.level;
   }
 
   /** ANS alarms (Reply.alarm) raise the banner that waits for an acknowledgement. */
@@ -455,8 +529,8 @@ class Console {
     if (!this.drone || (document.hidden && !force) || this.ros.state !== STATES.OPEN) return;
     try {
       const status = await this.api.drone(this.drone);
-      // A drone in its own vehicle process has a safety port: stops that no web traffic delays.
-      (this.safetyUrls ||= {})[this.drone] = status.vehicle ? status.vehicle.safety_url : null;
+      // A drone in its own vehicle process has a safety door: stops that no web traffic delays.
+      this.learnDoor(this.drone, status.vehicle);
       this.telemetry.onDroneStatus(status);
       this.map.onSnapshot(this.drone, status);
       this.map.setLocalised(this.drone, status.localised);
@@ -477,6 +551,7 @@ class Console {
   // ---- commands ----------------------------------------------------------------------------
   /** Publish what the operator said/typed to /console/utterance; false if it could not be sent. */
   sendUtterance(text, source, confidence, drone = this.drone) {
+    this.supersedeStops(); // a newer command: a pending stop must not fire after it
     // asked_by: a bare yes or no answers the drone that asked, whichever is selected.
     const askedBy = this.dialog.askedBy(drone || "");
     const msg = { text, confidence, source, drone: drone || "", asked_by: askedBy };
@@ -492,39 +567,58 @@ class Console {
 
   publishTwist(twist) {
     if (!this.drone) return;
+    if (!isZeroTwist(twist)) this.supersedeStops(); // jogging again drops a pending stop
     const topic = droneTopic("/cmd_vel", this.drone, this.fleet);
     if (!this.ros.publish(topic, TOPIC_TYPES["/cmd_vel"], twist, { issued: this.serverNow() })) {
       this.flash("Not connected: jog not sent.", "alert");
     }
   }
 
-  /** Direct actions through REST (land/emergency jump every queue on the server, DESIGN §5). */
+  /**
+   * Direct actions. Land, Hover and Emergency go down both roads at once (stops.js); any other
+   * action is a newer command, which drops a stop still pending (nothing fires from the past).
+   */
   async act(action, source = "button") {
     if (!this.drone) return;
-    if (action === "emergency") {
-      this.dialog.addSystem(`EMERGENCY STOP (${source === "keyboard" ? "Shift+Esc" : "button"})`);
-      document.body.dataset.emergency = String(Date.now());
+    if (STOP_ACTIONS.includes(action)) {
+      if (action === "emergency") {
+        this.dialog.addSystem(`EMERGENCY STOP (${source === "keyboard" ? "Shift+Esc" : "button"})`);
+        document.body.dataset.emergency = String(Date.now());
+      }
+      this.stops.send(this.drone, action, source);
+      return;
     }
-    const safety = (this.safetyUrls || {})[this.drone];
-    if (safety && (action === "emergency" || action === "land")) {
-      // Straight to the vehicle process as well, past the web server (issue 14).
-      const headers = this.api.token ? { Authorization: `Bearer ${this.api.token}` } : {};
-      fetch(`${safety}/${action}`, { method: "POST", headers }).catch(() => {});
-    }
+    this.supersedeStops();
     try {
       const res = await this.api.action(this.drone, action, source);
       // A refusal is shown where the operator looks (the banner) with its reason and the way
       // out; the server also says it in the dialog (and aloud).
       if (res && res.accepted === false) this.flash(res.detail || `${action} refused`, "warn", "refusal");
     } catch (err) {
-      // REST unreachable or failing: land still has a second road, ardrone_autonomy's topic.
-      // (There is no topic for emergency: /ardrone/reset only leaves the emergency state here.)
-      if (action === "land" && (err.status === 0 || err.status >= 500)) {
-        this.ros.publish(droneTopic("/ardrone/land", this.drone, this.fleet), "std_msgs/Empty", {});
-      }
       this.flash(`${action} failed: ${err.message}`, "alert");
       if (err.status === 403) this.onStatus({ level: "error", msg: err.message });
     }
+  }
+
+  /** A newer operator command: stops still pending are dropped (the page says so). */
+  supersedeStops() {
+    return this.stops.supersede();
+  }
+
+  /** Where a stop stands, where the operator looks: a standing banner while it is pending. */
+  onStopChange(stop) {
+    const { text, level } = stopText(stop, this.clockOffset);
+    document.body.dataset.stop = stop.state;
+    document.body.dataset.stopText = text;
+    if (stop.state === "pending") {
+      if (!stop.announced) this.dialog.addSystem(text);
+      stop.announced = true;
+      this.banner(text, "alert", "stop");
+      return;
+    }
+    this.dialog.addSystem(text);
+    if ($("banner").dataset.source === "stop") this.banner(null);
+    this.flash(text, level, "stop");
   }
 
   /** Scene description (the server's captioner), shown and spoken like a reply. */
@@ -544,6 +638,7 @@ class Console {
 
   async goToMarker(id) {
     const text = `go to marker ${id}`;
+    this.supersedeStops();
     this.dialog.addUtterance(text, { source: "map" });
     try {
       const res = await this.api.command(text, { drone: this.drone || undefined });
@@ -684,6 +779,11 @@ class Console {
     const h = $("dock").getBoundingClientRect().height;
     document.documentElement.style.setProperty("--dock-h", `${Math.ceil(h)}px`);
   }
+}
+
+function isZeroTwist(t) {
+  const parts = [t?.linear, t?.angular];
+  return parts.every((v) => !v || (!v.x && !v.y && !v.z));
 }
 
 const app = new Console();

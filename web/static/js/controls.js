@@ -77,6 +77,7 @@ export class Controls {
     this.keyHeld = new Map(); // key -> direction
     this.timer = null;
     this.enabled = true;
+    this.stopsEnabled = true; // Land and Hover (Space, L): any pilot, lease or not
     this.armed = false; // keyboard flying: off at every page load
     this.armButton = root.querySelector("#arm-keys");
     this.armButton?.addEventListener("click", () => this.setArmed(!this.armed));
@@ -86,11 +87,13 @@ export class Controls {
     this.renderSpeed();
     this.setArmed(false);
 
-    const bind = (id, action) =>
-      root.querySelector(id).addEventListener("click", () => this.enabled && hooks.action(action, "button"));
+    const bind = (id, action, stop = false) =>
+      root.querySelector(id).addEventListener("click", () => {
+        if (this.enabled || (stop && this.stopsEnabled)) hooks.action(action, "button");
+      });
     bind("#btn-takeoff", "takeoff");
-    bind("#btn-land", "land");
-    bind("#btn-hover", "hover");
+    bind("#btn-land", "land", true);
+    bind("#btn-hover", "hover", true);
     bind("#btn-reset", "reset");
     // Emergency on pointerdown as well as click: it must not wait for the finger to lift.
     const em = root.querySelector("#btn-emergency");
@@ -163,8 +166,10 @@ export class Controls {
     this.speedOut.textContent = `${Math.round(this.strength() * 100)} %`;
   }
 
-  setEnabled(on) {
+  /** ``on``: every control; ``stops``: Land and Hover (a pilot without the lease keeps them). */
+  setEnabled(on, stops = on) {
     this.enabled = on;
+    this.stopsEnabled = stops;
     if (!on) this.releaseAll(false);
   }
 
@@ -203,7 +208,8 @@ export class Controls {
       t instanceof HTMLInputElement && t.type !== "range"
         ? true
         : t instanceof HTMLTextAreaElement || t instanceof HTMLSelectElement || t?.isContentEditable;
-    if (typing || !this.enabled) return;
+    const stopKey = key === " " || key === "spacebar" || (key === "l" && !ev.repeat);
+    if (typing || !(this.enabled || (this.stopsEnabled && stopKey))) return;
     if (key === " " || key === "spacebar") {
       if (t instanceof HTMLButtonElement || t instanceof HTMLElement && t.tagName === "SUMMARY") return;
       ev.preventDefault();

@@ -1,5 +1,6 @@
 // The always-visible status bar (as QGroundControl and Foxglove keep one): selected drone,
-// flight state, battery, link, task with its next step, and the connection. One function names
+// flight state, battery, link, task with its next step, the connection, and the health of both
+// roads a stop takes (the web server and the drone's safety door). One function names
 // flight states for every panel (status bar, telemetry, map, fleet list), so labels agree.
 //
 // When the connection drops the bar greys out and says since when; after a reconnect the
@@ -111,6 +112,21 @@ export class StatusBar {
     this.view.link = text;
     setText(this.$("sb-link-v"), text);
     setLevel(this.$("sb-link"), level);
+  }
+
+  /**
+   * The two roads a stop takes to the selected drone: the web server and the drone's safety
+   * door, each {text, level} (level "ok", "alert", or "unknown" for a road there is not).
+   */
+  setRoads(server, door) {
+    this.view.roads = { server: server.text, door: door.text };
+    setText(this.$("sb-server-v"), server.text);
+    setLevel(this.$("sb-server"), server.level);
+    setText(this.$("sb-door-v"), door.text);
+    setLevel(this.$("sb-door"), door.level);
+    const levels = [server.level, door.level];
+    const worst = levels.includes("alert") ? "alert" : server.level === "ok" ? "ok" : "unknown";
+    setLevel(this.$("sb-roads"), worst);
   }
 
   setTask(task) {
