@@ -33,20 +33,26 @@ The position controller is PX4's cascade in miniature: position P (MPC_XY_P 0.95
 drag feed-forward → tilt (≤ 35°) → the physics' attitude loop. Landing descends at
 MPC_LAND_SPEED 0.7 m/s.
 
+MAVLink 2 signing (``signing_key``): every link shares one signing state, unsigned and badly
+signed frames are refused and counted, and a link that sent only refused frames is told once
+(STATUSTEXT "Refused: MAVLink 2 signing required").
+
 Sans-I/O: ``connect(cid)``, ``receive(cid, data)``, ``step(dt)``, ``drain(cid) -> bytes``; the
-clock is the autopilot's own ``time`` (advanced by ``step``). ``drone.mavlink.simserver`` pumps
+clock is the autopilot's own ``time`` (advanced by ``step``); only the signing timestamps read
+``signing_clock`` (Unix time). ``drone.mavlink.simserver`` pumps
 it on sockets; ``drone.mavlink.lockstep`` in memory.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 from drone.ardrone.navdata import CtrlState
-from drone.mavlink.codec import Codec, Message, mav
+from drone.mavlink.codec import Codec, Message, mav, signing_state, signing_timestamp
 from drone.mavlink.geo import Origin, enu_to_ned, yaw_enu_to_ned, yaw_ned_to_enu
 from drone.mavlink.modes import px4_custom_mode, px4_mode_name
 from drone.sim.battery import Battery
@@ -58,6 +64,7 @@ RESULT_ACCEPTED: int = int(mav.MAV_RESULT_ACCEPTED)  # typed copies (pymavlink i
 RESULT_DENIED: int = int(mav.MAV_RESULT_DENIED)
 RESULT_UNSUPPORTED: int = int(mav.MAV_RESULT_UNSUPPORTED)
 FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2: force (PX4 commander)
+REFUSED_UNSIGNED = b"Refused: MAVLink 2 signing required"  # STATUSTEXT, <= 50 bytes
 DEFAULT_ORIGIN = Origin(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zurich)
 SENSORS = (
     mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -125,6 +132,7 @@ class _Link:
     rates_hz: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_RATES_HZ))
     next_t: dict[str, float] = field(default_factory=dict)
     mission_up: tuple[int, int, list[Any]] | None = None  # (sysid, count, items so far)
+    told_unsigned: bool = False  # "signing required" already sent on this link
 
 
 @dataclass(frozen=True)
@@ -147,7 +155,10 @@ class SimAutopilot:
         start: ``(x, y, yaw_rad)`` on the ground (default the world's start).
         system_id: MAVLink system id (PX4 SITL: 1).
         battery_pct: initial charge.
-        signing_key: require MAVLink 2 signing on every link (32 bytes).
+        signing_key: require MAVLink 2 signing on every link (32 bytes). All links share one
+            signing state (``drone.mavlink.codec.signing_state``): a frame replayed on a new
+            link is as old as on its own.
+        signing_clock: Unix time, for the signing timestamps only (kept at least at it).
         refuse_all: test double of a vehicle that denies every command (bad-input tests).
         silent: never answer commands (a vehicle that only streams telemetry).
     """
@@ -161,6 +172,7 @@ class SimAutopilot:
         battery_pct: float = 100.0,
         params: AutopilotParams | None = None,
         signing_key: bytes | None = None,
+        signing_clock: Callable[[], float] = time.time,
         refuse_all: bool = False,
         silent: bool = False,
     ) -> None:
@@ -190,6 +202,10 @@ class SimAutopilot:
         self.component_id = mav.MAV_COMP_ID_AUTOPILOT1
         self.params = params or AutopilotParams()
         self.signing_key = signing_key
+        self.signing_clock = signing_clock
+        self._signing: Any = None
+        if signing_key is not None:
+            self._signing = signing_state(signing_key, timestamp=signing_timestamp(signing_clock()))
         self.refuse_all = refuse_all
         self.silent = silent
         self.time = 0.0
@@ -220,9 +236,7 @@ class SimAutopilot:
     # ------------------------------------------------------------------ links
     def connect(self, cid: object) -> None:
         """A new client link (TCP connection, UDP peer, in-memory end)."""
-        self.links[cid] = _Link(
-            Codec(self.system_id, self.component_id, signing_key=self.signing_key)
-        )
+        self.links[cid] = _Link(Codec(self.system_id, self.component_id, signing=self._signing))
 
     def disconnect(self, cid: object) -> None:
         self.links.pop(cid, None)
@@ -240,6 +254,11 @@ class SimAutopilot:
         data = bytes(link.out)
         link.out.clear()
         return b"" if self.link_down else data
+
+    def accepted(self, cid: object) -> int:
+        """Frames accepted from ``cid`` so far (0 for an unknown link)."""
+        link = self.links.get(cid)
+        return link.codec.accepted if link is not None else 0
 
     def rejected(self) -> dict[str, int]:
         """Frames refused on all links, by reason (garbage, bad_crc, mavlink1, bad_signature)."""
@@ -273,8 +292,20 @@ class SimAutopilot:
             return
         if cid not in self.links:
             self.connect(cid)
-        for msg in self.links[cid].codec.feed(data):
+        link = self.links[cid]
+        for msg in link.codec.feed(data):
             self._handle(cid, msg)
+        if (
+            link.codec.signed
+            and not link.told_unsigned
+            and link.codec.accepted == 0
+            and link.codec.rejected["bad_signature"]
+        ):
+            # Say why nothing this link sends is obeyed: a ground station without the key reads
+            # signed frames (MAVLink "Message Signing"), so it shows this line.
+            link.told_unsigned = True
+            m = link.codec.mav
+            self._send(cid, m.statustext_encode(mav.MAV_SEVERITY_ERROR, REFUSED_UNSIGNED))
 
     def _handle(self, cid: object, msg: Message) -> None:
         kind = msg.get_type()
@@ -757,6 +788,10 @@ class SimAutopilot:
         if dt <= 0:
             return
         self.time += dt
+        if self._signing is not None:  # MAVProxy's signing module keeps to the wall clock too
+            ts = signing_timestamp(self.signing_clock())
+            if ts > self._signing.timestamp:
+                self._signing.timestamp = ts
         self._failsafes()
         if self.armed and not self.physics.emergency:
             self._control(dt)
