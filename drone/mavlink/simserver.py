@@ -332,7 +332,8 @@ async def run_mavlink_sim(
     name = getattr(world, "name", "") or "open field"
     out(
         f"simulated PX4 quadrotor (MAVLink 2) on tcp:{addr}:{server.tcp_port} and udp "
-        f"{addr}:{server.udp_port}, world {name}, speed {speed:.1f}"
+        f"{addr}:{server.udp_port}, world {name} (ceiling {ap.ceiling_z - ap.home[2]:.1f} m "
+        f"above home), speed {speed:.1f}"
     )
     if insecure:
         out(
