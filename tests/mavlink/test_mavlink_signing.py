@@ -364,6 +364,44 @@ async def test_connection_flood_is_capped_and_a_signed_client_still_flies(world:
     assert ap.commands_executed.count(22) == 1  # the signed client's take-off, flown
 
 
+async def test_udp_peers_are_capped_too_and_a_signed_peer_commands(world: Any) -> None:
+    """UDP peers are links (PX4 SITL's 14580): 60 addresses sending garbage hold at most 16."""
+    import socket
+
+    from pymavlink import mavutil
+
+    addr = "127.0.16.67"
+    ap = SimAutopilot(world, signing_key=KEY)
+    async with MavlinkSimServer(addr, ap, tcp_port=None, udp_port=0, speed=4.0) as sim:
+        port = sim.udp_port
+        socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(60)]
+        try:
+            for i, s in enumerate(socks):
+                s.bind((addr, 0))
+                s.sendto(b"\xfd" + bytes([i]) * 40, (addr, port))
+                await asyncio.sleep(0)  # the simulator takes each datagram in turn
+            end = time.monotonic() + 10
+            while sim.admission.refused < 50 and time.monotonic() < end:
+                await asyncio.sleep(0.02)
+            assert len(ap.links) <= 16 and sim.admission.refused >= 50
+
+            def signed_peer() -> int:
+                m = mavutil.mavlink_connection(f"udpout:{addr}:{port}", source_system=254)
+                try:
+                    m.setup_signing(KEY, sign_outgoing=True)
+                    m.mav.heartbeat_send(6, 8, 0, 0, 0)
+                    assert m.wait_heartbeat(timeout=10) is not None
+                    return command(m, 400, 1)
+                finally:
+                    m.close()
+
+            assert await asyncio.wait_for(asyncio.to_thread(signed_peer), 60) == 0
+            assert ap.armed
+        finally:
+            for s in socks:
+                s.close()
+
+
 async def test_garbage_senders_are_closed_after_the_deadline(world: Any) -> None:
     addr = "127.0.16.64"
     ap = SimAutopilot(world, signing_key=KEY)
