@@ -56,8 +56,7 @@ class Settings:
     sim_speed: float = 1.0
     open_browser: bool = False
     # MAVLink drones (issue 16): the simulator's TCP port, and the 32-byte MAVLink 2 signing
-    # secret as 64 hex digits (sign everything, accept only signed frames); None: a simulated
-    # PX4 signs with the data directory's key (docs/mavlink.md), a real vehicle unsigned.
+    # secret as 64 hex digits (sign everything, accept only signed frames); None: unsigned.
     mavlink_sim_port: int = 5760
     mavlink_key: str | None = None
     # Speech (issue 15). asr_model: a CTranslate2 Whisper directory; None = the bundled tiny.en
