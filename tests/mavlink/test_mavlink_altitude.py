@@ -117,8 +117,8 @@ def test_takeoff_param7_is_amsl_and_never_brings_the_vehicle_down(outdoor: Any) 
 
 
 def test_takeoff_above_the_ceiling_is_refused_with_the_reason(indoor: Any) -> None:
-    """A 3 m room: a take-off to 5 m was accepted, climbed to the ceiling (2.88 m) and stayed in
-    AUTO.TAKEOFF for good; a ground station saw 2.88 m and no reason."""
+    """A 3 m room: a take-off to 5 m would stop at the ceiling (2.88 m) and stay in AUTO.TAKEOFF
+    for good, a ground station seeing 2.88 m and no reason; it is refused, and says why."""
     r = Rig(indoor)
     r.ap.params.MIS_TAKEOFF_ALT = 5.0
     r.arm()

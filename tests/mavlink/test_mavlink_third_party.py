@@ -130,8 +130,8 @@ async def test_mavsdk_flight_to_a_set_altitude_judged_by_mavsdk(world: Any) -> N
 
 
 async def test_mavsdk_takeoff_above_the_room_is_refused_with_the_reason() -> None:
-    """A 3 m room: 5 m was accepted and flown to the ceiling (MAVSDK saw 2.88 m, never 5);
-    now MAVSDK's takeoff() fails, the reason is in its status text, and 2 m flies."""
+    """A 3 m room: 5 m would end at the ceiling (MAVSDK would see 2.88 m, never 5), so MAVSDK's
+    takeoff() fails, the reason is in its status text, and 2 m flies."""
     ActionError = pytest.importorskip("mavsdk.plugins.action").ActionError
 
     ap = SimAutopilot(load_world("indoor"))
