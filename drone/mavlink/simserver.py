@@ -109,6 +109,7 @@ class MavlinkSimServer:
         self._task: asyncio.Task[None] | None = None
         self.admission = admission or Admission()
         self._configured: set[object] = set()
+        self._stopping = False
         self.bytes_sent = 0
 
     @property
@@ -151,17 +152,19 @@ class MavlinkSimServer:
         self._task = asyncio.create_task(self._run(), name=f"mavlink-sim:{self.addr}")
 
     async def stop(self) -> None:
+        self._stopping = True
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+        if self._server is not None:
+            self._server.close()  # no new clients from here on
         for w in list(self._writers.values()):
-            w.close()
+            w.transport.abort()  # at once: nothing queued for a client matters any more
         if self._handlers:
             # let each client handler see its connection end, so none is left to be cancelled
             await asyncio.wait(set(self._handlers), timeout=2.0)
         if self._server is not None:
-            self._server.close()
             with contextlib.suppress(Exception):
                 await self._server.wait_closed()
         if self._udp is not None and self._udp.transport is not None:
@@ -180,7 +183,7 @@ class MavlinkSimServer:
         self.admission.leave(cid)
         writer = self._writers.pop(cid, None)
         if writer is not None:
-            writer.close()
+            writer.transport.abort()  # not close(): a client that does not read cannot hold it
         self.autopilot.disconnect(cid)
 
     def _arrive(self, cid: object) -> None:
@@ -209,6 +212,9 @@ class MavlinkSimServer:
         if task is not None:
             self._handlers.add(task)
             task.add_done_callback(self._handlers.discard)
+        if self._stopping:
+            writer.transport.abort()
+            return
         self._writers[cid] = writer
         self._arrive(cid)
         try:
@@ -239,7 +245,7 @@ class MavlinkSimServer:
                     continue
                 writer.write(data)
                 if writer.transport.get_write_buffer_size() > MAX_BUFFER:
-                    writer.close()
+                    writer.transport.abort()  # it stopped reading: close() would wait for it
             elif isinstance(cid, tuple) and cid[0] == "udp" and self._udp is not None:
                 transport = self._udp.transport
                 if transport is not None:
