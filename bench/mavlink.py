@@ -4,7 +4,8 @@ Table 1, command round trip: ``COMMAND_LONG`` (MAV_CMD_DO_CHANGE_SPEED, which th
 autopilot only acknowledges) → ``COMMAND_ACK`` over TCP loopback to the MAVLink simulator in a
 separate process, p50/p99: through the console's driver (``MavlinkDriver`` + ``GcsProtocol``:
 queue, retry bookkeeping, event dispatch) vs a bare pymavlink loop (``mavutil`` send, blocking
-``recv_match``) on a second connection to the same simulator, measured in the same run.
+``recv_match``) on a second connection to the same simulator (``--insecure``: unsigned), and
+the driver again on a signed simulator (the default), measured in the same run.
 
 Table 2, telemetry ingest per drone: one minute of the simulated autopilot's telemetry at the
 rates the driver requests (≈ 45 messages/s) decoded by ``GcsProtocol.receive`` with a
@@ -28,6 +29,7 @@ import math
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -50,7 +52,7 @@ def _pct(values: list[float], q: float) -> float:
     return s[min(len(s) - 1, max(0, math.ceil(q * len(s)) - 1))]
 
 
-async def _driver_rtt(n: int) -> list[float]:
+async def _driver_rtt(n: int, key: bytes | None = None) -> list[float]:
     results: dict[int, float] = {}
     sent: dict[int, float] = {}
     acked = asyncio.Event()
@@ -60,7 +62,7 @@ async def _driver_rtt(n: int) -> list[float]:
             results[ev.token] = time.perf_counter() - sent[ev.token]
             acked.set()
 
-    d = MavlinkDriver(f"tcp:{ADDR}:5760", on_event=on_event)
+    d = MavlinkDriver(f"tcp:{ADDR}:5760", GcsProtocol(signing_key=key), on_event=on_event)
     await d.start()
     try:
         while d.protocol.pending_commands() or not d.protocol.connected:
@@ -92,13 +94,19 @@ def _bare_rtt(n: int) -> list[float]:
     return out
 
 
-def table_rtt(n: int) -> None:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "server", "sim", "--protocol", "mavlink", "--addr", ADDR],
+def _sim(*flags: str) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "server", "sim", "--protocol", "mavlink", "--addr", ADDR, *flags],
         cwd=ROOT,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
+
+
+def table_rtt(n: int) -> None:
+    from drone.mavlink import signing
+
+    proc = _sim("--insecure")  # unsigned (loopback only): the bare pymavlink loop's baseline
     try:
         time.sleep(3.0)
         driver = asyncio.run(_driver_rtt(n))
@@ -106,11 +114,26 @@ def table_rtt(n: int) -> None:
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+    with tempfile.TemporaryDirectory() as data_dir:  # signed, as the simulator runs by default
+        key, _ = signing.load_or_create(Path(data_dir))
+        proc = _sim("--data-dir", data_dir)
+        try:
+            time.sleep(3.0)
+            signed = asyncio.run(_driver_rtt(n, key))
+        finally:
+            proc.terminate()
+            proc.wait(timeout=10)
     print(f"\nCommand round trip COMMAND_LONG → COMMAND_ACK, TCP loopback, {n} commands (ms)")
     print(f"{'path':<34}{'p50':>8}{'p99':>8}")
-    for name, v in (("console driver (MavlinkDriver)", driver), ("bare pymavlink mavutil", bare)):
+    rows = (
+        ("console driver (MavlinkDriver)", driver),
+        ("bare pymavlink mavutil", bare),
+        ("console driver, signed link", signed),
+    )
+    for name, v in rows:
         print(f"{name:<34}{1e3 * _pct(v, 0.5):>8.2f}{1e3 * _pct(v, 0.99):>8.2f}")
     print(f"ratio driver / bare (p50)         {_pct(driver, 0.5) / _pct(bare, 0.5):>8.2f}")
+    print(f"ratio signed / unsigned (p50)     {_pct(signed, 0.5) / _pct(driver, 0.5):>8.2f}")
 
 
 def _telemetry_bytes(seconds: float) -> tuple[bytes, int]:

@@ -75,6 +75,17 @@ def _parser() -> argparse.ArgumentParser:
         default="ardrone",
         help="mavlink: a PX4-like autopilot on TCP 5760 (several clients) and UDP 14580",
     )
+    sim.add_argument(
+        "--insecure",
+        action="store_true",
+        help="mavlink: accept unsigned MAVLink (loopback addresses only; default: signed)",
+    )
+    sim.add_argument(
+        "--print-key",
+        action="store_true",
+        help="mavlink: print the signing key as 64 hex digits (UAVC_MAVLINK_KEY) and exit",
+    )
+    sim.add_argument("--data-dir", type=Path, default=None, help="mavlink: where the key lives")
 
     v = sub.add_parser("vehicle", help="one drone's stack joining a central server")
     v.add_argument("--central", required=True, help="ws://HOST:8000/rosbridge")
@@ -149,12 +160,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "serve":
             return _serve(args)
         if args.command == "sim" and args.protocol == "mavlink":
-            from drone.mavlink.simserver import run_mavlink_sim
-            from drone.sim.world import load_world
+            from server.mavlink_stack import sim_main
 
-            addr = args.addr or "127.0.0.9"
-            asyncio.run(run_mavlink_sim(addr, load_world(args.world), speed=args.speed))
-            return 0
+            return sim_main(args)
         if args.command == "sim":
             from drone.sim.server import run_sim
 

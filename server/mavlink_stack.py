@@ -1,25 +1,38 @@
 """Starting one MAVLink drone for the runtime: simulator (``--drone sim-mavlink``) or a vehicle
 at a connection string (``--drone tcp:10.0.0.5:5760``, ``udpin:0.0.0.0:14550`` …), its driver,
-:class:`~drone.mavlink.vehicle.MavlinkVehicle`, and :class:`~server.mavros_node.MavrosNode`.
+:class:`~drone.mavlink.vehicle.MavlinkVehicle`, and :class:`~server.mavros_node.MavrosNode`;
+and ``uav-console sim --protocol mavlink`` (:func:`sim_main`).
 
 ``--drone`` may also list one kind per drone of a fleet, comma-separated
 (``--fleet 3 --drone sim,sim-mavlink,sim-mavlink``): a mixed fleet; the last kind repeats.
+
+Signing: a simulated PX4 always signs, with ``UAVC_MAVLINK_KEY`` when set, else with the key of
+the data directory (``drone.mavlink.signing``: made on first use, shared by ``serve`` and
+``sim``), and the console's driver signs with the same key. A vehicle at a connection string
+is signed only when ``UAVC_MAVLINK_KEY`` is set (a real PX4 or ArduPilot must be given the key
+first).
 """
 
 from __future__ import annotations
 
+import argparse
+import asyncio
+import logging
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+from drone.mavlink import signing
 from drone.mavlink.autopilot import SimAutopilot
 from drone.mavlink.client import GcsProtocol
 from drone.mavlink.driver import MavlinkDriver, parse_connection
-from drone.mavlink.errors import ConnectionStringError
-from drone.mavlink.simserver import MavlinkSimServer
+from drone.mavlink.errors import ConnectionStringError, MavlinkError
+from drone.mavlink.simserver import MavlinkSimServer, run_mavlink_sim
 from drone.mavlink.vehicle import MavlinkVehicle
 from drone.sim.server import sim_endpoint
-from server.settings import SettingsError
+from server.settings import Settings, SettingsError
 
+log = logging.getLogger(__name__)
 SIM_MAVLINK = "sim-mavlink"
 
 
@@ -66,6 +79,23 @@ def signing_key(hex_key: str | None) -> bytes | None:
     return key
 
 
+def sim_signing_key(settings: Any) -> tuple[bytes, Path | None]:
+    """The key a simulated PX4 signs with, and the passphrase file it comes from (None: from
+    ``UAVC_MAVLINK_KEY``).
+
+    Raises:
+        SettingsError: a bad ``UAVC_MAVLINK_KEY``, or a passphrase file that cannot be made,
+            read or trusted.
+    """
+    key = signing_key(getattr(settings, "mavlink_key", None))
+    if key is not None:
+        return key, None
+    try:
+        return signing.load_or_create(Path(settings.data_dir))
+    except MavlinkError as exc:
+        raise SettingsError(str(exc)) from exc
+
+
 @dataclass
 class MavlinkParts:
     vehicle: MavlinkVehicle
@@ -80,6 +110,8 @@ async def start_mavlink(
     key = signing_key(getattr(settings, "mavlink_key", None))
     sim: MavlinkSimServer | None = None
     if kind == SIM_MAVLINK:
+        key, key_file = sim_signing_key(settings)
+        log.info("%s: simulated PX4 signs with %s", name, key_file or "UAVC_MAVLINK_KEY")
         addr, _ = sim_endpoint(index, settings.sim_base_addr)
         start = None
         stations = getattr(world, "stations", ())
@@ -103,3 +135,42 @@ async def start_mavlink(
     await vehicle.start(driver)
     await driver.start()
     return MavlinkParts(vehicle, driver, sim)
+
+
+def sim_main(args: argparse.Namespace) -> int:
+    """``uav-console sim --protocol mavlink [--addr A] [--world W] [--speed S] [--insecure]
+    [--print-key] [--data-dir D]``.
+
+    Raises:
+        SettingsError: a bad key, world or address, or ``--insecure`` off loopback.
+    """
+    from drone.sim.errors import SimConfigError
+    from drone.sim.world import WorldError, load_world
+
+    overrides = {"data_dir": args.data_dir} if args.data_dir else {}
+    settings = Settings.from_env(**overrides)
+    addr = args.addr or "127.0.0.9"
+    if args.print_key:
+        print(sim_signing_key(settings)[0].hex())
+        return 0
+    key: bytes | None = None
+    key_file: Path | None = None
+    if not args.insecure:
+        key, key_file = sim_signing_key(settings)
+    try:
+        world = load_world(args.world)
+        asyncio.run(
+            run_mavlink_sim(
+                addr,
+                world,
+                speed=args.speed,
+                signing_key=key,
+                key_file=key_file,
+                insecure=args.insecure,
+            )
+        )
+    except (MavlinkError, WorldError, SimConfigError) as exc:
+        raise SettingsError(str(exc)) from exc
+    except OSError as exc:  # the address is not ours, or the port is taken
+        raise SettingsError(f"cannot serve MAVLink on {addr}: {exc}") from exc
+    return 0

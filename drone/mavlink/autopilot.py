@@ -9,12 +9,19 @@ It presents itself on the wire as PX4 SITL does (PX4-Autopilot ``src/modules/mav
   ``health_all_ok`` holds; EXTENDED_SYS_STATE (landed state), GPS_RAW_INT (3D fix),
   GLOBAL_POSITION_INT, LOCAL_POSITION_NED, ATTITUDE, BATTERY_STATUS, HOME_POSITION,
   MISSION_CURRENT; rates changed by ``MAV_CMD_SET_MESSAGE_INTERVAL`` per link;
-* commands (COMMAND_LONG and COMMAND_INT) with COMMAND_ACK: arm/disarm (disarm in the air is
-  DENIED unless forced with 21196), take-off (MIS_TAKEOFF_ALT 2.5 m), land, RTL, DO_SET_MODE,
-  DO_REPOSITION (PX4 "goto": fly there and hold), MISSION_START, DO_CHANGE_SPEED,
+* commands (COMMAND_LONG and COMMAND_INT) with COMMAND_ACK, one handler each in a table
+  (``_command_table``): arm/disarm (disarm in the air is DENIED unless forced with 21196),
+  take-off (param7 AMSL; NaN: MIS_TAKEOFF_ALT, 2.5 m, above the vehicle), land, RTL,
+  DO_SET_MODE, DO_REPOSITION (PX4 "goto": fly there and hold), MISSION_START, DO_CHANGE_SPEED,
   DO_FLIGHTTERMINATION, SET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES;
   anything else UNSUPPORTED. A retransmission (same command, higher ``confirmation``) of a
   command already executed is answered with the same result and not executed again;
+* altitude frames as PX4's: GLOBAL_POSITION_INT ``alt`` AMSL and ``relative_alt`` above home
+  (mm), GPS_RAW_INT and HOME_POSITION AMSL (mm), LOCAL_POSITION_NED and HOME_POSITION's
+  x/y/z from the local origin (where the vehicle started, PX4's estimator origin; home moves to
+  wherever it arms); a take-off, reposition or mission item above the room's ceiling, or above
+  GF_MAX_VER_DIST over home when that geofence is set, is refused with the reason in STATUSTEXT
+  (it would stop at the ceiling and never arrive);
 * the mission protocol (upload and download, MISSION_ITEM_INT, MISSION_ACK, CLEAR_ALL,
   SET_CURRENT, MISSION_ITEM_REACHED) with NAV_WAYPOINT, NAV_TAKEOFF, NAV_LAND and
   NAV_RETURN_TO_LAUNCH items;
@@ -33,20 +40,26 @@ The position controller is PX4's cascade in miniature: position P (MPC_XY_P 0.95
 drag feed-forward → tilt (≤ 35°) → the physics' attitude loop. Landing descends at
 MPC_LAND_SPEED 0.7 m/s.
 
+MAVLink 2 signing (``signing_key``): every link shares one signing state, unsigned and badly
+signed frames are refused and counted, and a link that sent only refused frames is told once
+(STATUSTEXT "Refused: MAVLink 2 signing required").
+
 Sans-I/O: ``connect(cid)``, ``receive(cid, data)``, ``step(dt)``, ``drain(cid) -> bytes``; the
-clock is the autopilot's own ``time`` (advanced by ``step``). ``drone.mavlink.simserver`` pumps
+clock is the autopilot's own ``time`` (advanced by ``step``); only the signing timestamps read
+``signing_clock`` (Unix time). ``drone.mavlink.simserver`` pumps
 it on sockets; ``drone.mavlink.lockstep`` in memory.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 from drone.ardrone.navdata import CtrlState
-from drone.mavlink.codec import Codec, Message, mav
+from drone.mavlink.codec import Codec, Message, mav, signing_state, signing_timestamp
 from drone.mavlink.geo import Origin, enu_to_ned, yaw_enu_to_ned, yaw_ned_to_enu
 from drone.mavlink.modes import px4_custom_mode, px4_mode_name
 from drone.sim.battery import Battery
@@ -58,6 +71,7 @@ RESULT_ACCEPTED: int = int(mav.MAV_RESULT_ACCEPTED)  # typed copies (pymavlink i
 RESULT_DENIED: int = int(mav.MAV_RESULT_DENIED)
 RESULT_UNSUPPORTED: int = int(mav.MAV_RESULT_UNSUPPORTED)
 FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2: force (PX4 commander)
+REFUSED_UNSIGNED = b"Refused: MAVLink 2 signing required"  # STATUSTEXT, <= 50 bytes
 DEFAULT_ORIGIN = Origin(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zurich)
 SENSORS = (
     mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -86,6 +100,7 @@ DEFAULT_RATES_HZ = {
     "HOME_POSITION": 0.5,
     "MISSION_CURRENT": 0.5,
 }
+_FLOWN_TO = (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_LOITER_UNLIM)
 _MSG_IDS = {name: getattr(mav, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_RATES_HZ}
 _MSG_NAMES = {v: k for k, v in _MSG_IDS.items()}
 # MAVLink 2 (mavlink.io "Packet Serialization"): frames up to 280 bytes; several per datagram.
@@ -96,6 +111,7 @@ class AutopilotParams:
     """Parameters with PX4's names and defaults (except NAV_DLL_ACT, see module docstring)."""
 
     MIS_TAKEOFF_ALT: float = 2.5
+    GF_MAX_VER_DIST: float = 0.0  # geofence: highest above home, m (0: only the room's ceiling)
     RTL_RETURN_ALT: float = 10.0
     RTL_DESCEND_ALT: float = 5.0
     NAV_DLL_ACT: float = 2.0  # 0 disabled, 1 hold, 2 return, 3 land
@@ -125,6 +141,7 @@ class _Link:
     rates_hz: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_RATES_HZ))
     next_t: dict[str, float] = field(default_factory=dict)
     mission_up: tuple[int, int, list[Any]] | None = None  # (sysid, count, items so far)
+    told_unsigned: bool = False  # "signing required" already sent on this link
 
 
 @dataclass(frozen=True)
@@ -147,7 +164,10 @@ class SimAutopilot:
         start: ``(x, y, yaw_rad)`` on the ground (default the world's start).
         system_id: MAVLink system id (PX4 SITL: 1).
         battery_pct: initial charge.
-        signing_key: require MAVLink 2 signing on every link (32 bytes).
+        signing_key: require MAVLink 2 signing on every link (32 bytes). All links share one
+            signing state (``drone.mavlink.codec.signing_state``): a frame replayed on a new
+            link is as old as on its own.
+        signing_clock: Unix time, for the signing timestamps only (kept at least at it).
         refuse_all: test double of a vehicle that denies every command (bad-input tests).
         silent: never answer commands (a vehicle that only streams telemetry).
     """
@@ -161,6 +181,7 @@ class SimAutopilot:
         battery_pct: float = 100.0,
         params: AutopilotParams | None = None,
         signing_key: bytes | None = None,
+        signing_clock: Callable[[], float] = time.time,
         refuse_all: bool = False,
         silent: bool = False,
     ) -> None:
@@ -190,10 +211,17 @@ class SimAutopilot:
         self.component_id = mav.MAV_COMP_ID_AUTOPILOT1
         self.params = params or AutopilotParams()
         self.signing_key = signing_key
+        self.signing_clock = signing_clock
+        self._signing: Any = None
+        if signing_key is not None:
+            self._signing = signing_state(signing_key, timestamp=signing_timestamp(signing_clock()))
         self.refuse_all = refuse_all
         self.silent = silent
         self.time = 0.0
         self.home = (x, y, box[4], yaw)
+        # PX4's local NED origin is where its estimator got its first position (here the start
+        # on the floor) and stays there; home moves to wherever the vehicle arms.
+        self.local_origin = (x, y, box[4])
         self.armed = False
         self.mode = "AUTO.LOITER"
         self.landed_state = mav.MAV_LANDED_STATE_ON_GROUND
@@ -216,13 +244,12 @@ class SimAutopilot:
         self._recent: dict[tuple[int, int, int], tuple[float, int, int]] = {}  # dedupe retries
         self._rtl_z = 0.0
         self._link_down_until = -math.inf
+        self._commands = self._command_table()
 
     # ------------------------------------------------------------------ links
     def connect(self, cid: object) -> None:
         """A new client link (TCP connection, UDP peer, in-memory end)."""
-        self.links[cid] = _Link(
-            Codec(self.system_id, self.component_id, signing_key=self.signing_key)
-        )
+        self.links[cid] = _Link(Codec(self.system_id, self.component_id, signing=self._signing))
 
     def disconnect(self, cid: object) -> None:
         self.links.pop(cid, None)
@@ -240,6 +267,11 @@ class SimAutopilot:
         data = bytes(link.out)
         link.out.clear()
         return b"" if self.link_down else data
+
+    def accepted(self, cid: object) -> int:
+        """Frames accepted from ``cid`` so far (0 for an unknown link)."""
+        link = self.links.get(cid)
+        return link.codec.accepted if link is not None else 0
 
     def rejected(self) -> dict[str, int]:
         """Frames refused on all links, by reason (garbage, bad_crc, mavlink1, bad_signature)."""
@@ -273,8 +305,20 @@ class SimAutopilot:
             return
         if cid not in self.links:
             self.connect(cid)
-        for msg in self.links[cid].codec.feed(data):
+        link = self.links[cid]
+        for msg in link.codec.feed(data):
             self._handle(cid, msg)
+        if (
+            link.codec.signed
+            and not link.told_unsigned
+            and link.codec.accepted == 0
+            and link.codec.rejected["bad_signature"]
+        ):
+            # Say why nothing this link sends is obeyed: a ground station without the key reads
+            # signed frames (MAVLink "Message Signing"), so it shows this line.
+            link.told_unsigned = True
+            m = link.codec.mav
+            self._send(cid, m.statustext_encode(mav.MAV_SEVERITY_ERROR, REFUSED_UNSIGNED))
 
     def _handle(self, cid: object, msg: Message) -> None:
         kind = msg.get_type()
@@ -369,85 +413,126 @@ class SimAutopilot:
         return x, y, z
 
     def _execute(self, msg: Message) -> int:
-        c, p = msg.command, (msg.param1, msg.param2, msg.param3, msg.param4)
-        flying = self._in_air
-        if c == mav.MAV_CMD_COMPONENT_ARM_DISARM:
-            if p[0] >= 0.5:
-                return self._arm()
-            if flying and int(p[1]) != FORCE_MAGIC:
-                self.statustext(mav.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
-                return RESULT_DENIED
-            self._disarm("commanded")
-            return RESULT_ACCEPTED
-        if c == mav.MAV_CMD_NAV_TAKEOFF:
-            if not self.armed:
-                self.statustext(mav.MAV_SEVERITY_CRITICAL, "Takeoff denied: disarmed")
-                return RESULT_DENIED
-            alt = float(msg.param7) if msg.get_type() == "COMMAND_LONG" else float(msg.z)
-            rel = self.params.MIS_TAKEOFF_ALT
-            if math.isfinite(alt) and alt > self.origin.alt_m + self.home[2]:
-                rel = alt - self.origin.alt_m - self.home[2]
-            return self._takeoff(rel)
-        if c == mav.MAV_CMD_NAV_LAND:
-            if not flying:
-                return RESULT_DENIED
-            self._set_mode("AUTO.LAND")
-            return RESULT_ACCEPTED
-        if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            if not flying:
-                self.statustext(mav.MAV_SEVERITY_CRITICAL, "Return denied: landed")
-                return RESULT_DENIED
-            self._set_mode("AUTO.RTL")
-            return RESULT_ACCEPTED
-        if c == mav.MAV_CMD_DO_SET_MODE:
-            if not int(p[0]) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                return RESULT_DENIED
-            name = px4_mode_name((int(p[1]) << 16) | (int(p[2]) << 24))
-            return self._request_mode(name)
-        if c == mav.MAV_CMD_DO_REPOSITION:
-            if not flying:
-                self.statustext(mav.MAV_SEVERITY_CRITICAL, "Reposition denied: not flying")
-                return RESULT_DENIED
-            target = self._global_target(msg)
-            if target is None:
-                return RESULT_DENIED
-            if target[2] <= self.physics.bounds[4]:
-                self.statustext(mav.MAV_SEVERITY_CRITICAL, "Reposition denied: below ground")
-                return RESULT_DENIED
-            yaw = self._target[3] if not math.isfinite(p[3]) else yaw_ned_to_enu(math.radians(p[3]))
-            if p[0] > 0:
-                self._speed = min(float(p[0]), self.params.MPC_XY_CRUISE)
-            self._set_mode("AUTO.LOITER")
-            self._target = (*target, yaw)
-            return RESULT_ACCEPTED
-        if c == mav.MAV_CMD_MISSION_START:
-            if not self.mission:
-                self.statustext(mav.MAV_SEVERITY_CRITICAL, "Mission rejected: no mission")
-                return RESULT_DENIED
-            if not self.armed:
-                self.statustext(mav.MAV_SEVERITY_CRITICAL, "Mission denied: disarmed")
-                return RESULT_DENIED
-            self.mission_current = max(0, min(int(p[0]), len(self.mission) - 1))
-            self._set_mode("AUTO.MISSION")
-            return RESULT_ACCEPTED
-        if c == mav.MAV_CMD_DO_CHANGE_SPEED:
-            if p[1] > 0:
-                self._speed = min(float(p[1]), self.params.MPC_XY_CRUISE)
-            return RESULT_ACCEPTED
-        if c == mav.MAV_CMD_DO_FLIGHTTERMINATION:
-            if p[0] >= 0.5:
-                self.physics.cut_motors()
-                self.armed = False
-                self.statustext(mav.MAV_SEVERITY_EMERGENCY, "Flight termination active")
-            return RESULT_ACCEPTED
-        if c == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
-            return self._set_interval(msg, int(p[0]), float(p[1]))
-        if c in (mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            known = _MSG_NAMES.keys() | {mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
-            if c == mav.MAV_CMD_REQUEST_MESSAGE and int(p[0]) not in known:
-                return RESULT_UNSUPPORTED
-            return RESULT_ACCEPTED
-        return RESULT_UNSUPPORTED
+        """Act on a command (COMMAND_LONG or COMMAND_INT): its handler in :attr:`_commands`,
+        UNSUPPORTED for any other."""
+        handler = self._commands.get(int(msg.command))
+        return handler(msg) if handler is not None else RESULT_UNSUPPORTED
+
+    def _command_table(self) -> dict[int, Callable[[Message], int]]:
+        """Command id → handler, by PX4 service: commander (arming, modes, take-off, landing,
+        return, termination), navigator (reposition, mission, speed), mavlink (streams)."""
+        return {
+            mav.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
+            mav.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
+            mav.MAV_CMD_NAV_LAND: self._cmd_land,
+            mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_return,
+            mav.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
+            mav.MAV_CMD_DO_FLIGHTTERMINATION: self._cmd_terminate,
+            mav.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
+            mav.MAV_CMD_MISSION_START: self._cmd_mission_start,
+            mav.MAV_CMD_DO_CHANGE_SPEED: self._cmd_change_speed,
+            mav.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_message_interval,
+            mav.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
+            mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_request_message,
+        }
+
+    # commander
+    def _cmd_arm_disarm(self, msg: Message) -> int:
+        if msg.param1 >= 0.5:
+            return self._arm()
+        if self._in_air and int(msg.param2) != FORCE_MAGIC:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+            return RESULT_DENIED
+        self._disarm("commanded")
+        return RESULT_ACCEPTED
+
+    def _cmd_takeoff(self, msg: Message) -> int:
+        """NAV_TAKEOFF as PX4's navigator reads it (``takeoff.cpp`` set_takeoff_position):
+        param7 is the altitude AMSL; NaN means MIS_TAKEOFF_ALT above where the vehicle is; a
+        target below the vehicle keeps it where it is ("Already higher than takeoff altitude").
+        One leniency: a finite param7 at or below the ground (0, as scripts written for
+        ArduPilot's relative param7 send) is read as NaN, not as "stay on the ground"."""
+        if not self.armed:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Takeoff denied: disarmed")
+            return RESULT_DENIED
+        alt = float(msg.param7) if msg.get_type() == "COMMAND_LONG" else float(msg.z)
+        if math.isfinite(alt) and alt > self.origin.alt_m + self.home[2]:
+            return self._takeoff(alt - self.origin.alt_m)
+        return self._takeoff(None)
+
+    def _cmd_land(self, msg: Message) -> int:
+        if not self._in_air:
+            return RESULT_DENIED
+        self._set_mode("AUTO.LAND")
+        return RESULT_ACCEPTED
+
+    def _cmd_return(self, msg: Message) -> int:
+        if not self._in_air:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Return denied: landed")
+            return RESULT_DENIED
+        self._set_mode("AUTO.RTL")
+        return RESULT_ACCEPTED
+
+    def _cmd_set_mode(self, msg: Message) -> int:
+        if not int(msg.param1) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return RESULT_DENIED
+        name = px4_mode_name((int(msg.param2) << 16) | (int(msg.param3) << 24))
+        return self._request_mode(name)
+
+    def _cmd_terminate(self, msg: Message) -> int:
+        if msg.param1 >= 0.5:
+            self.physics.cut_motors()
+            self.armed = False
+            self.statustext(mav.MAV_SEVERITY_EMERGENCY, "Flight termination active")
+        return RESULT_ACCEPTED
+
+    # navigator
+    def _cmd_reposition(self, msg: Message) -> int:
+        if not self._in_air:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Reposition denied: not flying")
+            return RESULT_DENIED
+        target = self._global_target(msg)
+        if target is None:
+            return RESULT_DENIED
+        if target[2] <= self.physics.bounds[4]:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Reposition denied: below ground")
+            return RESULT_DENIED
+        if target[2] > self.ceiling_z + 1e-6:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Reposition is outside geofence")
+            return RESULT_DENIED
+        yaw_deg = float(msg.param4)
+        yaw = yaw_ned_to_enu(math.radians(yaw_deg)) if math.isfinite(yaw_deg) else self._target[3]
+        if msg.param1 > 0:
+            self._speed = min(float(msg.param1), self.params.MPC_XY_CRUISE)
+        self._set_mode("AUTO.LOITER")
+        self._target = (*target, yaw)
+        return RESULT_ACCEPTED
+
+    def _cmd_mission_start(self, msg: Message) -> int:
+        if not self.mission:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Mission rejected: no mission")
+            return RESULT_DENIED
+        if not self.armed:
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Mission denied: disarmed")
+            return RESULT_DENIED
+        self.mission_current = max(0, min(int(msg.param1), len(self.mission) - 1))
+        self._set_mode("AUTO.MISSION")
+        return RESULT_ACCEPTED
+
+    def _cmd_change_speed(self, msg: Message) -> int:
+        if msg.param2 > 0:
+            self._speed = min(float(msg.param2), self.params.MPC_XY_CRUISE)
+        return RESULT_ACCEPTED
+
+    # mavlink streams
+    def _cmd_message_interval(self, msg: Message) -> int:
+        return self._set_interval(msg, int(msg.param1), float(msg.param2))
+
+    def _cmd_request_message(self, msg: Message) -> int:
+        known = _MSG_NAMES.keys() | {mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
+        if msg.command == mav.MAV_CMD_REQUEST_MESSAGE and int(msg.param1) not in known:
+            return RESULT_UNSUPPORTED
+        return RESULT_ACCEPTED
 
     def _set_interval(self, msg: Message, msg_id: int, interval_us: float) -> int:
         name = _MSG_NAMES.get(msg_id)
@@ -491,13 +576,49 @@ class SimAutopilot:
         self._vel_sp = None
         self.statustext(mav.MAV_SEVERITY_INFO, f"Disarmed ({why})")
 
-    def _takeoff(self, rel_alt: float) -> int:
+    @property
+    def ceiling_z(self) -> float:
+        """The highest map z the vehicle may be sent to (see :meth:`_ceiling`)."""
+        return self._ceiling()[0]
+
+    def _ceiling(self) -> tuple[float, str]:
+        """(map z, "ceiling" or "geofence"): the room's ceiling as the physics keeps it (the
+        world's top less the airframe's height, within its altitude limit above the floor),
+        lowered to GF_MAX_VER_DIST above home when that geofence is set (PX4: 0 is off)."""
+        ph = self.physics
+        room = min(ph.bounds[4] + ph.params.altitude_max_m, ph.bounds[5] - ph.params.height_m)
+        fence = self.params.GF_MAX_VER_DIST
+        if math.isfinite(fence) and fence > 0 and self.home[2] + fence < room:
+            return self.home[2] + fence, "geofence"
+        return room, "ceiling"
+
+    def _takeoff(self, target_z: float | None) -> int:
+        """Take off to map z ``target_z`` (None: MIS_TAKEOFF_ALT above where the vehicle is),
+        never lower than it is. A target above :attr:`ceiling_z` is refused with the reason:
+        flying there would stop at the ceiling with the take-off never complete."""
         b = self.physics.body
         if not self.physics.battery.can_take_off and not self._in_air:
             self.statustext(mav.MAV_SEVERITY_CRITICAL, "Takeoff denied: low battery")
             return RESULT_DENIED
+        if target_z is None:
+            alt = self.params.MIS_TAKEOFF_ALT
+            if not math.isfinite(alt):
+                return RESULT_DENIED
+            target_z = b.z + alt
+            self.statustext(mav.MAV_SEVERITY_INFO, f"Using default takeoff altitude: {alt:.1f} m")
+        if target_z < b.z:
+            target_z = b.z
+            self.statustext(mav.MAV_SEVERITY_CRITICAL, "Already higher than takeoff altitude")
+        ceiling, what = self._ceiling()
+        if target_z > ceiling + 1e-6:
+            hz = self.home[2]
+            self.statustext(
+                mav.MAV_SEVERITY_CRITICAL,
+                f"Takeoff denied: {target_z - hz:.1f} m above {what} ({ceiling - hz:.1f} m)",
+            )
+            return RESULT_DENIED
         self._set_mode("AUTO.TAKEOFF")
-        self._target = (b.x, b.y, self.home[2] + rel_alt, b.yaw_rad)
+        self._target = (b.x, b.y, target_z, b.yaw_rad)
         self.physics.ctrl = CtrlState.FLYING
         self._took_off = True
         self.statustext(mav.MAV_SEVERITY_INFO, "Takeoff detected")
@@ -515,7 +636,7 @@ class SimAutopilot:
         elif name == "AUTO.TAKEOFF":
             if not self.armed:
                 return RESULT_DENIED
-            return self._takeoff(self.params.MIS_TAKEOFF_ALT)
+            return self._takeoff(None)
         elif name == "AUTO.MISSION":
             if not self.mission:
                 self.statustext(mav.MAV_SEVERITY_CRITICAL, "Mission rejected: no mission")
@@ -547,7 +668,7 @@ class SimAutopilot:
         if msg.coordinate_frame not in (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_LOCAL_OFFSET_NED):
             return
         mask = msg.type_mask
-        hx, hy, hz, _ = self.home
+        ox, oy, oz = self.local_origin
         self._offboard_t = self.time
         yaw_ignored = bool(mask & mav.POSITION_TARGET_TYPEMASK_YAW_IGNORE)
         yaw = self._target[3] if yaw_ignored else yaw_ned_to_enu(msg.yaw)
@@ -555,8 +676,8 @@ class SimAutopilot:
         if not all(math.isfinite(v) for v in values):
             return  # NaN setpoints are ignored, as PX4 does for fields it cannot use
         if not mask & mav.POSITION_TARGET_TYPEMASK_X_IGNORE:
-            # position: local NED relative to home (the EKF origin of this simulator)
-            self._target = (hx + msg.y, hy + msg.x, hz - msg.z, yaw)
+            # position: local NED from the local origin (PX4's estimator origin)
+            self._target = (ox + msg.y, oy + msg.x, oz - msg.z, yaw)
             self._vel_sp = None
         elif not mask & mav.POSITION_TARGET_TYPEMASK_VX_IGNORE:
             self._vel_sp = (msg.vy, msg.vx, -msg.vz)
@@ -621,6 +742,11 @@ class SimAutopilot:
             b = self.physics.bounds
             if not (b[0] <= x <= b[1] and b[2] <= y <= b[3]):
                 self.statustext(mav.MAV_SEVERITY_CRITICAL, f"Mission item {it.seq} outside")
+                self._mission_ack(cid, msg, mav.MAV_MISSION_ERROR)
+                return
+            if it.command in _FLOWN_TO and z > self.ceiling_z + 1e-6:
+                # PX4's feasibility check refuses items above the geofence (GF_MAX_VER_DIST)
+                self.statustext(mav.MAV_SEVERITY_CRITICAL, f"Mission item {it.seq} too high")
                 self._mission_ack(cid, msg, mav.MAV_MISSION_ERROR)
                 return
             parsed.append(MissionItem(it.seq, it.command, x, y, z, it))
@@ -757,6 +883,10 @@ class SimAutopilot:
         if dt <= 0:
             return
         self.time += dt
+        if self._signing is not None:  # MAVProxy's signing module keeps to the wall clock too
+            ts = signing_timestamp(self.signing_clock())
+            if ts > self._signing.timestamp:
+                self._signing.timestamp = ts
         self._failsafes()
         if self.armed and not self.physics.emergency:
             self._control(dt)
@@ -1055,8 +1185,8 @@ class SimAutopilot:
                 int(hdg * 100),
             )
         if name == "LOCAL_POSITION_NED":
-            hx, hy, hz, _ = self.home
-            n, e, d = enu_to_ned(b.x - hx, b.y - hy, b.z - hz)
+            ox, oy, oz = self.local_origin
+            n, e, d = enu_to_ned(b.x - ox, b.y - oy, b.z - oz)
             vn, ve, vd = enu_to_ned(b.vx, b.vy, b.vz)
             return m.local_position_ned_encode(t_ms, n, e, d, vn, ve, vd)
         if name == "ATTITUDE":
@@ -1082,14 +1212,16 @@ class SimAutopilot:
         if name == "HOME_POSITION":
             hx, hy, hz, hyaw = self.home
             hlat, hlon, halt = self.origin.to_geo(hx, hy, hz)
+            ox, oy, oz = self.local_origin
+            hn, he, hd = enu_to_ned(hx - ox, hy - oy, hz - oz)  # home in the local frame
             q = [math.cos(yaw_enu_to_ned(hyaw) / 2), 0.0, 0.0, math.sin(yaw_enu_to_ned(hyaw) / 2)]
             return m.home_position_encode(
                 round(hlat * 1e7),
                 round(hlon * 1e7),
                 round(halt * 1000),
-                0.0,
-                0.0,
-                0.0,
+                hn,
+                he,
+                hd,
                 q,
                 0.0,
                 0.0,

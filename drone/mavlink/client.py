@@ -36,10 +36,12 @@ from __future__ import annotations
 
 import collections
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from drone.mavlink.codec import Codec, Message, mav
+from drone.mavlink.codec import Codec, Message, mav, signing_timestamp
 from drone.mavlink.modes import custom_mode, intent_mode, mode_name
 
 GCS_SYSTEM_ID = 255  # QGroundControl's and MAVProxy's default
@@ -234,7 +236,12 @@ class _Upload:
 
 
 class GcsProtocol:
-    """See the module docstring."""
+    """See the module docstring.
+
+    ``signing_key`` signs every frame and accepts only signed ones; ``signing_clock`` (Unix
+    time) is read for the signing timestamps only, which start at it and are kept at least at
+    it (``Codec.keep_up``), so the vehicle's "new stream at most a minute old" check passes.
+    """
 
     def __init__(
         self,
@@ -243,13 +250,20 @@ class GcsProtocol:
         system_id: int = GCS_SYSTEM_ID,
         component_id: int = GCS_COMPONENT_ID,
         signing_key: bytes | None = None,
+        signing_clock: Callable[[], float] = time.time,
         link_timeout_s: float = 1.5,
         command_timeout_s: float = 1.0,
         retries: int = 3,
         setpoint_hz: float = 10.0,
         request_streams: bool = True,
     ) -> None:
-        self.codec = Codec(system_id, component_id, signing_key=signing_key)
+        self.signing_clock = signing_clock
+        self.codec = Codec(
+            system_id,
+            component_id,
+            signing_key=signing_key,
+            initial_timestamp=signing_timestamp(signing_clock()) if signing_key else None,
+        )
         self.m = self.codec.mav
         self.target_system = target_system
         self.target_component = mav.MAV_COMP_ID_AUTOPILOT1
@@ -876,6 +890,8 @@ class GcsProtocol:
     def tick(self, now: float) -> None:
         """Heartbeat, retries, setpoint stream, upload timeouts, link watchdog."""
         self._now = now
+        if self.codec.signed:
+            self.codec.keep_up(signing_timestamp(self.signing_clock()))
         if now >= self._next_hb:
             self._next_hb = now + HEARTBEAT_PERIOD_S
             self._send(

@@ -17,6 +17,16 @@ counted by reason in ``rejected`` and never raise:
   frame with a far-future timestamp made every genuine frame after it "old" and silenced a
   signed link for good (:func:`_check_signature` replaces its check).
 
+A vehicle with several links shares one signing state among their codecs
+(:func:`signing_state`): one outgoing timestamp and one table of stream timestamps, as
+ArduPilot's ``GCS_Signing`` keeps them, so a frame captured on one link and replayed on another
+(a new TCP connection) is as old there as on its own link.
+
+Signing timestamps count 10 µs since 2015-01-01 00:00 UTC (MAVLink docs "Message Signing",
+Timestamp): :func:`signing_timestamp` turns a Unix time into one; a link end keeps its own at
+least at its wall clock (:meth:`Codec.keep_up`), as MAVProxy's signing module does, so a peer
+that checks "a new stream at most one minute behind" hears it.
+
 The dialect is ArduPilot's ``ardupilotmega`` (a superset of ``common``), so an ArduPilot
 vehicle's own messages decode too.
 """
@@ -32,13 +42,52 @@ from typing import Any, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-__all__ = ["MAGIC_V2", "Codec", "Message", "mav"]
+__all__ = ["MAGIC_V2", "Codec", "Message", "mav", "signing_state", "signing_timestamp"]
 
 # pymavlink ships no type information: a decoded message is typed Any here.
 Message: TypeAlias = Any
 MAGIC_V2 = 0xFD  # MAVLink 2 start-of-frame (mavlink.io "Packet Serialization")
 NEW_STREAM_WINDOW = 6_000_000  # 60 s in 10 µs units: how far behind a new stream may start
 _TIMESTAMP = struct.Struct("<IH")  # the signature block's 48-bit timestamp
+SIGNING_EPOCH_UNIX_S = 1420070400  # 2015-01-01 00:00:00 UTC (MAVLink docs "Message Signing")
+
+
+def signing_timestamp(unix_s: float) -> int:
+    """A Unix time as a MAVLink 2 signing timestamp (10 µs units since 2015-01-01 UTC)."""
+    return max(0, int((unix_s - SIGNING_EPOCH_UNIX_S) * 100_000))
+
+
+def signing_state(
+    key: bytes,
+    *,
+    link_id: int = 0,
+    timestamp: int = 0,
+    accept_unsigned: Callable[[int], bool] | None = None,
+) -> Any:
+    """A signing state (pymavlink ``MAVLinkSigning``) for one or several codecs to share.
+
+    Args:
+        key: the 32-byte secret.
+        link_id: the link id put in what is sent.
+        timestamp: the first outgoing timestamp (:func:`signing_timestamp`).
+        accept_unsigned: unsigned frames still accepted, by message id; default none.
+
+    Raises:
+        ValueError: the key is not 32 bytes.
+    """
+    if len(key) != 32:
+        raise ValueError("a MAVLink 2 signing key is 32 bytes")
+    state = mav.MAVLinkSigning()
+    state.secret_key = bytes(key)
+    state.link_id = link_id
+    state.sign_outgoing = True
+    state.timestamp = timestamp
+
+    def _allow(_mav: Any, msg_id: int) -> bool:
+        return bool(accept_unsigned(msg_id)) if accept_unsigned is not None else False
+
+    state.allow_unsigned_callback = _allow
+    return state
 
 
 def _check_signature(signing: Any, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
@@ -71,6 +120,8 @@ class Codec:
         link_id: the signing link id (one per link end).
         accept_unsigned: with a key, still accept unsigned frames for which this returns True
             (by message id); default: none.
+        initial_timestamp: with a key, the first outgoing signing timestamp (default 0).
+        signing: a :func:`signing_state` shared with other codecs (instead of ``signing_key``).
     """
 
     def __init__(
@@ -82,33 +133,35 @@ class Codec:
         link_id: int = 0,
         accept_unsigned: Callable[[int], bool] | None = None,
         initial_timestamp: int | None = None,
+        signing: Any | None = None,
     ) -> None:
         self.mav = mav.MAVLink(None, system_id, component_id)
         self.mav.robust_parsing = True
         self.rejected: collections.Counter[str] = collections.Counter()
         self.accepted = 0
         self.bytes_in = 0
-        self.signed = signing_key is not None
-        if signing_key is not None:
-            if len(signing_key) != 32:
-                raise ValueError("a MAVLink 2 signing key is 32 bytes")
-            self.mav.signing.secret_key = signing_key
-            self.mav.signing.link_id = link_id
-            self.mav.signing.sign_outgoing = True
-            if initial_timestamp is not None:
-                self.mav.signing.timestamp = initial_timestamp
-            allow = accept_unsigned
-
-            def _allow(_mav: Any, msg_id: int) -> bool:
-                return bool(allow(msg_id)) if allow is not None else False
-
-            self.mav.signing.allow_unsigned_callback = _allow
-            signing = self.mav.signing
+        if signing is None and signing_key is not None:
+            signing = signing_state(
+                signing_key,
+                link_id=link_id,
+                timestamp=initial_timestamp or 0,
+                accept_unsigned=accept_unsigned,
+            )
+        self.signed = signing is not None
+        if signing is not None:
+            self.mav.signing = signing
+            state = signing
 
             def _check(msgbuf: bytearray, src_system: int, src_component: int) -> bool:
-                return _check_signature(signing, msgbuf, src_system, src_component)
+                return _check_signature(state, msgbuf, src_system, src_component)
 
             self.mav.check_signature = _check
+
+    def keep_up(self, timestamp: int) -> None:
+        """Keep the outgoing signing timestamp at least ``timestamp`` (:func:`signing_timestamp`
+        of the wall clock); nothing on an unsigned codec."""
+        if self.signed and timestamp > self.mav.signing.timestamp:
+            self.mav.signing.timestamp = timestamp
 
     def feed(self, data: bytes) -> list[Message]:
         """Parse ``data`` (any split of the stream); returns the accepted MAVLink 2 messages."""

@@ -8,7 +8,9 @@
     ├── CommandFailed           a command the vehicle refused, or never answered
     │   └── CommandTimeout      no COMMAND_ACK after every retry
     ├── MissionError            the mission upload was refused or timed out
-    └── NotConnected            no vehicle heard yet (or the link is lost)
+    ├── NotConnected            no vehicle heard yet (or the link is lost)
+    ├── SigningKeyError         the signing passphrase file cannot be made, read or trusted
+    └── InsecureLinkError       an unsigned simulator asked to listen beyond loopback
 """
 
 from __future__ import annotations
@@ -53,3 +55,13 @@ class MissionError(MavlinkError):
 
 class NotConnected(MavlinkError):
     """No vehicle is connected (never heard, or its heartbeat stopped)."""
+
+
+class SigningKeyError(MavlinkError):
+    """The MAVLink signing passphrase file cannot be made or read, is readable by others, or
+    holds no usable passphrase (``drone.mavlink.signing``)."""
+
+
+class InsecureLinkError(MavlinkError, ValueError):
+    """An unsigned (``--insecure``) simulator was asked to listen on a non-loopback address:
+    anyone who can reach it could arm it, take off and cut its motors."""

@@ -150,7 +150,8 @@ async def test_missing_serial_device_is_a_clear_error() -> None:
         await d.start()
 
 
-def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp() -> None:
+def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) -> None:
+    """The transports (signing: tests/mavlink/test_mavlink_signing.py)."""
     from pymavlink import mavutil
 
     proc = subprocess.Popen(
@@ -165,6 +166,9 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp() -> None:
             "127.0.16.15",
             "--world",
             "outdoor",
+            "--insecure",
+            "--data-dir",
+            str(tmp_path),
         ],
         cwd=ROOT,
         stdout=subprocess.PIPE,

@@ -1,19 +1,23 @@
 """Third-party judges fly the MAVLink simulator over real sockets (127.0.16.0/24):
 
 * **MAVSDK** (PyPI ``mavsdk``, the PX4 project's client library; its C++ core ships in the
-  wheel) connects over ``tcpout://ADDR:5760``, sees health ok, arms, takes off, flies a
-  ``goto_location``, returns to launch and disarms;
+  wheel) connects over ``tcpout://ADDR:5760``, sees health ok, sets the take-off altitude,
+  takes off to it, flies a ``goto_location``, returns to launch, lands and disarms, judged
+  by its own telemetry; in a 3 m room its take-off to 5 m is refused with the reason;
 * **pymavlink**'s ``mavutil`` does the same over ``tcp:ADDR:5760``, with two clients at once.
 
-The simulator runs at 4× real time to keep these seconds, not minutes.
+MAVSDK cannot sign (its Python API has no signing), so these simulators are unsigned, as
+``sim --protocol mavlink --insecure`` runs on loopback; the signed path is proven with
+pymavlink in ``test_mavlink_signing.py``. The simulator runs at 4× real time.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
 import pytest
@@ -23,6 +27,11 @@ from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
 
 SPEED = 4.0
+
+
+@pytest.fixture(scope="module")
+def world() -> Any:
+    return load_world("outdoor")
 
 
 async def _until(fn: Callable[[], Awaitable[Any]], timeout_s: float) -> Any:
@@ -35,64 +44,123 @@ async def _until(fn: Callable[[], Awaitable[Any]], timeout_s: float) -> Any:
     raise AssertionError(f"timed out waiting for {fn}")
 
 
-async def test_mavsdk_flies_the_simulator() -> None:
+@contextlib.asynccontextmanager
+async def _mavsdk(addr: str) -> AsyncIterator[tuple[Any, Any]]:
+    """MAVSDK connected to the simulator at ``addr``: its (telemetry, action) plugins."""
     mavsdk = pytest.importorskip("mavsdk.asyncio")
     from mavsdk.asyncio.plugins.action import ActionAsync
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
-    world = load_world("outdoor")
-    ap = SimAutopilot(world)
-    async with MavlinkSimServer("127.0.16.9", ap, speed=SPEED, udp_port=None):
-        config = mavsdk.Configuration.create_with_component_type(
-            mavsdk.ComponentType.GROUND_STATION
+    config = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
+    async with mavsdk.Mavsdk(config) as m:
+        await m.add_any_connection(f"tcpout://{addr}:5760")
+        system = await m.first_autopilot(10.0)
+        assert system is not None
+        tel, act = TelemetryAsync(system), ActionAsync(system)
+        assert await _until(tel.health_all_ok, 20.0)
+        yield tel, act
+
+
+async def test_mavsdk_flight_to_a_set_altitude_judged_by_mavsdk(world: Any) -> None:
+    """set_takeoff_altitude(5) (MIS_TAKEOFF_ALT), take-off (param7 NaN, as MAVSDK sends it to
+    PX4), goto, return to launch, land, disarm: every check on MAVSDK's own telemetry."""
+    FlightMode = pytest.importorskip("mavsdk.plugins.telemetry").FlightMode
+
+    ap = SimAutopilot(world)  # unsigned: the `--insecure` simulator, loopback only
+    async with (
+        MavlinkSimServer("127.0.16.9", ap, speed=SPEED, udp_port=None),
+        _mavsdk("127.0.16.9") as (tel, act),
+    ):
+        await act.set_takeoff_altitude(5.0)
+        assert await act.get_takeoff_altitude() == pytest.approx(5.0)
+        await act.arm()
+        await act.takeoff()
+
+        async def took_off() -> bool:  # at 5 m, and PX4 left TAKEOFF for HOLD
+            p = await tel.position()
+            return abs(p.relative_altitude_m - 5.0) < 0.15 and (
+                await tel.flight_mode() == FlightMode.HOLD
+            )
+
+        await _until(took_off, 40.0)
+        home = await tel.home()
+        assert math.isclose(home.latitude_deg, 36.367164, abs_tol=1e-6)
+        p = await tel.position()
+        # AMSL minus home's AMSL, the height above home, and the local frame agree
+        assert p.absolute_altitude_m - home.absolute_altitude_m == pytest.approx(
+            p.relative_altitude_m, abs=0.05
         )
-        async with mavsdk.Mavsdk(config) as m:
-            await m.add_any_connection("tcpout://127.0.16.9:5760")
-            system = await m.first_autopilot(10.0)
-            assert system is not None
-            tel, act = TelemetryAsync(system), ActionAsync(system)
-            assert await _until(tel.health_all_ok, 20.0)
-            await act.arm()
-            await act.takeoff()
+        ned = (await tel.position_velocity_ned()).position
+        assert -ned.down_m == pytest.approx(p.relative_altitude_m, abs=0.1)
 
-            async def high() -> bool:
-                return bool((await tel.position()).relative_altitude_m > 2.3)
+        wp = world.waypoints[2].geo  # (15, 15) in the map frame
+        await act.goto_location(wp.lat_deg, wp.lon_deg, home.absolute_altitude_m + 8.0, 0.0)
 
-            await _until(high, 30.0)
-            home = await tel.home()
-            assert math.isclose(home.latitude_deg, 36.367164, abs_tol=1e-6)
-            wp = world.waypoints[2].geo  # (15, 15) in the map frame
-            await act.goto_location(wp.lat_deg, wp.lon_deg, home.absolute_altitude_m + 5.0, 0.0)
+        async def there() -> bool:
+            p = await tel.position()
+            return (
+                abs(p.latitude_deg - wp.lat_deg) < 3e-6
+                and abs(p.longitude_deg - wp.lon_deg) < 3e-6
+                and abs(p.relative_altitude_m - 8.0) < 0.15
+            )
 
-            async def there() -> bool:
-                p = await tel.position()
-                return (
-                    abs(p.latitude_deg - wp.lat_deg) < 3e-6
-                    and abs(p.longitude_deg - wp.lon_deg) < 3e-6
-                )
+        await _until(there, 60.0)
+        await act.return_to_launch()
 
-            await _until(there, 40.0)
-            assert math.dist((ap.physics.body.x, ap.physics.body.y), (15.0, 15.0)) < 0.5
-            await act.return_to_launch()
+        async def landed() -> bool:
+            return not await tel.in_air()
 
-            async def landed() -> bool:
-                return not await tel.in_air()
+        await _until(landed, 90.0)
+        try:
+            await act.disarm()  # PX4 may have disarmed itself after landing already
+        except Exception as exc:
+            assert "disarm" in str(exc).lower() or "denied" not in str(exc).lower()
 
-            await _until(landed, 60.0)
-            try:
-                await act.disarm()  # PX4 may have disarmed itself after landing already
-            except Exception as exc:
-                assert "disarm" in str(exc).lower() or "denied" not in str(exc).lower()
+        async def disarmed() -> bool:
+            return not await tel.armed()
 
-            async def disarmed() -> bool:
-                return not await tel.armed()
-
-            await _until(disarmed, 10.0)
-    b = ap.physics.body
-    assert math.hypot(b.x, b.y) < 0.6 and b.z == pytest.approx(0.0)
+        await _until(disarmed, 10.0)
+        p = await tel.position()
+        assert abs(p.latitude_deg - home.latitude_deg) < 6e-6  # back home (≈ 0.6 m)
+        assert abs(p.longitude_deg - home.longitude_deg) < 6e-6
+        assert p.relative_altitude_m == pytest.approx(0.0, abs=0.1)
     cmds = set(ap.commands_executed)
     assert {400, 22, 192} <= cmds  # arm/disarm, take-off, DO_REPOSITION
     assert 176 in cmds or 20 in cmds  # RTL as a mode change or as NAV_RETURN_TO_LAUNCH
+
+
+async def test_mavsdk_takeoff_above_the_room_is_refused_with_the_reason() -> None:
+    """A 3 m room: 5 m would end at the ceiling (MAVSDK would see 2.88 m, never 5), so MAVSDK's
+    takeoff() fails, the reason is in its status text, and 2 m flies."""
+    ActionError = pytest.importorskip("mavsdk.plugins.action").ActionError
+
+    ap = SimAutopilot(load_world("indoor"))
+    async with (
+        MavlinkSimServer("127.0.16.8", ap, speed=SPEED, udp_port=None),
+        _mavsdk("127.0.16.8") as (tel, act),
+    ):
+        await act.set_takeoff_altitude(5.0)
+        await act.arm()
+        with pytest.raises(ActionError, match="DENIED"):
+            await act.takeoff()
+
+        async def told() -> bool:
+            return "above ceiling (2.9 m)" in (await tel.status_text()).text
+
+        await _until(told, 10.0)
+        await act.set_takeoff_altitude(2.0)
+        await act.takeoff()
+
+        async def at_two_m() -> bool:
+            return abs((await tel.position()).relative_altitude_m - 2.0) < 0.15
+
+        await _until(at_two_m, 30.0)
+        await act.land()
+        await _until(lambda: _not(tel.armed), 40.0)
+
+
+async def _not(get: Callable[[], Awaitable[Any]]) -> bool:
+    return not await get()
 
 
 def _mavutil_flight(addr: str, ap: SimAutopilot, world: Any) -> list[str]:
