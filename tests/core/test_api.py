@@ -33,8 +33,9 @@ async def test_health_needs_no_token_and_reports_parts(api: httpx.AsyncClient) -
     r = await api.get("/api/v1/health", headers={"Authorization": ""})
     assert r.status_code == 200
     body = r.json()
-    assert set(body) == {"status", "version", "drones", "captioner"}
+    assert set(body) == {"status", "version", "drones", "captioner", "bus"}
     assert list(body["drones"]) == ["uav1"]
+    assert body["bus"] is None  # drones in the web process: no bus router (docs/bus.md)
 
 
 async def test_an_inline_control_thread_keeps_normal_scheduling(api: httpx.AsyncClient) -> None:
