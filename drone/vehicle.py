@@ -44,6 +44,7 @@ from drone.ardrone.navdata import (
     TAG_PRESSURE_RAW,
     CtrlState,
     DroneState,
+    Gps,
     Navdata,
 )
 from drone.control.clock import Clock, MonotonicClock
@@ -56,6 +57,10 @@ from drone.perception.markers import FrameResult, MarkerLocaliser, PerceptionWor
 __all__ = ["Commander", "MarkerSeen", "Setpoint", "Vehicle", "VehicleMode", "VehicleSnapshot"]
 
 FLYING_STATES = (CtrlState.FLYING, CtrlState.HOVERING, CtrlState.GOTOFIX)
+# A GPS fix's 1-σ per horizontal axis at HDOP 1: the u-blox 6 receivers' 2.5 m CEP (u-blox 6
+# GPS modules data sheet), CEP = 1.1774 σ for a circular normal error.
+GPS_SIGMA_M = 2.1
+GPS_MIN_HDOP = 0.5  # a reported HDOP below this is not believed (σ never under ~1 m)
 ALTITUDE_MAX_DEFAULT_MM = 3000  # control:altitude_max firmware default (ARDroneLib config_keys.h)
 
 
@@ -140,6 +145,7 @@ class VehicleSnapshot:
     estimator_disagreement: tuple[str, ...] = ()  # Estimate.disagreement
     estimator_reinits: int = 0  # EkfStats.navdata_reinits
     jog_limit: str = ""  # why the jog is being slowed/stopped near a limit ("" when it is not)
+    gps_age_s: float | None = None  # since the last GPS fix fused (None: never)
 
     @property
     def yaw_deg(self) -> float:
@@ -205,6 +211,9 @@ class Vehicle:
         self._link_ok = False
         self._markers: tuple[MarkerSeen, ...] = ()
         self._last_marker_t: float | None = None
+        self._gps_origin = getattr(world, "gps_origin", None)
+        self._last_gps: tuple[float, float, float] | None = None
+        self._last_gps_t: float | None = None
         self._last_result: FrameResult | None = None
         self._last_frame: np.ndarray | None = None
         self._last_cmd: PcmdCommand | None = None
@@ -382,8 +391,29 @@ class Vehicle:
                 unpowered,
             )
         )
+        if nav.gps is not None:
+            self._fuse_gps(nav.gps, now)
         for cb in self._nav_listeners:
             cb(nav, now)
+
+    def _fuse_gps(self, gps: Gps, now: float) -> None:
+        """A GPS option: its fix, when new and valid, into the EKF as a map-frame position.
+
+        The option repeats the receiver's last fix in every packet; only a changed one is a new
+        measurement (fusing repeats would count one fix many times)."""
+        origin = self._gps_origin
+        fix = (gps.latitude_deg, gps.longitude_deg, gps.elevation_m)
+        if origin is None or not gps.data_available or fix == self._last_gps:
+            return
+        if not all(math.isfinite(v) for v in (*fix, gps.hdop)):
+            return
+        self._last_gps = fix
+        import pymap3d  # only worlds with a GPS origin get here
+
+        e, n, _ = pymap3d.geodetic2enu(*fix, origin.lat_deg, origin.lon_deg, origin.alt_m)
+        sigma = max(gps.hdop, GPS_MIN_HDOP) * GPS_SIGMA_M
+        self.ekf.update_position(now, float(e), float(n), sigma)
+        self._last_gps_t = now
 
     def on_frame(self, frame: np.ndarray, t: float) -> None:
         """A camera frame captured at ``t``: to the worker thread if running, else processed now."""
@@ -543,6 +573,7 @@ class Vehicle:
             estimator_disagreement=est.disagreement,
             estimator_reinits=self.ekf.stats.navdata_reinits,
             jog_limit=self._jog_limit if self._mode is VehicleMode.MANUAL else "",
+            gps_age_s=None if self._last_gps_t is None else max(0.0, now - self._last_gps_t),
         )
 
     def overlay(self, lines: tuple[str, ...] = ()) -> np.ndarray | None:

@@ -1,0 +1,186 @@
+"""GPS outdoors: the navdata option's whole layout, the simulated receiver, and its fixes in the
+EKF (a position update that bounds dead reckoning and never claims a yaw)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from drone.ardrone import at
+from drone.ardrone.navdata import (
+    GPS_CHANNELS,
+    TAG_GPS,
+    DroneState,
+    Gps,
+    Navdata,
+    decode_navdata,
+    encode_navdata,
+)
+from drone.control.pid import Setpoint
+from drone.lockstep import LockstepRig
+from drone.perception.ekf import IX, IY, ExtendedKalmanFilter, NavdataInput
+from drone.perception.errors import EstimatorError
+from drone.sim.drone import SimConfig, SimDrone
+from drone.sim.world import load_world
+
+f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
+f64 = st.floats(allow_nan=False, allow_infinity=False)
+u32 = st.integers(0, 2**32 - 1)
+u8 = st.integers(0, 255)
+full_gps = st.builds(
+    Gps,
+    f64,
+    f64,
+    f64,
+    f64,
+    u32,
+    zero_validated=u32,
+    lat0_deg=f64,
+    gps_state=u32,
+    x_traj=f32,
+    phi_d=f32,
+    pdop=f64,
+    speed_m_s=f32,
+    last_frame_timestamp=u32,
+    degree=f32,
+    c_n0=f32,
+    nbsat=u32,
+    channels=st.lists(st.tuples(u8, u8), max_size=GPS_CHANNELS).map(tuple),
+    is_gps_plugged=u32,
+    firmware_status=u32,
+)
+
+
+@settings(deadline=None)
+@given(full_gps)
+def test_every_field_of_the_gps_option_survives_the_wire(gps: Gps) -> None:
+    nav = Navdata(state=DroneState(0), sequence=7, gps=gps)
+    data = encode_navdata(nav)
+    assert len(data) == 16 + 216 + 8  # header, the option's 216 bytes, checksum
+    assert decode_navdata(data).gps == gps
+
+
+def test_channels_are_twelve_and_more_are_refused() -> None:
+    g = Gps(1.0, 2.0, 3.0, channels=((5, 40),))
+    assert len(g.channels) == GPS_CHANNELS and g.channels[1] == (0, 0)
+    with pytest.raises(ValueError, match="12 channels"):
+        Gps(1.0, 2.0, 3.0, channels=((1, 1),) * 13)
+
+
+def _gps_sim(**cfg: float) -> SimDrone:
+    sim = SimDrone(load_world("outdoor"), start=(10.0, 20.0, 0.0), config=SimConfig(**cfg))  # type: ignore[arg-type]
+    sim.receive_navdata_request(b"\x01", 0.0)
+    sim.receive_at(at.encode_command(at.Config("general:navdata_demo", "TRUE"), 1), 0.0)
+    options = at.Config("general:navdata_options", str(1 << TAG_GPS))
+    sim.receive_at(at.encode_command(options, 2), 0.0)
+    return sim
+
+
+def _fixes(sim: SimDrone, seconds: float) -> list[tuple[float, Gps]]:
+    out = []
+    for _ in range(round(seconds / 0.005)):
+        sim.step(0.005)
+        pkt = sim.navdata_due(sim.time)
+        if pkt is not None:
+            gps = decode_navdata(pkt).gps
+            assert gps is not None
+            out.append((sim.time, gps))
+    return out
+
+
+def test_the_simulated_receiver_gives_5_fixes_a_second_with_its_noise() -> None:
+    import pymap3d
+
+    sim = _gps_sim(gps_noise_m=0.5)
+    packets = _fixes(sim, 20.0)
+    fixes = []
+    for _, g in packets:
+        if not fixes or fixes[-1] != g:
+            fixes.append(g)
+    assert len(packets) > 250 and 95 <= len(fixes) <= 105  # 15 Hz navdata, 5 Hz fixes
+    o = sim.gps_origin
+    assert o is not None
+    en = np.array(
+        [
+            pymap3d.geodetic2enu(
+                g.latitude_deg, g.longitude_deg, g.elevation_m, o.lat_deg, o.lon_deg, o.alt_m
+            )[:2]
+            for g in fixes
+        ]
+    )
+    err = en - np.array([10.0, 20.0])
+    assert np.abs(err.mean(axis=0)).max() < 0.15  # no bias
+    sd = err.std(axis=0)
+    assert sd.min() > 0.4 and sd.max() < 0.6
+    g = fixes[-1]
+    assert g.data_available == 1 and g.is_gps_plugged == 1 and g.nbsat == 9
+    assert g.hdop > 0 and g.vdop > 0 and g.pdop == pytest.approx(math.hypot(g.hdop, g.vdop))
+    assert sum(1 for sat, cn0 in g.channels if sat) == 9 and g.c_n0 > 30
+
+
+def test_ground_speed_and_course_follow_the_drone() -> None:
+    rig = LockstepRig(load_world("outdoor"), seed=2, camera=False)
+    seen: list[tuple[Gps, float, float]] = []
+
+    def on_nav(nav: Navdata, now: float) -> None:
+        tr = rig.sim.truth
+        if nav.gps is not None and (not seen or seen[-1][0] != nav.gps):
+            seen.append((nav.gps, math.hypot(tr.vx, tr.vy), math.atan2(tr.vx, tr.vy)))
+
+    rig.vehicle.add_navdata_listener(on_nav)
+    assert rig.wait_link() and rig.takeoff_all()
+    rig.vehicle.set_setpoint(Setpoint(30.0, 30.0, 2.0, math.pi / 4))  # north-east
+    rig.run(8.0)
+    moving = [(g, v, c) for g, v, c in seen[-10:]]
+    assert all(v > 1.0 for _, v, _ in moving)
+    for g, v, course in moving:
+        assert g.speed_m_s == pytest.approx(v, rel=1e-4)
+        assert g.degree == pytest.approx(math.degrees(course) % 360.0, abs=0.01)
+    assert all(40.0 < g.degree < 50.0 for g, _, _ in moving)
+
+
+def _still(ekf: ExtendedKalmanFilter, t: float) -> None:
+    ekf.update_navdata(NavdataInput(t, 0.0, 0.0, 0.0, 1.0, 0.0))
+
+
+def test_a_position_update_places_and_then_refines_the_estimate() -> None:
+    ekf = ExtendedKalmanFilter()
+    _still(ekf, 0.1)
+    assert ekf.update_position(0.1, 12.0, -4.0, 2.0)  # the first fix places it
+    est = ekf.latest
+    assert (est.x, est.y) == (12.0, -4.0) and not est.localised  # no yaw from a GPS
+    assert est.P[IX, IX] == pytest.approx(4.0)
+    rng = np.random.default_rng(0)
+    for k in range(2, 200):
+        t = k * 0.2
+        _still(ekf, t)
+        ekf.update_position(t, 13.0 + rng.normal(0, 2.0), -5.0 + rng.normal(0, 2.0), 2.0)
+    est = ekf.latest
+    assert math.hypot(est.x - 13.0, est.y + 5.0) < 0.8
+    assert est.P[IX, IX] < 1.0 and est.P[IY, IY] < 1.0
+    stats = ekf.stats  # the 99.9 % gate drops about one honest fix in a thousand
+    assert stats.positions_accepted + stats.positions_rejected == 199
+    assert stats.positions_rejected <= 2
+
+
+def test_fixes_that_keep_disagreeing_reinitialise_the_position() -> None:
+    ekf = ExtendedKalmanFilter()
+    ekf.reset(0.0, 0.0, 0.0, 1.0, 0.0)  # a surveyed start, very sure of itself
+    for k in range(1, 20):
+        t = k * 0.2
+        _still(ekf, t)
+        ekf.update_position(t, 40.0, 0.0, 1.0)  # the drone is really 40 m away
+    assert ekf.stats.positions_rejected == ekf.cfg.reinit_after - 1
+    assert ekf.latest.x == pytest.approx(40.0, abs=0.5)
+
+
+@pytest.mark.parametrize(
+    ("t", "x", "y", "sigma"), [(0.0, math.nan, 0.0, 1.0), (0.0, 0.0, 0.0, 0.0), (math.inf, 0, 0, 1)]
+)
+def test_a_bad_position_is_refused(t: float, x: float, y: float, sigma: float) -> None:
+    with pytest.raises(EstimatorError):
+        ExtendedKalmanFilter().update_position(t, x, y, sigma)
