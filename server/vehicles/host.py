@@ -75,9 +75,10 @@ class VehicleOptions:
     fingerprint: str | None = None  # wss:// central: or accept exactly this certificate
 
 
-def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
+def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = False) -> LinkSpec:
     """The topics and services a whole vehicle shares with the central server: an AR.Drone's
-    navdata and camera, or a MAVLink drone's ``/mavros/*`` topics (no camera over MAVLink)."""
+    navdata (and GPS navdata in a ``gps`` world) and camera, or a MAVLink drone's ``/mavros/*``
+    topics (no camera over MAVLink)."""
     from server.dialog.manager import INTERPRET, REPLY, STATE, UTTERANCE
     from server.fleet.messages import (
         FLEET_TOPIC,
@@ -88,7 +89,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
         STATUS_TYPE,
     )
     from server.mavros_node import MAVROS_LATCHED, MAVROS_TOPICS
-    from server.vehicle_node import EMPTY, IMAGE, MARKERS, NAVDATA, POSE, TASK, TWIST
+    from server.vehicle_node import EMPTY, IMAGE, MARKERS, NAVDATA, NAVDATA_GPS, POSE, TASK, TWIST
 
     p = prefix
     if mavlink:
@@ -99,6 +100,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
     else:
         drone = (
             TopicSpec(f"{p}/ardrone/navdata", NAVDATA),
+            *((TopicSpec(f"{p}/ardrone/navdata_gps", NAVDATA_GPS),) if gps else ()),
             TopicSpec(f"{p}/ardrone/image_raw/compressed", IMAGE),
         )
     out = (
@@ -213,7 +215,8 @@ class VehicleHost:
         vehicle, tasks = self.stack.vehicle, self.stack.tasks
         assert tasks is not None and self.stack.node is not None
         await self.stack.node.start()
-        spec = link_spec(self.name, o.prefix, mavlink=self.mavlink)
+        gps = getattr(self.world, "gps_origin", None) is not None
+        spec = link_spec(self.name, o.prefix, mavlink=self.mavlink, gps=gps)
         self.core = GraphLinkCore(self.graph, spec)
         self.link = GraphLink(
             o.central,

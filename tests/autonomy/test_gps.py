@@ -184,3 +184,77 @@ def test_fixes_that_keep_disagreeing_reinitialise_the_position() -> None:
 def test_a_bad_position_is_refused(t: float, x: float, y: float, sigma: float) -> None:
     with pytest.raises(EstimatorError):
         ExtendedKalmanFilter().update_position(t, x, y, sigma)
+
+
+def test_the_vehicle_publishes_navdata_gps_per_fix_with_ardrone_autonomy_fields() -> None:
+    import pymap3d
+
+    from server.graph import Graph
+    from server.vehicle_node import NAVDATA_GPS, VehicleNode
+    from tests.autonomy.flight import Flight
+
+    world = load_world("outdoor")
+    f = Flight.make(world, seed=4, camera=False)
+    g = Graph()
+    clock = f.rig.clock.now
+    node = VehicleNode(g, f.rig.vehicle, f.tm, "uav2", "/uav2", clock=clock, stamp=clock)
+    got: list[dict[str, object]] = []
+    g.subscribe("/uav2/ardrone/navdata_gps", got.append)
+    assert g.topic_type("/uav2/ardrone/navdata_gps") == NAVDATA_GPS
+    f.submit({"action": "takeoff"}, {"action": "goto", "waypoint": 2})
+    assert f.run_until_idle(60.0)
+    seconds = f.rig.clock.now()
+    assert 4.5 < len(got) / seconds < 5.5  # one message per fix, 5 Hz
+    last = got[-1]
+    assert (last["tag"], last["size"]) == (27, 216)
+    assert last["data_available"] == 1 and last["is_gps_plugged"] is True and last["nbsat"] == 9
+    assert len(last["channels"]) == 12 and last["channels"][0]["sat"] == 1  # type: ignore[arg-type,index]
+    o = world.gps_origin
+    assert o is not None
+    e, n, _ = pymap3d.geodetic2enu(
+        last["latitude"], last["longitude"], last["elevation"], o.lat_deg, o.lon_deg, o.alt_m
+    )
+    tr = f.rig.sim.truth
+    assert math.hypot(e - tr.x, n - tr.y) < 2.5  # the receiver's noise, 0.5 m per axis
+    node.close()
+    assert g.publishers("/uav2/ardrone/navdata_gps") == []
+
+
+def test_indoors_there_is_no_navdata_gps() -> None:
+    from server.graph import Graph
+    from server.vehicle_node import VehicleNode
+    from server.vehicles.host import link_spec
+    from tests.autonomy.flight import Flight
+
+    f = Flight.make(load_world("indoor"), seed=4, camera=False)
+    g = Graph()
+    VehicleNode(g, f.rig.vehicle, f.tm, "uav1", "", clock=f.rig.clock.now)
+    assert "/ardrone/navdata_gps" not in g.topics()
+    assert "/ardrone/navdata_gps" not in {t.name for t in link_spec("uav1", "").out_topics}
+    spec = link_spec("uav2", "/uav2", gps=True)
+    assert {t.name: t.type for t in spec.out_topics}["/uav2/ardrone/navdata_gps"] == (
+        "ardrone_autonomy/navdata_gps"
+    )
+
+
+def test_navdata_gps_has_a_ros1_definition_and_serialisation() -> None:
+    from server.ros1 import codec_for
+    from server.rosbridge.rosapi import full_text, typedefs
+    from server.vehicle_node import navdata_gps_message
+
+    text = full_text("ardrone_autonomy/navdata_gps")
+    assert text.startswith("std_msgs/Header header\nuint16 tag\nuint16 size\nfloat64 latitude")
+    assert "ardrone_autonomy/navdata_gps_channel[12] channels" in text
+    assert "MSG: ardrone_autonomy/navdata_gps_channel\nuint8 sat\nuint8 c_n0" in text
+    top = typedefs("ardrone_autonomy/navdata_gps")[0]
+    assert top["fieldarraylen"][top["fieldnames"].index("channels")] == 12
+    gps = Gps(36.3, 127.3, 61.0, 0.9, 1, nbsat=3, channels=((1, 40), (2, 39), (3, 38)))
+    msg = navdata_gps_message(gps, 1_700_000_000.25)
+    codec = codec_for("ardrone_autonomy/navdata_gps")
+    data = codec.encode(msg)
+    # Header (seq, stamp, frame id "ardrone_base_link"), tag and size, then the option's 212
+    # bytes less 3 for each of its three int32 booleans, one byte each in ROS 1
+    assert len(data) == (4 + 8 + 4 + 17) + 4 + 212 - 3 * 3
+    back = codec.decode(data)
+    assert back["latitude"] == 36.3 and back["nbsat"] == 3
+    assert back["channels"][2] == {"sat": 3, "c_n0": 38} and len(back["channels"]) == 12
