@@ -172,6 +172,10 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
         # The drone whose "Did you say …?" the console has open while another drone is
         # selected: a bare yes or no goes to it (server/dialog/manager.py), else "".
         ("asked_by", "string"),
+        # True on the copy a door that answers by itself (REST POST /command, POST /speech)
+        # publishes so that every input is on the graph and in the recording: no dialog acts
+        # on it (it has already had its answer).
+        ("answered", "bool"),
     ),
     "uav_console/Reply": (
         ("header", "std_msgs/Header"),

@@ -48,6 +48,7 @@ async def command(
         )
     # A stated confidence means recognised speech: below the threshold it is not executed.
     source = "speech" if "confidence" in body.model_fields_set else "rest"
+    runtime.note_utterance(body.text, source=source, confidence=body.confidence, drone=name)
     results = []
     for t in targets:
         try:

@@ -147,6 +147,8 @@ class BridgeSession:
         if self.security.needs_lease(key, service=False):
             self._ensure_lease(now, f"publish to {topic}")
         msg = check_message(type_name, op.msg, self.ctx.wall_clock())
+        if type_name == "uav_console/Utterance" and not msg.get("source"):
+            msg["source"] = "rosbridge"  # a client that does not say: the door it came through
         try:
             if key not in self.advertised or op.latch:
                 self.graph.advertise(key, type_name, latch=op.latch, owner=self.owner)
