@@ -3,6 +3,8 @@
 ::
 
     VehicleError
+    ├── CannotStart           the vehicle cannot start here (e.g. its simulator's address is
+    │                         taken): starting it again would fail the same way
     ├── LinkError             the vehicle link cannot be used (bad URL, closed)
     └── RemoteCallError       a call over the link was refused or not answered
         └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
@@ -13,6 +15,10 @@ from __future__ import annotations
 
 class VehicleError(Exception):
     """Base of this package's errors."""
+
+
+class CannotStart(VehicleError):
+    """The vehicle cannot start here; the message says why and what to change."""
 
 
 class LinkError(VehicleError):

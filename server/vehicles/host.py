@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import gc
 import json
 import logging
@@ -31,11 +32,12 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
+from drone.sim.errors import AddressInUse
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
 from server.tls import TLSError, server_context
 from server.vehicles import names
-from server.vehicles.errors import RemoteCallError, VehicleError
+from server.vehicles.errors import CannotStart, RemoteCallError, VehicleError
 from server.vehicles.link import GraphLink
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
 from server.vehicles.safety import SafetyPort, loopback_origin
@@ -488,7 +490,16 @@ async def run_vehicle(settings: Settings, options: VehicleOptions, token: str) -
     for sig in (signal.SIGTERM, signal.SIGINT):
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
-    await host.start()
+    try:
+        await host.start()
+    except OSError as exc:  # another console's simulator holds the address
+        if not isinstance(exc, AddressInUse) and exc.errno != errno.EADDRINUSE:
+            raise
+        why = str(exc) if isinstance(exc, AddressInUse) else f"an address is in use ({exc})"
+        raise CannotStart(
+            f"{options.name}: {why} (another console's simulator?); `serve --sim-addr` moves "
+            "this console's simulators"
+        ) from None
     # Startup objects (modules, the world, the stack) out of the cyclic collector: a full
     # collection then walks only what the flight made since, so it cannot stall the control
     # thread as one over everything did (74 ms, vs 2.7 ms frozen, in bench/isolation.py).
@@ -499,7 +510,7 @@ async def run_vehicle(settings: Settings, options: VehicleOptions, token: str) -
         gc.get_freeze_count(),
     )
     log.info("%s: vehicle up; safety port %s", options.name, host.safety.url)
-    pid_file = settings.data_dir / "vehicles" / f"{options.name}.pid"
+    pid_file = names.pid_dir(settings.data_dir, settings.port) / f"{options.name}.pid"
     with contextlib.suppress(OSError):  # lets a restarted serve find (and adopt) this vehicle
         pid_file.parent.mkdir(parents=True, exist_ok=True)
         pid_file.write_text(str(os.getpid()))

@@ -13,8 +13,9 @@ import os
 import sys
 
 from server.settings import Settings
-from server.vehicles.errors import VehicleError
+from server.vehicles.errors import CannotStart, VehicleError
 from server.vehicles.host import VehicleOptions, run_vehicle
+from server.vehicles.names import EXIT_CANNOT_START
 
 
 def whole_vehicle_main(args: argparse.Namespace) -> int:
@@ -43,6 +44,9 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
     )
     try:
         asyncio.run(run_vehicle(settings, options, token))
+    except CannotStart as exc:  # one line, no traceback: the operator can act on it
+        print(f"uav-console vehicle: {exc}", file=sys.stderr)
+        return EXIT_CANNOT_START
     except VehicleError as exc:
         print(f"uav-console vehicle: {exc}", file=sys.stderr)
         return 2
