@@ -78,7 +78,9 @@ def test_drone_2_fly_to_waypoint_3_reaches_it_and_says_so(tmp_path: Path) -> Non
             # the GPS of the flying drone, as a third party reads it
             url = f"ws://127.0.0.1:{srv.port}/rosbridge?token={TOKEN}"
             out = subprocess.run(
-                [node, "foxglove_client.mjs", "live", url, "3"],
+                # a GPS panel's subscription (every topic, cameras included, is
+                # tests/recorder/test_foxglove.py's)
+                [node, "foxglove_client.mjs", "live", url, "3", "/ardrone/navdata_gps$"],
                 cwd=NODE_DIR,
                 capture_output=True,
                 text=True,
