@@ -57,10 +57,6 @@ from drone.perception.markers import FrameResult, MarkerLocaliser, PerceptionWor
 __all__ = ["Commander", "MarkerSeen", "Setpoint", "Vehicle", "VehicleMode", "VehicleSnapshot"]
 
 FLYING_STATES = (CtrlState.FLYING, CtrlState.HOVERING, CtrlState.GOTOFIX)
-# A GPS fix's 1-σ per horizontal axis at HDOP 1: the u-blox 6 receivers' 2.5 m CEP (u-blox 6
-# GPS modules data sheet), CEP = 1.1774 σ for a circular normal error.
-GPS_SIGMA_M = 2.1
-GPS_MIN_HDOP = 0.5  # a reported HDOP below this is not believed (σ never under ~1 m)
 ALTITUDE_MAX_DEFAULT_MM = 3000  # control:altitude_max firmware default (ARDroneLib config_keys.h)
 
 
@@ -145,7 +141,7 @@ class VehicleSnapshot:
     estimator_disagreement: tuple[str, ...] = ()  # Estimate.disagreement
     estimator_reinits: int = 0  # EkfStats.navdata_reinits
     jog_limit: str = ""  # why the jog is being slowed/stopped near a limit ("" when it is not)
-    gps_age_s: float | None = None  # since the last GPS fix fused (None: never)
+    gps_age_s: float | None = None  # since the GPS option last carried a new fix (None: never)
 
     @property
     def yaw_deg(self) -> float:
@@ -211,8 +207,7 @@ class Vehicle:
         self._link_ok = False
         self._markers: tuple[MarkerSeen, ...] = ()
         self._last_marker_t: float | None = None
-        self._gps_origin = getattr(world, "gps_origin", None)
-        self._last_gps: tuple[float, float, float] | None = None
+        self._last_gps: tuple[float, float, float, int] | None = None
         self._last_gps_t: float | None = None
         self._last_result: FrameResult | None = None
         self._last_frame: np.ndarray | None = None
@@ -392,28 +387,21 @@ class Vehicle:
             )
         )
         if nav.gps is not None:
-            self._fuse_gps(nav.gps, now)
+            self._note_gps(nav.gps, now)
         for cb in self._nav_listeners:
             cb(nav, now)
 
-    def _fuse_gps(self, gps: Gps, now: float) -> None:
-        """A GPS option: its fix, when new and valid, into the EKF as a map-frame position.
-
-        The option repeats the receiver's last fix in every packet; only a changed one is a new
-        measurement (fusing repeats would count one fix many times)."""
-        origin = self._gps_origin
-        fix = (gps.latitude_deg, gps.longitude_deg, gps.elevation_m)
-        if origin is None or not gps.data_available or fix == self._last_gps:
+    def _note_gps(self, gps: Gps, now: float) -> None:
+        """A GPS option carrying a valid fix: when the receiver last gave one (the fleet's LTM
+        fuses the fixes into the EKF, ``server.fleet.ltm``; the ANS reads how fresh they are).
+        The option repeats the receiver's last fix in every packet: a new one has another time
+        stamp (``lastFrameTimestamp``) or position."""
+        fix = (gps.latitude_deg, gps.longitude_deg, gps.elevation_m, gps.last_frame_timestamp)
+        if not gps.data_available or fix == self._last_gps:
             return
-        if not all(math.isfinite(v) for v in (*fix, gps.hdop)):
-            return
-        self._last_gps = fix
-        import pymap3d  # only worlds with a GPS origin get here
-
-        e, n, _ = pymap3d.geodetic2enu(*fix, origin.lat_deg, origin.lon_deg, origin.alt_m)
-        sigma = max(gps.hdop, GPS_MIN_HDOP) * GPS_SIGMA_M
-        self.ekf.update_position(now, float(e), float(n), sigma)
-        self._last_gps_t = now
+        if all(math.isfinite(v) for v in fix):
+            self._last_gps = fix
+            self._last_gps_t = now
 
     def on_frame(self, frame: np.ndarray, t: float) -> None:
         """A camera frame captured at ``t``: to the worker thread if running, else processed now."""

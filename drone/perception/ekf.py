@@ -27,11 +27,6 @@ to know about a falling drone), so the fall is neither rejected, re-initialised 
 disagreement (the ANS said "estimate disagrees" after every emergency stop before).
 Marker update: z = [px, py, pz, ψ] from one marker's PnP pose,
 H linear, R from ``markers.py`` (grows with distance and viewing angle).
-Position update (GPS, outdoors): z = [px, py] in the map frame (the caller converts the fix to
-local ENU), H linear, R = σ²·I from the receiver's HDOP. It bounds the drift of dead reckoning
-far from the markers; it says nothing of the yaw, so it never makes the filter ``localised``
-(only a marker fix does). The first fix places an estimate that has never had a position; a fix
-gated out ``reinit_after`` times in a row re-initialises the position from it.
 
 Numerics: Joseph-form covariance update P = (I−KH)P(I−KH)ᵀ + KRKᵀ (stays symmetric positive
 definite in floating point; filterpy ``KalmanFilter.update`` does the same). Yaw innovations are
@@ -159,8 +154,6 @@ class EkfStats:
     fixes_too_old: int = 0
     fixes_late: int = 0
     reinitialisations: int = 0
-    positions_accepted: int = 0  # GPS (position) updates fused
-    positions_rejected: int = 0
     navdata_reinits: int = 0  # a navdata component re-initialised after persistent rejection
     navdata_component_rejects: dict[str, int] = field(default_factory=dict)  # by component
     last_nis: float = 0.0  # normalised innovation squared of the last marker fix
@@ -174,7 +167,6 @@ class _Entry:
     omega: float  # yaw rate in force after this event
     nav: NavdataInput | None  # the navdata event that produced this entry
     fix: tuple[MarkerFix, np.ndarray] | None = None  # or the marker fix (and its R)
-    position: tuple[float, float, float] | None = None  # or a position update (x, y, σ)
     nav_rejects: dict[str, int] = field(default_factory=dict)  # rejections in a row, then
 
 
@@ -197,8 +189,6 @@ class ExtendedKalmanFilter:
         self.last_fix_t: float | None = None
         self.stats = EkfStats()
         self._rejects_in_row = 0
-        self._position_rejects_in_row = 0
-        self.has_position = False  # a marker fix or a position update has placed the estimate
         self._nav_rejects_in_row = dict.fromkeys(NAV_COMPONENTS, 0)
         self._history: deque[_Entry] = deque()
         self._lock = threading.Lock()
@@ -224,7 +214,6 @@ class ExtendedKalmanFilter:
             self.x = np.array([x, y, z, wrap(yaw_rad), 0.0, 0.0, 0.0])
             self.P = np.diag([pos_sigma**2] * 3 + [yaw_sigma**2] + [0.01] * 3)
             self.localised = localised
-            self.has_position = self.has_position or localised
             self._history.clear()
             self._publish()
 
@@ -264,49 +253,6 @@ class ExtendedKalmanFilter:
             ok = self._fuse_fix(fix, R)
             self._publish()
             return ok
-
-    def update_position(self, t: float, x: float, y: float, sigma_m: float) -> bool:
-        """Fuse a planar map-frame position (a GPS fix) measured at ``t``, each axis with 1-σ
-        ``sigma_m``. A position older than the state is fused at the state's time (a GPS fix
-        comes with the navdata packet just fused). Returns True if accepted.
-
-        Raises:
-            EstimatorError: a value is NaN/Inf or ``sigma_m`` is not positive.
-        """
-        if not _finite(t, x, y, sigma_m) or sigma_m <= 0:
-            raise EstimatorError(f"position update must be finite with σ > 0: {(t, x, y, sigma_m)}")
-        with self._lock:
-            ok = self._apply_position(max(t, self.t), x, y, sigma_m)
-            if ok:
-                self.stats.positions_accepted += 1
-            else:
-                self.stats.positions_rejected += 1
-            self._remember(None, position=(x, y, sigma_m))
-            self._publish()
-            return ok
-
-    def _apply_position(self, t: float, x: float, y: float, sigma_m: float) -> bool:
-        if t > self.t:
-            self._predict(t - self.t, self.omega)
-            self.t = t
-        idx = [IX, IY]
-        R = np.eye(2) * sigma_m**2
-        if self.has_position:
-            H = np.zeros((2, NX))  # the fix observes the planar position directly
-            H[0, IX] = H[1, IY] = 1.0
-            ok, _ = self._update(np.array([x, y]) - H @ self.x, H, R, gate=True)
-            self._position_rejects_in_row = 0 if ok else self._position_rejects_in_row + 1
-            if ok or self._position_rejects_in_row < self.cfg.reinit_after:
-                return ok
-            self.stats.reinitialisations += 1
-        # no position yet, or the fixes keep disagreeing: the estimate is what is wrong
-        self.x[idx] = [x, y]
-        self.P[idx, :] = 0.0
-        self.P[:, idx] = 0.0
-        self.P[np.ix_(idx, idx)] = R
-        self.has_position = True
-        self._position_rejects_in_row = 0
-        return True
 
     def predict_to(self, t: float) -> None:
         """Propagate the state to ``t`` without a measurement (e.g. for a telemetry stamp)."""
@@ -494,7 +440,6 @@ class ExtendedKalmanFilter:
         self.P[:, idx] = 0.0
         self.P[np.ix_(idx, idx)] = R
         self.localised = True
-        self.has_position = True
         self._rejects_in_row = 0
 
     def _fuse_fix(self, fix: MarkerFix, R: np.ndarray) -> bool:
@@ -528,9 +473,6 @@ class ExtendedKalmanFilter:
                 self._remember(e.nav)
             elif e.fix is not None:
                 self._after_fix(e.fix[0], self._apply_fix(*e.fix), count=False)
-            elif e.position is not None:
-                self._apply_position(e.t, *e.position)
-                self._remember(None, position=e.position)
         return ok
 
     def _after_fix(self, fix: MarkerFix, ok: bool, count: bool = True) -> None:
@@ -542,11 +484,7 @@ class ExtendedKalmanFilter:
         self._remember(None, (fix, np.asarray(fix.R, dtype=float)))
 
     def _remember(
-        self,
-        nav: NavdataInput | None,
-        fix: tuple[MarkerFix, np.ndarray] | None = None,
-        *,
-        position: tuple[float, float, float] | None = None,
+        self, nav: NavdataInput | None, fix: tuple[MarkerFix, np.ndarray] | None = None
     ) -> None:
         self._history.append(
             _Entry(
@@ -556,8 +494,7 @@ class ExtendedKalmanFilter:
                 self.omega,
                 nav,
                 fix,
-                position=position,
-                nav_rejects=dict(self._nav_rejects_in_row),
+                dict(self._nav_rejects_in_row),
             )
         )
         while self._history and self._history[0].t < self.t - self.cfg.history_s:

@@ -74,12 +74,12 @@ class SimConfig:
     ground_temperature_c: float | None = None
     pressure_noise_pa: float = 10.0  # Parrot's AR.Drone 2.0 spec: pressure sensor ±10 Pa
     temperature_noise_c: float = 0.1
-    # The GPS receiver (AR.Drone Flight Recorder): a new fix at this rate (u-blox default
-    # navigation rate, 1-5 Hz), each with white noise of this 1-σ per horizontal axis (less than
-    # a lone receiver's ~2 m: the fixes of one flight here are independent, so the noise is a
-    # stand-in, not a model of multipath or atmospheric bias).
+    # The GPS receiver (AR.Drone Flight Recorder): a new fix at this rate (u-blox receivers
+    # compute 1-5 fixes a second), each with white noise of this 1-σ per horizontal axis. The
+    # fixes are exact by default: the estimator's GPS update already assumes a real receiver's
+    # σ (server/fleet/accuracy.py), and the lockstep experiments stay comparable.
     gps_rate_hz: float = 5.0
-    gps_noise_m: float = 0.5
+    gps_noise_m: float = 0.0
     gps_satellites: int = 9
 
 
@@ -404,7 +404,7 @@ class SimDrone:
         e, n = b.x + rng.normal(0.0, c.gps_noise_m), b.y + rng.normal(0.0, c.gps_noise_m)
         u = b.z + rng.normal(0.0, 1.5 * c.gps_noise_m)  # vertical error ~1.5× horizontal
         lat, lon, alt = pymap3d.enu2geodetic(e, n, u, o.lat_deg, o.lon_deg, o.alt_m)
-        # Dilutions of a good open-sky geometry; accuracy estimates from the noise itself.
+        # Dilutions of a good open-sky geometry; accuracy estimates from the configured noise.
         hdop, vdop = 0.9, 1.4
         sats = max(0, min(c.gps_satellites, 12))
         cn0 = 38.0 + 0.5 * sats  # dB-Hz, a clear sky's strong signals
