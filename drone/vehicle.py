@@ -44,6 +44,7 @@ from drone.ardrone.navdata import (
     TAG_PRESSURE_RAW,
     CtrlState,
     DroneState,
+    Gps,
     Navdata,
 )
 from drone.control.clock import Clock, MonotonicClock
@@ -141,6 +142,7 @@ class VehicleSnapshot:
     estimator_reinits: int = 0  # EkfStats.navdata_reinits
     jog_limit: str = ""  # why the jog is being slowed/stopped near a limit ("" when it is not)
     navdata_doubt: str = ""  # why the driver doubts the navdata ("" while it trusts it)
+    gps_age_s: float | None = None  # since the GPS option last carried a new fix (None: never)
 
     @property
     def yaw_deg(self) -> float:
@@ -207,6 +209,8 @@ class Vehicle:
         self._link_ok = False
         self._markers: tuple[MarkerSeen, ...] = ()
         self._last_marker_t: float | None = None
+        self._last_gps: tuple[float, float, float, int] | None = None
+        self._last_gps_t: float | None = None
         self._last_result: FrameResult | None = None
         self._last_frame: np.ndarray | None = None
         self._last_cmd: PcmdCommand | None = None
@@ -388,8 +392,22 @@ class Vehicle:
                 unpowered,
             )
         )
+        if nav.gps is not None:
+            self._note_gps(nav.gps, now)
         for cb in self._nav_listeners:
             cb(nav, now)
+
+    def _note_gps(self, gps: Gps, now: float) -> None:
+        """A GPS option carrying a valid fix: when the receiver last gave one (the fleet's LTM
+        fuses the fixes into the EKF, ``server.fleet.ltm``; the ANS reads how fresh they are).
+        The option repeats the receiver's last fix in every packet: a new one has another time
+        stamp (``lastFrameTimestamp``) or position."""
+        fix = (gps.latitude_deg, gps.longitude_deg, gps.elevation_m, gps.last_frame_timestamp)
+        if not gps.data_available or fix == self._last_gps:
+            return
+        if all(math.isfinite(v) for v in fix):
+            self._last_gps = fix
+            self._last_gps_t = now
 
     def on_frame(self, frame: np.ndarray, t: float) -> None:
         """A camera frame captured at ``t``: to the worker thread if running, else processed now."""
@@ -550,6 +568,7 @@ class Vehicle:
             estimator_reinits=self.ekf.stats.navdata_reinits,
             jog_limit=self._jog_limit if self._mode is VehicleMode.MANUAL else "",
             navdata_doubt=self._navdata_doubt,
+            gps_age_s=None if self._last_gps_t is None else max(0.0, now - self._last_gps_t),
         )
 
     def overlay(self, lines: tuple[str, ...] = ()) -> np.ndarray | None:

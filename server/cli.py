@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import os
 import subprocess
 import sys
@@ -43,6 +44,12 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--cert", type=Path, default=None, help="TLS certificate (PEM) for HTTPS")
     s.add_argument("--key", type=Path, default=None, help="its private key (PEM)")
     s.add_argument("--no-tls", action="store_true", help="plain HTTP even on a non-loopback --host")
+    s.add_argument(
+        "--sim-addr",
+        default=None,
+        help="the first simulated drone's loopback address (default 127.0.0.2, or the next "
+        "free one when another console has it; env UAVC_SIM_BASE_ADDR)",
+    )
     s.add_argument(
         "--vehicles",
         choices=("inline", "process"),
@@ -247,6 +254,7 @@ def _serve(args: argparse.Namespace) -> int:
         bus_listen=tuple(args.bus_listen) if args.bus_listen else None,
         bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
         fleet_name=args.fleet_name,
+        sim_base_addr=args.sim_addr,
     )
     if settings.recognizer not in ("server", "browser", "auto"):
         raise SettingsError(
@@ -254,8 +262,16 @@ def _serve(args: argparse.Namespace) -> int:
         )
     from server.mavlink_stack import drone_kind, is_mavlink
 
-    for index in range(max(1, settings.fleet)):  # a bad connection string: refused up front
-        is_mavlink(drone_kind(settings.drone, index))
+    kinds = [drone_kind(settings.drone, i) for i in range(max(1, settings.fleet))]
+    for kind in kinds:  # a bad connection string: refused up front
+        is_mavlink(kind)
+    if settings.drone != "none":  # simulators on addresses nobody else holds (module simaddr)
+        from server.simaddr import choose_sim_base
+
+        choice = choose_sim_base(settings, kinds, fixed=args.sim_addr is not None)
+        if choice.note:
+            print(f"uav-console: {choice.note}", flush=True)
+            settings = dataclasses.replace(settings, sim_base_addr=choice.base)
     from server.tls import TLSError, tls_for
 
     try:

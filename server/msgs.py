@@ -101,6 +101,52 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
         ("tags_distance", "float32[]"),
         ("tm", "float32"),
     ),
+    # ardrone_autonomy's navdata_gps.msg and navdata_gps_channel.msg (AutonomyLab/
+    # ardrone_autonomy): the AR.Drone's GPS navdata option (tag 27), field for field.
+    "ardrone_autonomy/navdata_gps_channel": (("sat", "uint8"), ("c_n0", "uint8")),
+    "ardrone_autonomy/navdata_gps": (
+        ("header", "std_msgs/Header"),
+        ("tag", "uint16"),
+        ("size", "uint16"),
+        ("latitude", "float64"),
+        ("longitude", "float64"),
+        ("elevation", "float64"),
+        ("hdop", "float64"),
+        ("data_available", "uint32"),
+        ("zero_validated", "bool"),
+        ("wpt_validated", "bool"),
+        ("lat0", "float64"),
+        ("long0", "float64"),
+        ("lat_fused", "float64"),
+        ("long_fused", "float64"),
+        ("gps_state", "uint32"),
+        ("X_traj", "float32"),
+        ("X_ref", "float32"),
+        ("Y_traj", "float32"),
+        ("Y_ref", "float32"),
+        ("theta_p", "float32"),
+        ("phi_p", "float32"),
+        ("theta_i", "float32"),
+        ("phi_i", "float32"),
+        ("theta_d", "float32"),
+        ("phi_d", "float32"),
+        ("vdop", "float64"),
+        ("pdop", "float64"),
+        ("speed", "float32"),
+        ("lastFrameTimestamp", "uint32"),
+        ("degree", "float32"),
+        ("degree_magnetic", "float32"),
+        ("ehpe", "float32"),
+        ("ehve", "float32"),
+        ("c_n0", "float32"),
+        ("nbsat", "uint32"),
+        ("channels", "ardrone_autonomy/navdata_gps_channel[12]"),
+        ("is_gps_plugged", "bool"),
+        ("ephemerisStatus", "uint32"),
+        ("vx_traj", "float32"),
+        ("vy_traj", "float32"),
+        ("firmwareStatus", "uint32"),
+    ),
     "uav_console/Marker": (
         ("id", "int32"),
         ("pose", "geometry_msgs/Pose"),
@@ -126,6 +172,10 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
         # The drone whose "Did you say …?" the console has open while another drone is
         # selected: a bare yes or no goes to it (server/dialog/manager.py), else "".
         ("asked_by", "string"),
+        # True on the copy a door that answers by itself (REST POST /command, POST /speech)
+        # publishes so that every input is on the graph and in the recording: no dialog acts
+        # on it (it has already had its answer).
+        ("answered", "bool"),
     ),
     "uav_console/Reply": (
         ("header", "std_msgs/Header"),
@@ -187,12 +237,25 @@ def base_type(field_type: str) -> str:
     return field_type.split("[", 1)[0]
 
 
+def array_length(field_type: str) -> int:
+    """rosapi's ``fieldarraylen``: -1 for a scalar, 0 for a variable-length array, N for
+    ``T[N]``."""
+    if not is_array(field_type):
+        return -1
+    inner = field_type[len(base_type(field_type)) + 1 : -1]
+    return int(inner) if inner else 0
+
+
 def default_message(type_name: str) -> dict[str, Any]:
-    """A message of ``type_name`` with every field at its ROS default."""
+    """A message of ``type_name`` with every field at its ROS default (a fixed-size array
+    holds its N defaults)."""
     out: dict[str, Any] = {}
     for name, ftype in MESSAGES.get(type_name, ()):
         if is_array(ftype):
-            out[name] = []
+            base = base_type(ftype)
+            item = PRIMITIVES.get(base)
+            n = array_length(ftype)
+            out[name] = [item if base in PRIMITIVES else default_message(base) for _ in range(n)]
         elif ftype in PRIMITIVES:
             out[name] = PRIMITIVES[ftype]
         else:

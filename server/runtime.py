@@ -29,7 +29,7 @@ from server.captioner.grounding import SeenMarker, ground_marker_ids, seen_marke
 from server.captioner.service import NOTHING, load_captioner, unavailable_text
 from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
 from server.dialog.addressing import parse_address
-from server.dialog.manager import DialogManager
+from server.dialog.manager import UTTERANCE, DialogManager
 from server.fleet.service import FleetService
 from server.graph import Graph
 from server.language.nlu import default_nlu
@@ -50,6 +50,7 @@ from server.vehicle_node import VehicleNode
 from server.vehicles.central import VehicleCentral
 from server.vehicles.stops import StopLedger
 
+UTTERANCE_TYPE = "uav_console/Utterance"
 log = logging.getLogger("uav_console")
 
 
@@ -378,6 +379,21 @@ class Runtime:
         if isinstance(self._captioner, CaptionerUnavailable):
             return unavailable_text(self._captioner.reason)
         return "ready"
+
+    def note_utterance(self, text: str, *, source: str, confidence: float, drone: str) -> None:
+        """Publish an operator's sentence that came through a door answering it by itself
+        (REST ``POST /command``, ``POST /speech``) on ``/console/utterance``, marked
+        ``answered`` so no dialog acts on it again: every input, whatever its door, is on the
+        graph and in the flight recording, just before its reply (DESIGN §4)."""
+        msg = {
+            "text": text,
+            "confidence": confidence if math.isfinite(confidence) else 0.0,
+            "source": source,
+            "drone": drone,
+            "asked_by": "",
+            "answered": True,
+        }
+        self.graph.publish(UTTERANCE, msg, type=UTTERANCE_TYPE)
 
     def interpret(self, text: str, state: str | None) -> list[dict[str, Any]]:
         """NLU only (raises ``UnknownStateError``, a ``KeyError``, for an unknown state)."""

@@ -5,6 +5,9 @@ Publishes (a fleet prefixes ``/NAME``, e.g. ``/uav2/ardrone/navdata``):
 - ``/ardrone/navdata`` (ardrone_autonomy/Navdata) at the navdata rate, converted as
   ardrone_autonomy does: state = major ctrl_state, rotX = phi/1000, rotY = −theta/1000,
   rotZ = −psi/1000 (degrees), altd mm, vx, vy = −vy, vz = −vz (mm/s), tm µs;
+- ``/ardrone/navdata_gps`` (ardrone_autonomy/navdata_gps) in a world with a GPS origin: the
+  navdata's GPS option field for field, once per new fix and at least every second while the
+  option comes (the option repeats the receiver's last fix in every navdata packet);
 - ``/ardrone/image_raw/compressed`` (sensor_msgs/CompressedImage): JPEG of the camera with the
   tracking overlay, at most ``image_hz`` (15); ``data`` is base64 text (rosbridge's JSON form of
   ``uint8[]``);
@@ -44,7 +47,7 @@ from typing import Any
 
 import cv2
 
-from drone.ardrone.navdata import Navdata, ros_navdata_fields
+from drone.ardrone.navdata import GPS_SIZE, TAG_GPS, Gps, Navdata, ros_navdata_fields
 from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, ReportGate, label
 from drone.perception.markers import FrameResult
 from server import deadlines
@@ -54,6 +57,8 @@ from server.msgs import header
 log = logging.getLogger(__name__)
 
 NAVDATA = "ardrone_autonomy/Navdata"
+NAVDATA_GPS = "ardrone_autonomy/navdata_gps"
+GPS_REPEAT_S = 1.0  # an unchanged fix is published again after this long
 IMAGE = "sensor_msgs/CompressedImage"
 POSE = "geometry_msgs/PoseStamped"
 MARKERS = "uav_console/MarkerArray"
@@ -65,6 +70,54 @@ EMPTY = "std_msgs/Empty"
 def navdata_message(nav: Navdata, stamp_s: float, t_s: float) -> dict[str, Any]:
     """ardrone_autonomy/Navdata from a decoded packet (conversions in the module docstring)."""
     return {"header": header("ardrone_base_link", stamp_s), **ros_navdata_fields(nav, t_s * 1e6)}
+
+
+def navdata_gps_message(gps: Gps, stamp_s: float) -> dict[str, Any]:
+    """ardrone_autonomy/navdata_gps from a decoded GPS option (names as its navdata_gps.msg)."""
+    g = gps
+    return {
+        "header": header("ardrone_base_link", stamp_s),
+        "tag": TAG_GPS,
+        "size": GPS_SIZE,
+        "latitude": g.latitude_deg,
+        "longitude": g.longitude_deg,
+        "elevation": g.elevation_m,
+        "hdop": g.hdop,
+        "data_available": g.data_available,
+        "zero_validated": bool(g.zero_validated),
+        "wpt_validated": bool(g.wpt_validated),
+        "lat0": g.lat0_deg,
+        "long0": g.long0_deg,
+        "lat_fused": g.lat_fused_deg,
+        "long_fused": g.long_fused_deg,
+        "gps_state": g.gps_state,
+        "X_traj": g.x_traj,
+        "X_ref": g.x_ref,
+        "Y_traj": g.y_traj,
+        "Y_ref": g.y_ref,
+        "theta_p": g.theta_p,
+        "phi_p": g.phi_p,
+        "theta_i": g.theta_i,
+        "phi_i": g.phi_i,
+        "theta_d": g.theta_d,
+        "phi_d": g.phi_d,
+        "vdop": g.vdop,
+        "pdop": g.pdop,
+        "speed": g.speed_m_s,
+        "lastFrameTimestamp": g.last_frame_timestamp,
+        "degree": g.degree,
+        "degree_magnetic": g.degree_magnetic,
+        "ehpe": g.ehpe_m,
+        "ehve": g.ehve_m,
+        "c_n0": g.c_n0,
+        "nbsat": g.nbsat,
+        "channels": [{"sat": sat, "c_n0": cn0} for sat, cn0 in g.channels],
+        "is_gps_plugged": bool(g.is_gps_plugged),
+        "ephemerisStatus": g.ephemeris_status,
+        "vx_traj": g.vx_traj,
+        "vy_traj": g.vy_traj,
+        "firmwareStatus": g.firmware_status,
+    }
 
 
 def _quat_yaw(yaw: float) -> dict[str, float]:
@@ -119,6 +172,7 @@ class VehicleNode:
             k: self._name(v)
             for k, v in {
                 "navdata": "/ardrone/navdata",
+                "navdata_gps": "/ardrone/navdata_gps",
                 "image": "/ardrone/image_raw/compressed",
                 "pose": "/uav/pose",
                 "markers": "/uav/markers",
@@ -135,6 +189,9 @@ class VehicleNode:
         self._last_operator: float | None = None
         self._last_task: tuple[Any, ...] | None = None
         self._last_image_t = -math.inf
+        # a world with a GPS origin asks the drone for the GPS option (drone.vehicle)
+        self.gps = getattr(getattr(vehicle, "world", None), "gps_origin", None) is not None
+        self._last_gps: tuple[Gps, float] | None = None  # (published option, when)
         self._last_image_frame = -1
         # (frame count, JPEG) of the last image published; the MJPEG route serves it too
         self.latest_jpeg: tuple[int, bytes | None] = (-1, None)
@@ -152,6 +209,8 @@ class VehicleNode:
     def _advertise(self) -> None:
         g, o, t = self.graph, self.owner, self.topic
         g.advertise(t["navdata"], NAVDATA, owner=o)
+        if self.gps:
+            g.advertise(t["navdata_gps"], NAVDATA_GPS, owner=o)
         g.advertise(t["image"], IMAGE, owner=o)
         g.advertise(t["pose"], POSE, owner=o)
         g.advertise(t["markers"], MARKERS, owner=o)
@@ -175,6 +234,8 @@ class VehicleNode:
         self._subs = []
         for topic in ("navdata", "image", "pose", "markers", "task"):
             self.graph.unadvertise(self.topic[topic], self.owner)
+        if self.gps:
+            self.graph.unadvertise(self.topic["navdata_gps"], self.owner)
 
     # ------------------------------------------------------------------ inputs
     def operator_heartbeat(self) -> None:
@@ -273,6 +334,11 @@ class VehicleNode:
             return
         stamp = self.stamp()
         self.graph.publish(self.topic["navdata"], navdata_message(nav, stamp, now))
+        if self.gps and nav.gps is not None:
+            last = self._last_gps
+            if last is None or last[0] != nav.gps or now - last[1] >= GPS_REPEAT_S:
+                self._last_gps = (nav.gps, now)
+                self.graph.publish(self.topic["navdata_gps"], navdata_gps_message(nav.gps, stamp))
         est = self.vehicle.estimate
         self.graph.publish(
             self.topic["pose"],

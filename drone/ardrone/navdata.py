@@ -10,7 +10,8 @@ Options decoded here: demo (tag 0, 148 bytes, ``navdata_demo_t``), raw pressure 
 the barometer's compensated temperature in 0.1 °C and pressure in Pa, which ardrone_autonomy
 copies into ``temp`` and ``pressure``), GPS (tag 27, 216 bytes, the
 firmware 2.4 layout used by ardrone_autonomy's ``gps`` branch: float64 latitude, longitude,
-elevation, hdop, u32 data_available, rest opaque) and the checksum. Unknown options are skipped
+elevation, hdop, u32 data_available, then the rest of ``navdata_gps_t``: see :class:`Gps`) and
+the checksum. Unknown options are skipped
 by their size and kept raw so that encode(decode(x)) == x.
 
 Raw AR.Drone values (millidegrees, psi clockwise, vy right, vz down) stay inside this module;
@@ -23,7 +24,7 @@ from __future__ import annotations
 import enum
 import math
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from drone.ardrone.errors import (
@@ -50,9 +51,12 @@ _OPTION = struct.Struct("<HH")
 # vx, vy, vz, num_frames; then deprecated detection/drone camera fields (9+3 f32, 2 u32, 9+3 f32).
 _DEMO = struct.Struct("<IIfffifffI")
 _DEMO_PAD = DEMO_SIZE - _OPTION.size - _DEMO.size  # 104 bytes of deprecated camera fields
-_GPS = struct.Struct("<ddddI")
+# navdata_gps_t after tag/size, in the field order of ardrone_autonomy's navdata_gps.msg with
+# ARDroneLib's types (packed; bool_t is int32): 212 bytes, the option's 216 less tag and size.
+_GPS = struct.Struct("<ddddIIIddddI10fddfIfffffI24BIIffI")
+GPS_CHANNELS = 12  # navdata_gps_channel[12]: (satellite id, C/N0) of each receiver channel
 _PRESSURE = struct.Struct("<ihii")  # up, ut, Temperature_meas, Pression_meas
-_GPS_PAD = GPS_SIZE - _OPTION.size - _GPS.size
+assert _GPS.size == GPS_SIZE - _OPTION.size
 _CKS = struct.Struct("<HHI")
 
 
@@ -139,13 +143,83 @@ class Demo:
 
 @dataclass(frozen=True)
 class Gps:
-    """First fields of the firmware-2.4 GPS option (tag 27); the rest of its 216 bytes are zero."""
+    """The firmware-2.4 GPS option (tag 27, ``navdata_gps_t``), field for field as
+    ardrone_autonomy's ``navdata_gps`` message names them (snake case, units where they help).
+
+    The fix first (position, dilutions, speed, course, accuracy estimates, satellites); the
+    ``*_traj``, ``*_ref`` and PID terms are the firmware's own GPS flight controller's, zero
+    unless it flies a GPS flight plan. ``channels``: (satellite id, C/N0 dB-Hz) per channel.
+    """
 
     latitude_deg: float
     longitude_deg: float
     elevation_m: float
     hdop: float = 1.0
     data_available: int = 1
+    zero_validated: int = 0
+    wpt_validated: int = 0
+    lat0_deg: float = 0.0
+    long0_deg: float = 0.0
+    lat_fused_deg: float = 0.0
+    long_fused_deg: float = 0.0
+    gps_state: int = 0
+    x_traj: float = 0.0
+    x_ref: float = 0.0
+    y_traj: float = 0.0
+    y_ref: float = 0.0
+    theta_p: float = 0.0
+    phi_p: float = 0.0
+    theta_i: float = 0.0
+    phi_i: float = 0.0
+    theta_d: float = 0.0
+    phi_d: float = 0.0
+    vdop: float = 0.0
+    pdop: float = 0.0
+    speed_m_s: float = 0.0
+    last_frame_timestamp: int = 0
+    degree: float = 0.0  # course over ground, degrees clockwise from north
+    degree_magnetic: float = 0.0
+    ehpe_m: float = 0.0  # estimated horizontal position error
+    ehve_m: float = 0.0  # estimated vertical position error
+    c_n0: float = 0.0  # signal to noise ratio, mean of the four best satellites (dB-Hz)
+    nbsat: int = 0  # satellites acquired
+    channels: tuple[tuple[int, int], ...] = ()
+    is_gps_plugged: int = 0
+    ephemeris_status: int = 0
+    vx_traj: float = 0.0
+    vy_traj: float = 0.0
+    firmware_status: int = 0
+
+    def __post_init__(self) -> None:
+        """Channels as the option holds them: 12, the unused ones (0, 0).
+
+        Raises:
+            ValueError: more than 12 channels.
+        """
+        if len(self.channels) > GPS_CHANNELS:
+            raise ValueError(f"a GPS option has {GPS_CHANNELS} channels, got {len(self.channels)}")
+        pad = ((0, 0),) * (GPS_CHANNELS - len(self.channels))
+        object.__setattr__(self, "channels", tuple(tuple(c) for c in self.channels) + pad)
+
+    def pack(self) -> bytes:
+        """The option's payload (after tag and size)."""
+        flat = [v for pair in self.channels for v in pair]
+        vals = [getattr(self, f.name) for f in fields(self) if f.name != "channels"]
+        head, tail = vals[:_GPS_CHANNELS_AT], vals[_GPS_CHANNELS_AT:]
+        return _GPS.pack(*head, *flat, *tail)
+
+    @classmethod
+    def unpack(cls, data: bytes, offset: int) -> Gps:
+        vals = _GPS.unpack_from(data, offset)
+        at, end = _GPS_CHANNELS_AT, _GPS_CHANNELS_AT + 2 * GPS_CHANNELS
+        chans = vals[at:end]
+        pairs = tuple((chans[2 * i], chans[2 * i + 1]) for i in range(GPS_CHANNELS))
+        names = [f.name for f in fields(cls) if f.name != "channels"]
+        kw = dict(zip(names, vals[:at] + vals[end:], strict=True))
+        return cls(**kw, channels=pairs)
+
+
+_GPS_CHANNELS_AT = 32  # index of the first channel byte among the unpacked values
 
 
 @dataclass(frozen=True)
@@ -303,10 +377,7 @@ def encode_navdata(nav: Navdata) -> bytes:
     if nav.gps is not None:
         g = nav.gps
         parts.append(_OPTION.pack(TAG_GPS, GPS_SIZE))
-        parts.append(
-            _GPS.pack(g.latitude_deg, g.longitude_deg, g.elevation_m, g.hdop, g.data_available)
-        )
-        parts.append(bytes(_GPS_PAD))
+        parts.append(g.pack())
     for tag, payload in nav.unknown:
         parts.append(_OPTION.pack(tag, len(payload) + _OPTION.size))
         parts.append(payload)
@@ -360,7 +431,7 @@ def decode_navdata(data: bytes) -> Navdata:
         elif tag == TAG_PRESSURE_RAW and size == PRESSURE_SIZE:
             pressure = PressureRaw(*_PRESSURE.unpack_from(data, offset + 4))
         elif tag == TAG_GPS and size == GPS_SIZE:
-            gps = Gps(*_GPS.unpack_from(data, offset + 4))
+            gps = Gps.unpack(data, offset + 4)
         else:
             # Tag 27 is also ZIMMU_3000 on firmware < 2.4 (navdata_keys.h); any other size there
             # is that option, skipped like every unknown one.

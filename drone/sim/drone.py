@@ -74,6 +74,13 @@ class SimConfig:
     ground_temperature_c: float | None = None
     pressure_noise_pa: float = 10.0  # Parrot's AR.Drone 2.0 spec: pressure sensor ±10 Pa
     temperature_noise_c: float = 0.1
+    # The GPS receiver (AR.Drone Flight Recorder): a new fix at this rate (u-blox receivers
+    # compute 1-5 fixes a second), each with white noise of this 1-σ per horizontal axis. The
+    # fixes are exact by default: the estimator's GPS update already assumes a real receiver's
+    # σ (server/fleet/accuracy.py), and the lockstep experiments stay comparable.
+    gps_rate_hz: float = 5.0
+    gps_noise_m: float = 0.0
+    gps_satellites: int = 9
 
 
 @dataclass(frozen=True)
@@ -150,6 +157,9 @@ class SimDrone:
         self.rng = np.random.default_rng(self.config.seed)
         # its own stream: asking for the barometer does not change the other sensors' noise
         self._baro_rng = np.random.default_rng([self.config.seed, TAG_PRESSURE_RAW])
+        self._gps_rng = np.random.default_rng([self.config.seed, TAG_GPS])
+        self._gps_fix: Gps | None = None  # the receiver's last fix, held until the next one
+        self._gps_next_t = 0.0  # when the receiver has its next fix (a fixed grid of epochs)
         self.time = 0.0
         self.settings: dict[str, str] = {}
         self.rejected_at = 0  # malformed AT datagrams ignored
@@ -379,14 +389,46 @@ class SimDrone:
         return PressureRaw(up=0, ut=0, temperature_dc=round(temp * 10.0), pressure_pa=round(p))
 
     def _gps_option(self) -> Gps | None:
+        """The receiver's latest fix: a new one every ``1 / gps_rate_hz`` s of simulated time
+        (the option repeats it between fixes, as the drone does), at the true position plus
+        the configured noise; ground speed and course from the true velocity."""
         o = self.gps_origin
         if o is None:
             return None
+        c = self.config
+        if self._gps_fix is not None and self.time < self._gps_next_t:
+            return self._gps_fix
         import pymap3d  # only worlds with a GPS origin need it
 
-        b = self.physics.body
-        lat, lon, alt = pymap3d.enu2geodetic(b.x, b.y, b.z, o.lat_deg, o.lon_deg, o.alt_m)
-        return Gps(float(lat), float(lon), float(alt), hdop=1.0, data_available=1)
+        b, rng = self.physics.body, self._gps_rng
+        e, n = b.x + rng.normal(0.0, c.gps_noise_m), b.y + rng.normal(0.0, c.gps_noise_m)
+        u = b.z + rng.normal(0.0, 1.5 * c.gps_noise_m)  # vertical error ~1.5× horizontal
+        lat, lon, alt = pymap3d.enu2geodetic(e, n, u, o.lat_deg, o.lon_deg, o.alt_m)
+        # Dilutions of a good open-sky geometry; accuracy estimates from the configured noise.
+        hdop, vdop = 0.9, 1.4
+        sats = max(0, min(c.gps_satellites, 12))
+        cn0 = 38.0 + 0.5 * sats  # dB-Hz, a clear sky's strong signals
+        period = 1.0 / c.gps_rate_hz
+        self._gps_next_t = (math.floor(self.time / period) + 1) * period
+        self._gps_fix = Gps(
+            float(lat),
+            float(lon),
+            float(alt),
+            hdop=hdop,
+            data_available=1,
+            vdop=vdop,
+            pdop=math.hypot(hdop, vdop),
+            speed_m_s=math.hypot(b.vx, b.vy),
+            last_frame_timestamp=int(self.time * 1000.0) & 0xFFFFFFFF,
+            degree=math.degrees(math.atan2(b.vx, b.vy)) % 360.0,  # clockwise from north
+            ehpe_m=math.sqrt(2.0) * c.gps_noise_m,
+            ehve_m=1.5 * c.gps_noise_m,
+            c_n0=cn0,
+            nbsat=sats,
+            channels=tuple((k + 1, round(cn0) - k % 4) for k in range(sats)),
+            is_gps_plugged=1,
+        )
+        return self._gps_fix
 
     # ---------------------------------------------------------------- truth and faults
     @property

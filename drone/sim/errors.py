@@ -4,7 +4,8 @@
 
     SimError
     ├── FaultError (ValueError)     inject_fault() with an unknown kind or bad parameters
-    └── SimConfigError (ValueError) bad simulator construction (bounds, start pose, speed, ports)
+    ├── SimConfigError (ValueError) bad simulator construction (bounds, start pose, speed, ports)
+    └── AddressInUse (OSError)      a simulator's socket is already bound (another simulator)
 
 World files raise ``drone.sim.world.WorldError`` (a ``ValueError``) — owned by the world module.
 """
@@ -22,3 +23,8 @@ class FaultError(SimError, ValueError):
 
 class SimConfigError(SimError, ValueError):
     """The simulator was constructed with values it cannot use."""
+
+
+class AddressInUse(SimError, OSError):
+    """A socket the simulator binds is already in use on its address (most often another
+    console's simulator); the message names the address, the port and the protocol."""

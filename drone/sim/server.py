@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import math
 import socket
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from drone.sim.drone import SimDrone, Truth
-from drone.sim.errors import SimConfigError
+from drone.sim.errors import AddressInUse, SimConfigError
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +53,34 @@ def loopback_usable(addr: str) -> bool:
         except OSError:
             return False
     return True
+
+
+def in_use(addr: str, sockets: list[tuple[str, int]]) -> str | None:
+    """Which of ``sockets`` (("udp" | "tcp", port)) cannot be bound on ``addr`` now because it
+    is in use ("UDP 5554 on 127.0.0.2"), or None when every one can (each is closed again at
+    once). A TCP port is probed with SO_REUSEADDR, as asyncio's servers bind: only a listening
+    socket counts, not the TIME_WAIT of old connections.
+
+    Raises:
+        OSError: ``addr`` cannot be bound for another reason (not a local address).
+    """
+    for proto, port in sockets:
+        kind = socket.SOCK_DGRAM if proto == "udp" else socket.SOCK_STREAM
+        with socket.socket(socket.AF_INET, kind) as s:
+            if kind == socket.SOCK_STREAM:
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind((addr, port))
+            except OSError as exc:
+                if exc.errno == errno.EADDRINUSE:
+                    return f"{proto.upper()} {port} on {addr}"
+                raise
+    return None
+
+
+def sim_sockets(ports: SimPorts) -> list[tuple[str, int]]:
+    """The sockets an AR.Drone simulator binds (navdata, AT, video)."""
+    return [("udp", ports.navdata), ("udp", ports.at), ("tcp", ports.video)]
 
 
 def sim_endpoint(index: int, base_addr: str = "127.0.0.2") -> tuple[str, SimPorts]:
@@ -142,12 +171,22 @@ class SimServer:
         """Bind the three sockets and start the physics loop.
 
         Raises:
-            OSError: an address/port is unavailable (already in use, or not a local address).
+            AddressInUse: one of its sockets is already bound (another simulator there).
+            OSError: an address/port is unavailable otherwise (not a local address).
         """
         loop = asyncio.get_running_loop()
-        nav_t, nav_p = await loop.create_datagram_endpoint(
-            lambda: _NavdataPort(self), local_addr=(self.addr, self.ports.navdata)
-        )
+        taken = in_use(self.addr, sim_sockets(self.ports))
+        if taken is not None:
+            raise AddressInUse(f"the simulator's {taken} is in use")
+        try:
+            nav_t, nav_p = await loop.create_datagram_endpoint(
+                lambda: _NavdataPort(self), local_addr=(self.addr, self.ports.navdata)
+            )
+        except OSError as exc:  # taken between the look and the bind
+            if exc.errno != errno.EADDRINUSE:
+                raise
+            what = f"UDP {self.ports.navdata} on {self.addr}"
+            raise AddressInUse(f"the simulator's {what} is in use") from None
         self._transports.append(nav_t)
         self._nav = nav_p
         try:

@@ -53,6 +53,7 @@ async def command(
         )
     # A stated confidence means recognised speech: below the threshold it is not executed.
     source = "speech" if "confidence" in body.model_fields_set else "rest"
+    runtime.note_utterance(body.text, source=source, confidence=body.confidence, drone=name)
     kinds = tuple(str(c["action"]) for c in understood)
     when = issued.of(kinds)
     late = deadlines.judge(runtime.settings.command_deadline_s, kinds, when)

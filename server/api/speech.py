@@ -127,6 +127,7 @@ async def speech(
             # A "yes" names no command itself (it runs the one the dialog read back): an empty
             # set needs the lease like any command.
             check_lease(request, runtime, {c["action"] for c in rec.commands})
+            runtime.note_utterance(rec.text, source="speech", confidence=rec.confidence, drone=name)
             result = await dialog.handle_utterance(
                 rec.text, confidence=rec.confidence, source="speech", role=role
             )

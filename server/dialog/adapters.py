@@ -13,6 +13,7 @@ from typing import Any
 from server.dialog.ports import TaskDecision, TaskEvent, VehicleSnapshot
 
 SAFETY_ACTIONS = ("land", "emergency", "return_home", "hover")
+GPS_FRESH_S = 2.0  # a GPS fix this recent keeps the position (receivers give 1-5 fixes a second)
 
 
 class TaskManagerPort:
@@ -100,10 +101,15 @@ class VehiclePort:
             estimator_reinits=int(getattr(s, "estimator_reinits", 0)),
             jog_limit=str(getattr(s, "jog_limit", "")),
             navdata_doubt=str(getattr(s, "navdata_doubt", "")),
+            gps=_fresh(getattr(s, "gps_age_s", None)),
         )
 
     def marker_ids(self) -> frozenset[int]:
         return self._markers
+
+
+def _fresh(age_s: float | None) -> bool:
+    return age_s is not None and age_s <= GPS_FRESH_S
 
 
 class CallableDescriber:

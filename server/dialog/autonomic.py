@@ -174,7 +174,8 @@ class MarkersLostMonitor:
     """While carrying out a task, no marker seen for ``after_s``: warn once; say when one is in
     sight again. It never claims a search: whether to search is the task manager's decision
     (it searches only when the estimate is no longer confident) and it says so itself, so the
-    monitor is silent outside EXECUTING (issue 13 item 8)."""
+    monitor is silent outside EXECUTING (issue 13 item 8), and while a GPS fix keeps the
+    position (outdoors, far from the markers, that is the normal way to fly)."""
 
     after_s: float
     period_s: float = 0.5
@@ -183,7 +184,7 @@ class MarkersLostMonitor:
     _told: bool = False
 
     def check(self, snap: VehicleSnapshot, state: State, now: float) -> Alarm | None:
-        if state is not State.EXECUTING:
+        if state is not State.EXECUTING or snap.gps:  # a GPS fix keeps the position outdoors
             self._since = None
             self._told = False
             return None

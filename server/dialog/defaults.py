@@ -29,7 +29,11 @@ def fill_defaults(
         c = dict(cmd)
         if c.get("action") == "turn" and "direction" not in c and "angle" in c:
             c["direction"] = DEFAULT_TURN_DIRECTION
-        elif c.get("action") == "patrol" and not c.get("markers") and markers:
+        elif (
+            c.get("action") == "patrol"
+            and not (c.get("markers") or c.get("waypoints"))  # waypoints are left as said
+            and markers
+        ):
             c["markers"] = markers
         out.append(c)
     return out

@@ -264,6 +264,8 @@ class DialogManager:
 
     # -- utterances ---------------------------------------------------------------------------
     def _on_utterance_msg(self, msg: Mapping[str, Any]) -> None:
+        if msg.get("answered"):  # a REST or speech door's record of what it had answered
+            return
         drone = str(msg.get("drone") or "")
         text = str(msg.get("text", ""))
         address = parse_address(text)

@@ -37,6 +37,7 @@ class VehicleSnapshot:
     estimator_reinits: int = 0  # parts of the EKF state restarted from navdata so far
     jog_limit: str = ""  # why the manual jog is being slowed or stopped ("" when it is not)
     navdata_doubt: str = ""  # why the driver doubts the navdata ("" while it trusts it)
+    gps: bool = False  # a GPS fix keeps the position (fused within the last GPS_FRESH_S)
 
 
 @dataclass(frozen=True)

@@ -58,13 +58,21 @@ def confirmation(cmd: Mapping[str, Any]) -> str:
         )
         return " ".join(words)
     if a == "goto":
-        return f"Flying to marker {cmd.get('marker')}"
+        return f"Flying to {target_words(cmd)}"
     if a == "patrol":
-        ms = cmd.get("markers")
-        return (
-            f"Patrolling markers {join_and([str(m) for m in ms])}" if ms else "Starting the patrol"
-        )
+        kind = "waypoints" if not cmd.get("markers") and cmd.get("waypoints") else "markers"
+        ms = cmd.get(kind)
+        if not ms:
+            return "Starting the patrol"
+        return f"Patrolling {kind} {join_and([str(m) for m in ms])}"
     return str(a)
+
+
+def target_words(cmd: Mapping[str, Any]) -> str:
+    """ "marker 3" or "waypoint 3": what a goto flies to."""
+    if "marker" not in cmd and "waypoint" in cmd:
+        return f"waypoint {cmd.get('waypoint')}"
+    return f"marker {cmd.get('marker')}"
 
 
 def object_words(cmd: Mapping[str, Any]) -> str:
@@ -77,7 +85,7 @@ def result(cmd: Mapping[str, Any]) -> str:
     """A finished task ("Reached marker 3")."""
     a = cmd.get("action")
     if a == "goto":
-        return f"Reached marker {cmd.get('marker')}."
+        return f"Reached {target_words(cmd)}."
     if a == "takeoff":
         return "I am airborne."
     if a == "land":

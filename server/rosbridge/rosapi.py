@@ -75,7 +75,7 @@ def typedefs(type_name: str) -> list[dict[str, Any]]:
                 "fieldnames": [f for f, _ in fields],
                 "fieldtypes": [msgs.base_type(t) for _, t in fields],
                 # rosapi objectutils: -1 scalar, 0 variable-length array
-                "fieldarraylen": [0 if msgs.is_array(t) else -1 for _, t in fields],
+                "fieldarraylen": [msgs.array_length(t) for _, t in fields],
                 "examples": [
                     "{}"
                     if msgs.base_type(t) in msgs.MESSAGES and not msgs.is_array(t)
@@ -108,7 +108,7 @@ def _legacy_full_text(type_name: str) -> str:
     parts: list[str] = []
     for td in typedefs(type_name):
         lines = [
-            f"{t}{'[]' if n == 0 else ''} {f}"
+            f"{t}{'[]' if n == 0 else f'[{n}]' if n > 0 else ''} {f}"
             for f, t, n in zip(td["fieldnames"], td["fieldtypes"], td["fieldarraylen"], strict=True)
         ]
         head = "" if td["type"] == type_name else "=" * 80 + f"\nMSG: {td['type']}\n"

@@ -183,6 +183,8 @@ class BridgeSession:
         ):
             self._ensure_lease(now, f"publish to {topic}")
         msg = check_message(type_name, op.msg, self.ctx.wall_clock())
+        if type_name == "uav_console/Utterance" and not msg.get("source"):
+            msg["source"] = "rosbridge"  # a client that does not say: the door it came through
         issued = self._issued(op, key, msg)
         if issued is not None and not self._in_time(key, msg, issued, op.id):
             return

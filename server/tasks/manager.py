@@ -26,10 +26,11 @@ they run in spoken order ("go to marker 3 and land"). ``cancel`` in a sentence c
 ``query`` is accepted and left to the dialog (it is answered from ``vehicle.snapshot()``).
 A manual jog (``vehicle.jog``) cancels the running task.
 
-Tag search (issue 4): while a task needs localisation (goto, patrol, return home, indoor
-waypoints) and no marker has been seen for ``search_after_s``, and the estimate is no longer
-confident (planar σ > 0.3 m or yaw σ > 10°) — or at once when the drone has never been
-localised — the task pauses (state SEARCHING,
+Tag search (issue 4): while a task needs localisation (goto and patrol of markers, return home,
+indoor waypoints) and no marker has been seen for ``search_after_s``, and the estimate is no
+longer confident (planar σ > 0.3 m or yaw σ > 10°) — or at once when the drone has never been
+localised, also for a task that only needs a known position (a move, a GPS waypoint) — the
+task pauses (state SEARCHING,
 event "searching": "I lost sight of the markers, searching"), the drone holds its position and
 height and turns in yaw until a marker fix arrives ("marker_found"), then the task resumes.
 After two full turns without a marker the task fails.
@@ -261,7 +262,7 @@ class TaskManager(Context):
 
     def _predicted(self, s: VehicleSnapshot, flying: bool) -> PlanState:
         """The state the next queued task will start from (after the running and queued ones)."""
-        p = PlanState(flying, s.x, s.y, max(s.z, 0.0), s.yaw_rad)
+        p = PlanState(flying, s.x, s.y, max(s.z, 0.0), s.yaw_rad, located=s.localised)
         for t in ([self._current] if self._current else []) + list(self._queue):
             if t.name == "patrol":
                 continue  # loops forever; what follows starts wherever it is cancelled
@@ -299,7 +300,9 @@ class TaskManager(Context):
                 task = build_task(cmd)
                 s = self.snapshot()
                 if action in ("return_home", "hover"):
-                    task.plan(PlanState(s.flying, s.x, s.y, s.z, s.yaw_rad), self)
+                    task.plan(
+                        PlanState(s.flying, s.x, s.y, s.z, s.yaw_rad, located=s.localised), self
+                    )
             except CommandError as exc:
                 return Decision(cmd, False, exc.reason)
             self._preempt_with(task)
@@ -406,9 +409,11 @@ class TaskManager(Context):
             self._queue.clear()
 
     def _needs_search(self, task: Task, s: VehicleSnapshot, now: float) -> bool:
-        if not task.needs_localisation or not s.flying:
+        if not s.flying:
             return False
-        return self._lost(s, now)
+        if task.needs_localisation:
+            return self._lost(s, now)
+        return task.needs_position and not s.localised
 
     def _lost(self, s: VehicleSnapshot, now: float) -> bool:
         """No usable position: never localised, or no marker lately and no confidence left."""
@@ -436,6 +441,8 @@ class TaskManager(Context):
                     task.pause(now - self._search_started)
                 if task.target is not None:
                     self.vehicle.set_setpoint(task.target)
+                else:  # its setpoints come from the position just found: hold here until then
+                    self.vehicle.set_setpoint(Setpoint(s.x, s.y, s.z, s.yaw_rad))
                 task.detail = task.detail.replace(" (searching)", "")
                 self._search_started = None
                 return

@@ -52,6 +52,9 @@ class PlanState:
     y: float
     z: float
     yaw_rad: float
+    # Whether x, y are a known position (a marker fix, or a target the plan flies to); before
+    # the first fix the estimate's (0, 0) is no position, so no fence can be judged from it.
+    located: bool = True
 
 
 @dataclass(frozen=True)
@@ -99,7 +102,12 @@ class Task:
     """Base class: subclasses set ``name`` and override ``plan``/``start``/``step``."""
 
     name = "task"
+    # Needs a confident position from markers while it flies (the manager searches when lost).
     needs_localisation = False
+    # Needs a known position (at least one marker fix) before its setpoints are computed: the
+    # manager searches for a marker first when the drone has never had one (a move taken from
+    # the unlocalised estimate would aim at a made-up place and jump with the first fix).
+    needs_position = False
 
     def __init__(self, command: Mapping[str, Any]) -> None:
         self.id = next(_ids)
@@ -135,9 +143,13 @@ def _need_flying(p: PlanState, what: str) -> None:
         raise RefusedError(f"I can't {what}: I'm not flying. Say 'take off' first.")
 
 
-def _inside(ctx: Context, x: float, y: float, z: float, what: str) -> None:
-    """Refuse up front a target outside the world's limits (fence, floor, ceiling)."""
-    why = ctx.limits.violation(x, y, z)
+def _inside(ctx: Context, x: float, y: float, z: float, what: str, located: bool = True) -> None:
+    """Refuse up front a target outside the world's limits (fence, floor, ceiling).
+
+    ``located`` False: (x, y) come from no known position, so only the height is judged here;
+    the task judges the fence when it starts, from where the drone then is.
+    """
+    why = ctx.limits.violation(x, y, z) if located else ctx.limits.height_violation(z)
     if why is not None:
         raise RefusedError(f"I can't {what}: {why}.")
 
@@ -197,12 +209,25 @@ class LegsTask(Task):
     def done_text(self) -> str:
         return f"{self.describe()}: done"
 
+    def check_legs(self, ctx: Context, legs: list[Setpoint]) -> str | None:
+        """Why the legs, computed when the task starts, cannot be flown (None: they can)."""
+        return None
+
     def start(self, ctx: Context, now: float) -> Outcome | None:
         super().start(ctx, now)
         s = ctx.snapshot()
         if not s.flying:
             return Outcome(False, "I'm not flying")
+        if self.needs_position and not s.localised:
+            self.detail = "finding my position first"
+            return None  # the manager searches; the legs are computed once a marker is seen
+        return self._first_leg(ctx, s, now)
+
+    def _first_leg(self, ctx: Context, s: VehicleSnapshot, now: float) -> Outcome | None:
         self._legs, self._labels = self.legs(ctx, s)
+        why = self.check_legs(ctx, self._legs)
+        if why is not None:
+            return Outcome(False, why)
         self._begin_leg(ctx, s, now)
         return None
 
@@ -219,15 +244,19 @@ class LegsTask(Task):
 
     def step(self, ctx: Context, now: float) -> Outcome | None:
         s = ctx.snapshot()
-        leg = self._leg
-        assert leg is not None
         if not s.flying:
             return Outcome(False, "the drone is no longer flying")
+        if self._leg is None:  # started before the drone knew its position (needs_position)
+            if not s.localised:
+                return None
+            return self._first_leg(ctx, s, now)
+        leg = self._leg
         n = len(self._legs)
         self.progress = (self._i + leg.progress(s)) / n
         if now > leg.deadline:
             d, dyaw = leg.error(s)
-            return Outcome(False, f"timed out {d:.2f} m / {dyaw:.0f}° from {self._labels[self._i]}")
+            off = f", {dyaw:.0f}° off its heading" if dyaw > leg.rule.yaw_tol_deg else ""
+            return Outcome(False, f"timed out {d:.1f} m from {self._labels[self._i]}{off}")
         if not leg.arrived(s, now):
             return None
         self.on_leg_done(ctx, self._i)
@@ -327,13 +356,21 @@ class HoverTask(Task):
 
 
 class GotoMarkerTask(LegsTask):
+    """Fly to a marker's stand-off pose, or to a GPS world's numbered waypoint.
+
+    A marker is flown to on marker localisation (the manager searches when the markers are
+    lost); a waypoint of a GPS world is flown on the estimate the GPS keeps (no marker search),
+    once the drone knows where it is.
+    """
+
     name = "goto"
     needs_localisation = True
+    needs_position = True
     standoff_m = 1.0
 
     def __init__(self, command: Mapping[str, Any]) -> None:
         super().__init__(command)
-        # "waypoint": the world's numbered waypoint (GPS worlds, issue 16); a marker elsewhere.
+        # "waypoint": the world's numbered waypoint (GPS worlds); a marker elsewhere.
         self.waypoint: int | None = None
         if "marker" not in command and "waypoint" in command:
             self.waypoint = _marker_id(command["waypoint"])
@@ -345,9 +382,11 @@ class GotoMarkerTask(LegsTask):
     def _standoff(self, ctx: Context) -> Setpoint:
         if self.waypoint is not None and _has_waypoints(ctx):
             self.kind = "waypoint"
+            self.needs_localisation = False  # the GPS keeps the position, not the markers
             x, y, z = _world_waypoint(ctx, self.waypoint)
             return Setpoint(x, y, z, ctx.snapshot().yaw_rad)
         self.kind = "marker"
+        self.needs_localisation = True
         try:
             m = ctx.world.marker(self.marker)
         except KeyError:
@@ -362,7 +401,7 @@ class GotoMarkerTask(LegsTask):
         sp = self._standoff(ctx)
         _need_flying(p, f"go to {self.kind} {self.marker}")
         _inside(ctx, sp.x, sp.y, sp.z, f"go to {self.kind} {self.marker}")
-        return replace(p, x=sp.x, y=sp.y, z=sp.z, yaw_rad=sp.yaw_rad)
+        return replace(p, x=sp.x, y=sp.y, z=sp.z, yaw_rad=sp.yaw_rad, located=True)
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
         return [self._standoff(ctx)], [f"{self.kind} {self.marker}"]
@@ -395,6 +434,7 @@ def _world_waypoint(ctx: Context, n: int) -> tuple[float, float, float]:
 class PatrolTask(LegsTask):
     name = "patrol"
     needs_localisation = True
+    needs_position = True
     loop = True
 
     def __init__(self, command: Mapping[str, Any]) -> None:
@@ -410,10 +450,12 @@ class PatrolTask(LegsTask):
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
         for g in self._gotos:
             p = g.plan(p, ctx)
+        self.needs_localisation = any(g.needs_localisation for g in self._gotos)
         return p
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
         legs = [g._standoff(ctx) for g in self._gotos]
+        self.needs_localisation = any(g.needs_localisation for g in self._gotos)
         return legs, [f"{g.kind} {g.marker}" for g in self._gotos]
 
     def on_leg_done(self, ctx: Context, i: int) -> None:
@@ -436,9 +478,15 @@ def _offset(direction: str, dist: float, yaw: float) -> tuple[float, float, floa
 
 
 class MoveTask(LegsTask):
-    """Relative move in the drone's frame (forward = where its nose points)."""
+    """Relative move in the drone's frame (forward = where its nose points).
+
+    From an unknown position (no marker fix yet, e.g. a sentence said on the ground) only the
+    height is judged when it is planned; it starts once the drone knows where it is, and its
+    target is judged against the fence then.
+    """
 
     name = "move"
+    needs_position = True
 
     def __init__(self, command: Mapping[str, Any]) -> None:
         super().__init__(command)
@@ -457,8 +505,13 @@ class MoveTask(LegsTask):
         _need_flying(p, what)
         dx, dy, dz = _offset(self.direction, self.distance, p.yaw_rad)
         x, y, z = p.x + dx, p.y + dy, max(p.z, 0.8) + dz if dz else p.z
-        _inside(ctx, x, y, z if dz else max(z, ctx.limits.floor_m), what)
+        _inside(ctx, x, y, z if dz else max(z, ctx.limits.floor_m), what, p.located)
         return replace(p, x=x, y=y, z=z)
+
+    def check_legs(self, ctx: Context, legs: list[Setpoint]) -> str | None:
+        sp = legs[-1]
+        why = ctx.limits.violation(sp.x, sp.y, sp.z)
+        return None if why is None else f"I can't {self.describe()}: {why}"
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
         base = s.setpoint if s.setpoint is not None and s.setpoint.yaw_rate_rad_s is None else None
@@ -546,7 +599,7 @@ class ReturnHomeTask(LegsTask):
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
         _need_flying(p, "return home")
         h = self._home(ctx, p.x, p.y)
-        return replace(p, flying=False, x=h.position[0], y=h.position[1], z=0.0)
+        return replace(p, flying=False, x=h.position[0], y=h.position[1], z=0.0, located=True)
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
         h = self._home(ctx, s.x, s.y)
@@ -631,7 +684,7 @@ class WaypointsTask(LegsTask):
             _inside(ctx, x, y, z, f"fly to waypoint {k + 1}")
         x, y, z = self.points[-1]
         self.needs_localisation = bool(getattr(ctx.world, "indoor", False) and ctx.world.markers)
-        return replace(p, x=x, y=y, z=z)
+        return replace(p, x=x, y=y, z=z, located=True)
 
     def start(self, ctx: Context, now: float) -> Outcome | None:
         if self.tolerance_m:

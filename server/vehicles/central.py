@@ -62,7 +62,7 @@ DISCOVER_EVERY = 5  # heartbeat periods
 
 def pid_dir_of(settings: Settings) -> Path:
     """Where vehicle processes leave their pid (``NAME.pid``) while they run."""
-    return settings.data_dir / "vehicles"
+    return names.pid_dir(settings.data_dir, settings.port)
 
 
 # What a vehicle process needs of the server's settings (an allowlist: a setting added later
@@ -479,6 +479,9 @@ class VehicleCentral:
             if self._stopping:
                 return
             vp.exits.append(code)
+            if code == names.EXIT_CANNOT_START:  # it said why on its one line of stderr
+                self.alert(f"{vp.name}'s flight process cannot start here; not restarting it.")
+                return
             up_s = time.monotonic() - vp.started_at
             if up_s > STABLE_AFTER_S:
                 delay = RESTART_BACKOFF_S[0]

@@ -3,6 +3,8 @@
 ::
 
     VehicleError
+    ├── CannotStart           the vehicle cannot start here (e.g. its simulator's address is
+    │                         taken): starting it again would fail the same way
     ├── LinkError             the vehicle link cannot be used (bad URL, closed)
     ├── VehicleKeyError       a vehicle key or its name is missing, unreadable or malformed
     ├── RemoteCallError       a call over the link was refused or not answered
@@ -17,6 +19,10 @@ from __future__ import annotations
 
 class VehicleError(Exception):
     """Base of this package's errors."""
+
+
+class CannotStart(VehicleError):
+    """The vehicle cannot start here; the message says why and what to change."""
 
 
 class LinkError(VehicleError):

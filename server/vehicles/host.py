@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import gc
 import json
 import logging
@@ -44,6 +45,7 @@ from drone.bus.config import vehicle_user
 from drone.bus.errors import BusError
 from drone.bus.vehicle import VehicleBus
 from drone.deadline import BadIssued, ClockOffset, parse_issued
+from drone.sim.errors import AddressInUse
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
 from server.tls import TLSError, server_context
@@ -57,7 +59,12 @@ from server.vehicles.door_protocol import (
     Superseded,
     stop_message,
 )
-from server.vehicles.errors import DoorProtocolError, RemoteCallError, VehicleError
+from server.vehicles.errors import (
+    CannotStart,
+    DoorProtocolError,
+    RemoteCallError,
+    VehicleError,
+)
 from server.vehicles.link import GraphLink
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
 from server.vehicles.relay import dialog_out
@@ -99,9 +106,10 @@ class VehicleOptions:
     fingerprint: str | None = None  # wss:// central: or accept exactly this certificate
 
 
-def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
+def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = False) -> LinkSpec:
     """The topics and services a whole vehicle shares with the central server: an AR.Drone's
-    navdata and camera, or a MAVLink drone's ``/mavros/*`` topics (no camera over MAVLink).
+    navdata (and GPS navdata in a ``gps`` world) and camera, or a MAVLink drone's ``/mavros/*``
+    topics (no camera over MAVLink).
 
     What it publishes and provides is all its own drone's (the central server lets a vehicle
     publish nothing else: :mod:`server.vehicles.access`); its dialog speaks under
@@ -116,7 +124,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
         STATUS_TYPE,
     )
     from server.mavros_node import MAVROS_LATCHED, MAVROS_TOPICS
-    from server.vehicle_node import EMPTY, IMAGE, MARKERS, NAVDATA, POSE, TASK, TWIST
+    from server.vehicle_node import EMPTY, IMAGE, MARKERS, NAVDATA, NAVDATA_GPS, POSE, TASK, TWIST
 
     p = prefix
     if mavlink:
@@ -127,6 +135,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False) -> LinkSpec:
     else:
         drone = (
             TopicSpec(f"{p}/ardrone/navdata", NAVDATA),
+            *((TopicSpec(f"{p}/ardrone/navdata_gps", NAVDATA_GPS),) if gps else ()),
             TopicSpec(f"{p}/ardrone/image_raw/compressed", IMAGE),
         )
     out = (
@@ -248,7 +257,8 @@ class VehicleHost:
         vehicle, tasks = self.stack.vehicle, self.stack.tasks
         assert tasks is not None and self.stack.node is not None
         await self.stack.node.start()
-        spec = link_spec(self.name, o.prefix, mavlink=self.mavlink)
+        gps = getattr(self.world, "gps_origin", None) is not None
+        spec = link_spec(self.name, o.prefix, mavlink=self.mavlink, gps=gps)
         self.core = GraphLinkCore(self.graph, spec, to_local=self.local_issued)
         self._heartbeat_sub = self.graph.subscribe(
             names.HEARTBEAT, self._on_heartbeat, type=names.STRING
@@ -663,7 +673,16 @@ async def run_vehicle(
     for sig in (signal.SIGTERM, signal.SIGINT):
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
-    await host.start()
+    try:
+        await host.start()
+    except OSError as exc:  # another console's simulator holds the address
+        if not isinstance(exc, AddressInUse) and exc.errno != errno.EADDRINUSE:
+            raise
+        why = str(exc) if isinstance(exc, AddressInUse) else f"an address is in use ({exc})"
+        raise CannotStart(
+            f"{options.name}: {why} (another console's simulator?); `serve --sim-addr` moves "
+            "this console's simulators"
+        ) from None
     # Startup objects (modules, the world, the stack) out of the cyclic collector: a full
     # collection then walks only what the flight made since, so it cannot stall the control
     # thread as one over everything did (74 ms, vs 2.7 ms frozen, in bench/isolation.py).
@@ -674,7 +693,7 @@ async def run_vehicle(
         gc.get_freeze_count(),
     )
     log.info("%s: vehicle up; safety door %s", options.name, host.door.url)
-    pid_file = settings.data_dir / "vehicles" / f"{options.name}.pid"
+    pid_file = names.pid_dir(settings.data_dir, settings.port) / f"{options.name}.pid"
     with contextlib.suppress(OSError):  # lets a restarted serve find (and adopt) this vehicle
         pid_file.parent.mkdir(parents=True, exist_ok=True)
         pid_file.write_text(str(os.getpid()))

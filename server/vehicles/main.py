@@ -18,9 +18,10 @@ import os
 import sys
 
 from server.settings import Settings
-from server.vehicles.errors import VehicleError, VehicleKeyError
+from server.vehicles.errors import CannotStart, VehicleError, VehicleKeyError
 from server.vehicles.host import VehicleOptions, run_vehicle
 from server.vehicles.keys import check_name, key_from, loosely_readable
+from server.vehicles.names import EXIT_CANNOT_START
 
 log = logging.getLogger("uav_console.vehicle")
 
@@ -70,6 +71,9 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
     )
     try:
         asyncio.run(run_vehicle(settings, options, key, safety_token=safety_token))
+    except CannotStart as exc:  # one line, no traceback: the operator can act on it
+        print(f"uav-console vehicle: {exc}", file=sys.stderr)
+        return EXIT_CANNOT_START
     except VehicleError as exc:
         print(f"uav-console vehicle: {exc}", file=sys.stderr)
         return 2

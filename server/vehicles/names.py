@@ -28,12 +28,17 @@ A vehicle process puts its drone on the central graph through the vehicle link
 
 from __future__ import annotations
 
+from pathlib import Path
+
 STRING = "std_msgs/String"
 CONTROL_TYPE = "uav_console/VehicleControl"
 HEARTBEAT = "/vehicles/heartbeat"
 RECORDING = "/console/recording"
 HEARTBEAT_PERIOD_S = 0.1
 LINK_PATH = "/vehicle-link"
+# A vehicle process's exit status when it cannot start here (errors.CannotStart): its
+# supervisor does not start it again, since it would fail the same way.
+EXIT_CANNOT_START = 3
 
 
 def info_topic(name: str) -> str:
@@ -66,3 +71,10 @@ def drone_order(name: str) -> tuple[str, int, str]:
     stem = name.rstrip("0123456789")
     digits = name[len(stem) :]
     return (stem, int(digits) if digits else -1, name)
+
+
+def pid_dir(data_dir: Path, port: int) -> Path:
+    """Where a console's vehicle processes leave their pid (``NAME.pid``): one directory per
+    console port, so two consoles sharing a data directory never take each other's vehicles
+    for their own (a vehicle rejoins only the console at its ``--central`` URL's port)."""
+    return data_dir / "vehicles" / str(port)

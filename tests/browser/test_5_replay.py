@@ -100,3 +100,57 @@ def test_replay_shows_the_recorded_flight_with_a_timeline(browser: Any, tmp_path
         proc.terminate()
         proc.wait(10)
         log.close()
+
+
+def test_replay_shows_every_input_in_order_with_its_door(browser: Any, tmp_path: Path) -> None:
+    """The operator's sentences of a recording, whatever their door (REST, the page's
+    microphone, a rosbridge client), in the order said, each with its reply's annotation."""
+    path = write_flight(tmp_path / "flights")
+    port = free_port()
+    log = (tmp_path / "replay.log").open("wb")
+    cmd = [sys.executable, "-m", "server", "replay", str(path), "--paused"]
+    cmd += ["--port", str(port), "--token", TOKEN]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+    auth = {"Authorization": f"Bearer {TOKEN}"}
+    try:
+        base = f"http://127.0.0.1:{port}"
+        deadline = time.monotonic() + 30
+        while True:
+            assert proc.poll() is None, (tmp_path / "replay.log").read_text()
+            assert time.monotonic() < deadline, "replay did not start"
+            try:
+                if httpx.get(f"{base}/api/v1/health", timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.2)
+        ctx, cp = open_console(browser, f"{base}/?token={TOKEN}")
+        page = cp.page
+        try:
+            page.wait_for_selector("#replay-bar:not([hidden])", timeout=10_000)
+            page.wait_for_function("uavConsole.ros.subscriptions.has('/console/utterance')")
+            # from the start, four times as fast as it was flown
+            httpx.post(f"{base}/api/v1/replay", json={"action": "speed", "speed": 4}, headers=auth)
+            httpx.post(f"{base}/api/v1/replay", json={"action": "play"}, headers=auth)
+            page.wait_for_function(
+                "document.querySelector('#dialog').textContent.includes('Landed')",
+                timeout=20_000,
+            )
+            said = page.eval_on_selector_all(
+                "#dialog .msg-user",
+                "els => els.map(e => [e.querySelector('.text').textContent,"
+                " e.querySelector('.meta')?.textContent || '',"
+                " e.querySelector('.understood') !== null])",
+            )
+            assert said == [
+                ["take off", "sent over REST", True],
+                ["how high are you", "spoken · confidence 87 %", True],
+                ["land", "sent over rosbridge", True],
+            ], said
+            assert cp.console_errors() == []
+        finally:
+            ctx.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        log.close()

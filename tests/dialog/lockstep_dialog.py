@@ -28,12 +28,26 @@ class DialogRig:
 
 def dialog_rig(
     seed: int,
-    start: tuple[float, float, float] = (4.0, 2.0, 0.0),
+    start: tuple[float, float, float] | None = (4.0, 2.0, 0.0),
+    *,
     settings: Settings | None = None,
+    world_name: str = "indoor",
+    camera: bool = False,
+    known_start: bool = True,
+    drone: str = "uav1",
+    drones: tuple[str, ...] = ("uav1",),
 ) -> DialogRig:
-    """The indoor world with the drone landed at ``start``; every part stepped by the rig."""
-    world = load_world("indoor")
-    rig = LockstepRig(world, seed=seed, camera=False, starts=[start])
+    """``world_name`` (indoor by default) with the drone landed at ``start`` (None: the world's
+    first station); every part stepped by the rig. ``drone``/``drones``: this dialog's name and
+    the fleet's (for sentences that name their drone)."""
+    world = load_world(world_name)
+    rig = LockstepRig(
+        world,
+        seed=seed,
+        camera=camera,
+        starts=None if start is None else [start],
+        known_start=known_start,
+    )
     tm = TaskManager(rig.vehicle, world, rig.clock)
     rig.add_stepper(lambda now, dt: tm.step(now))
     graph = Graph()
@@ -49,6 +63,8 @@ def dialog_rig(
         audit,
         rig.clock.now,
         nlu=NLU(),
+        drone=drone,
+        drones=lambda: list(drones),
     )
     rig.add_stepper(lambda now, dt: dm.step(now))
     return DialogRig(rig, tm, dm, audit, replies)

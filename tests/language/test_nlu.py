@@ -50,6 +50,10 @@ RULE_EXAMPLES = {
         "patrol waypoints 1, 2, 3 and 4",
         {"action": "patrol", "waypoints": [1, 2, 3, 4]},
     ),
+    "patrol.waypoint_range": (
+        "patrol waypoints 1 to 4",
+        {"action": "patrol", "waypoints": [1, 2, 3, 4]},
+    ),
     "patrol.list": ("patrol markers 1, 3 and 5", {"action": "patrol", "markers": [1, 3, 5]}),
     "patrol.range": ("patrol markers 2 through 5", {"action": "patrol", "markers": [2, 3, 4, 5]}),
     "patrol.markers_first": ("markers 4 and 2 on patrol", {"action": "patrol", "markers": [4, 2]}),
@@ -527,3 +531,34 @@ def test_hyphens_that_are_not_signs_still_work(
     text: str, expected: list[dict[str, object]]
 ) -> None:
     assert _NLU.interpret(text) == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("fly to waypoint 3", [{"action": "goto", "waypoint": 3}]),
+        ("go to wp2", [{"action": "goto", "waypoint": 2}]),
+        ("go to wp 2", [{"action": "goto", "waypoint": 2}]),
+        ("please head to way point three", [{"action": "goto", "waypoint": 3}]),
+        ("patrol waypoints 1 to 4", [{"action": "patrol", "waypoints": [1, 2, 3, 4]}]),
+        ("patrol waypoints 4 through 2", [{"action": "patrol", "waypoints": [4, 3, 2]}]),
+        ("patrol waypoints 1 and 3", [{"action": "patrol", "waypoints": [1, 3]}]),
+        # markers keep their reading: "1 to 4" is the two markers
+        ("patrol markers 1 to 4", [{"action": "patrol", "markers": [1, 4]}]),
+        (
+            "take off and fly to waypoint 3",
+            [{"action": "takeoff"}, {"action": "goto", "waypoint": 3}],
+        ),
+    ],
+)
+def test_waypoints_by_voice(text: str, expected: list[dict[str, object]]) -> None:
+    assert _NLU.interpret(text) == expected
+
+
+def test_a_drone_named_before_a_waypoint_is_an_address() -> None:
+    from server.dialog.addressing import parse_address
+
+    for said in ("drone 2 fly to waypoint 3", "drone 2, fly to waypoint 3", "uav2 fly to wp 3"):
+        address = parse_address(said)
+        assert address.names == ("uav2",), said
+        assert _NLU.interpret(address.text) == [{"action": "goto", "waypoint": 3}], said

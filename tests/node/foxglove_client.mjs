@@ -1,10 +1,11 @@
 // Does what Foxglove does with uav-console, with Foxglove's own npm libraries.
 //
-//   node foxglove_client.mjs live ws://HOST:PORT/rosbridge?token=T SECONDS
+//   node foxglove_client.mjs live ws://HOST:PORT/rosbridge?token=T SECONDS [TOPIC_REGEX]
 //     Foxglove's Rosbridge connection (RosbridgePlayer): @foxglove/roslibjs calls
 //     rosapi/topics_and_raw_types, tells ROS 1 from ROS 2 by the type of /rosout, parses every
-//     definition with @foxglove/rosmsg, subscribes to every topic with compression "cbor-raw"
-//     and reads msg.bytes with @foxglove/rosmsg-serialization's MessageReader.
+//     definition with @foxglove/rosmsg, subscribes to every topic (or those TOPIC_REGEX matches,
+//     as a Foxglove panel would) with compression "cbor-raw" and reads msg.bytes with
+//     @foxglove/rosmsg-serialization's MessageReader.
 //   node foxglove_client.mjs mcap FILE.mcap
 //     Foxglove's MCAP reader: @mcap/core McapIndexedReader (zstd via fzstd), every message of
 //     every channel decoded by its schema (ros1msg -> MessageReader, jsonschema -> JSON).
@@ -38,7 +39,7 @@ function plain(value) {
   return value;
 }
 
-async function live(url, seconds) {
+async function live(url, seconds, only = null) {
   const ros = new roslib.Ros({ url });
   await new Promise((resolve, reject) => {
     ros.on("connection", resolve);
@@ -64,6 +65,7 @@ async function live(url, seconds) {
       entry.error = `definition: ${e?.message ?? e}`;
       continue;
     }
+    if (only && !only.test(name)) continue;
     const topic = new roslib.Topic({ ros, name, messageType: types[i], compression: "cbor-raw" });
     topic.subscribe((message) => {
       try {
@@ -141,9 +143,10 @@ async function mcap(file) {
   return out;
 }
 
-const [mode, arg, extra] = process.argv.slice(2);
+const [mode, arg, extra, pattern] = process.argv.slice(2);
 try {
-  const out = mode === "live" ? await live(arg, Number(extra ?? 3)) : await mcap(arg);
+  const only = pattern ? new RegExp(pattern) : null;
+  const out = mode === "live" ? await live(arg, Number(extra ?? 3), only) : await mcap(arg);
   process.stdout.write(JSON.stringify(out));
   process.exit(0);
 } catch (e) {

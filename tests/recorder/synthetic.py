@@ -41,6 +41,12 @@ def write_flight(directory: Path, seconds: float = 12.0, rate_hz: float = 10.0) 
     )
     rec.start(background=False)
     reply = {"header": msgs.header(), "level": "info", "speak": False, "commands": "[]"}
+    said = {"drone": "uav1", "asked_by": ""}
+    graph.publish(  # through REST: the door's own record of it
+        "/console/utterance",
+        {**said, "text": "take off", "confidence": 1.0, "source": "rest", "answered": True},
+        type="uav_console/Utterance",
+    )
     graph.publish(
         "/console/reply",
         {**reply, "text": "Taking off.", "utterance": "take off"},
@@ -67,8 +73,22 @@ def write_flight(directory: Path, seconds: float = 12.0, rate_hz: float = 10.0) 
         if i % 2 == 0:
             image = {"header": msgs.header("cam"), "format": "jpeg", "data": jpeg(i)}
             graph.publish("/ardrone/image_raw/compressed", image, type=IMAGE)
+        if i == int(10 * rate_hz):  # spoken on the page 10 s in (the replay test's first
+            # look, before it, sees "Taking off." as the latest reply)
+            asked = {"text": "how high are you", "confidence": 0.87, "source": "speech"}
+            graph.publish("/console/utterance", {**said, **asked}, type="uav_console/Utterance")
+            graph.publish(
+                "/console/reply",
+                {**reply, "text": "I am at 1.0 meters.", "utterance": asked["text"]},
+                type="uav_console/Reply",
+            )
         clock[0] += 1.0 / rate_hz
         rec.step()
+    graph.publish(  # from a rosbridge client
+        "/console/utterance",
+        {**said, "text": "land", "confidence": 1.0, "source": "rosbridge"},
+        type="uav_console/Utterance",
+    )
     graph.publish(
         "/console/reply",
         {**reply, "text": "Landed.", "utterance": "land"},

@@ -35,6 +35,11 @@ def _value(ftype: str, depth: int = 0) -> st.SearchStrategy[Any]:
         if base in ("uint8", "char", "byte"):
             return st.binary(max_size=64)
         return st.lists(_value(base, depth + 1), max_size=3)
+    if msgs.array_length(ftype) > 0:  # T[N]: exactly N
+        n = msgs.array_length(ftype)
+        if base in ("uint8", "char", "byte"):
+            return st.binary(min_size=n, max_size=n)
+        return st.lists(_value(base, depth + 1), min_size=n, max_size=n)
     if base in _INTS:
         lo, hi = _INTS[base]
         return st.integers(lo, hi)

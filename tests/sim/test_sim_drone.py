@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from drone.ardrone import at
 from drone.ardrone.driver import DriverProtocol, HandshakeDone, LinkLost, LinkRestored
 from drone.ardrone.navdata import TAG_GPS, CtrlState, DroneState, decode_navdata
-from drone.sim.drone import SimDrone
+from drone.sim.drone import SimConfig, SimDrone
 from drone.sim.errors import FaultError, SimConfigError
 from drone.sim.link import InMemoryLink
 
@@ -166,7 +166,8 @@ def test_gps_only_when_asked_and_only_with_an_origin() -> None:
         gps_origin = Origin()
         start = None
 
-    sim = SimDrone(World(), start=(10.0, 20.0, 0.0))  # type: ignore[arg-type]
+    exact = SimConfig(gps_noise_m=0.0)  # the conversion itself, without the receiver's noise
+    sim = SimDrone(World(), start=(10.0, 20.0, 0.0), config=exact)  # type: ignore[arg-type]
     sim.receive_navdata_request(b"\x01", 0.0)
     sim.receive_at(wire(at.Config("general:navdata_demo", "TRUE")), 0.0)
     assert decode_navdata(collect(sim, 0.1)[0]).gps is None

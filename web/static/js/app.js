@@ -442,6 +442,11 @@ class Console {
   }
 
   subscribeGlobal() {
+    // Every operator input, whatever its door (other consoles, REST, speech, rosbridge, a
+    // replay), before the replies: a latched one arrives first, then the reply it annotates.
+    this.ros.subscribe("/console/utterance", TOPIC_TYPES["/console/utterance"], (m) =>
+      this.dialog.onUtterance(m),
+    );
     this.ros.subscribe("/console/reply", TOPIC_TYPES["/console/reply"], (m) => {
       this.dialog.onReply(m);
       this.onAlarm(m);

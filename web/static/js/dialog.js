@@ -3,6 +3,7 @@
 // assertively for screen readers.
 
 const MAX_ENTRIES = 200;
+const MAX_SENT = 20; // own inputs awaiting their echo (a lost echo must not hide later ones forever)
 // How long the Yes / No buttons of "Did you say …?" stay usable: the server drops the question
 // after 15 s (server/dialog/confirm.py MAX_AGE_S), and a later yes would run nothing.
 export const ANSWER_TTL_MS = 15000;
@@ -49,6 +50,7 @@ export class DialogPanel {
     // "browser" (speechSynthesis has voices), "server" (replies spoken by the server's
     // espeak-ng), "none" (shown, not spoken), or "unknown" until checked.
     this.voice = "unknown";
+    this.sent = []; // texts this page sent whose /console/utterance copy has not come back yet
     els.mute.addEventListener("click", () => this.setMuted(!this.muted));
     this.renderMute();
   }
@@ -124,8 +126,25 @@ export class DialogPanel {
     return li;
   }
 
-  /** The operator said or typed something (shown at once, annotated when the reply comes). */
-  addUtterance(text, { source = "text", confidence = 1 } = {}) {
+  /** The operator said or typed something here (shown at once, annotated when the reply
+   *  comes); its copy on /console/utterance is then not shown again. */
+  addUtterance(text, opts = {}) {
+    this.sent.push(text);
+    this.sent.splice(0, this.sent.length - MAX_SENT);
+    return this.showUtterance(text, opts);
+  }
+
+  /** uav_console/Utterance: an input from any door; this page's own are already shown. */
+  onUtterance(msg) {
+    const own = this.sent.indexOf(msg.text);
+    if (own >= 0) {
+      this.sent.splice(own, 1);
+      return;
+    }
+    this.showUtterance(msg.text, { source: msg.source, confidence: msg.confidence });
+  }
+
+  showUtterance(text, { source = "text", confidence = 1 } = {}) {
     const meta =
       source === "speech"
         ? `spoken · confidence ${Math.round(confidence * 100)} %`
@@ -133,7 +152,9 @@ export class DialogPanel {
           ? "from the map"
           : source === "button"
             ? "answered with a button"
-            : "typed";
+            : source === "rest" || source === "rosbridge"
+              ? `sent over ${source === "rest" ? "REST" : "rosbridge"}`
+              : "typed";
     const li = this.add("user", text, { meta });
     li.dataset.utterance = text;
     li.dataset.pending = "1";
