@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import dataclasses
 import os
 import subprocess
 import sys
@@ -271,7 +270,7 @@ def _serve(args: argparse.Namespace) -> int:
         choice = choose_sim_base(settings, kinds, fixed=args.sim_addr is not None)
         if choice.note:
             print(f"uav-console: {choice.note}", flush=True)
-            settings = dataclasses.replace(settings, sim_base_addr=choice.base)
+            settings = settings.with_(sim_base_addr=choice.base)
     from server.tls import TLSError, tls_for
 
     try:

@@ -64,10 +64,13 @@ class VehicleScope:
 @functools.lru_cache(maxsize=1024)
 def scope_for(name: str, prefix: str) -> VehicleScope:
     """The scope of vehicle ``name`` whose drone topics carry ``prefix``: every topic and
-    service its link declares, AR.Drone or MAVLink, and nothing of the server's own."""
+    service its link declares, AR.Drone or MAVLink, GPS world or not, and nothing of the
+    server's own."""
     from server.vehicles.host import link_spec  # the link's own declaration, one source
 
-    specs = [link_spec(name, prefix, mavlink=m) for m in (False, True)]
+    specs = [
+        link_spec(name, prefix, mavlink=m, gps=g) for m in (False, True) for g in (False, True)
+    ]
     topics = frozenset(canonical(t.name) for s in specs for t in s.out_topics)
     services = frozenset(canonical(n) for s in specs for n, _ in s.out_services)
     # A floor under the declaration: whatever link_spec says, never the server's own names nor
