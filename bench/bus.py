@@ -22,7 +22,9 @@ Both rows are measured the same way, through a real client of the central: an ob
 - telemetry end to end (vehicle's stamp → the observer, one machine, one clock): p50 / p99;
 - the central's CPU (``/proc/<pid>/stat`` of the central process / of ``serve``: CPU seconds per
   wall second, 1.0 is one core) and its work per message (CPU µs per telemetry received);
-- telemetry messages per second at the observer (expected N × 10), and how many vehicles it heard;
+- telemetry messages per second at the observer (expected N × 10), how many vehicles it heard
+  and how many the central knows (bus: alive by liveliness; link: drones registered with
+  fresh telemetry, from ``GET /api/v1/health``);
 - memory per vehicle (RSS of the vehicle processes after joining over before, /N).
 
 Usage: ``python bench/bus.py [--quick] [--n 10 50 200] [--seconds S] [--procs P] [--no-link]``.
@@ -191,7 +193,7 @@ def bus_vehicle_worker(
         bus.close()
 
 
-def bus_central_worker(directory: str, names: list[str], ready: Any, stop: Any) -> None:
+def bus_central_worker(directory: str, names: list[str], ready: Any, ask: Any, stop: Any) -> None:
     """The console's router with its access control (and its telemetry subscriber)."""
     from drone.bus.console import ConsoleBus
     from drone.bus.session import free_listen_endpoint
@@ -208,8 +210,9 @@ def bus_central_worker(directory: str, names: list[str], ready: Any, stop: Any) 
             str(bus.client_file),
         )
     )
-    stop.wait()
+    ask.wait()
     ready.put(("alive", len(bus.alive())))
+    stop.wait()
     bus.close()
 
 
@@ -241,9 +244,9 @@ def run_bus(n: int, seconds: float, procs: int) -> dict[str, Any]:
     ctx = mp.get_context("spawn")  # Zenoh is opened in the children only, after the spawn
     names = [f"v{i:03d}" for i in range(n)]
     ready, out = ctx.Queue(), ctx.Queue()
-    start, counting, stop = ctx.Event(), ctx.Event(), ctx.Event()
+    start, counting, stop, ask = ctx.Event(), ctx.Event(), ctx.Event(), ctx.Event()
     with tempfile.TemporaryDirectory() as tmp:
-        central = ctx.Process(target=bus_central_worker, args=(tmp, names, ready, stop))
+        central = ctx.Process(target=bus_central_worker, args=(tmp, names, ready, ask, stop))
         central.start()
         tag, creds, client_file = ready.get(timeout=60)
         assert tag == "creds"
@@ -265,9 +268,10 @@ def run_bus(n: int, seconds: float, procs: int) -> dict[str, Any]:
         joined_mb = [ready.get(timeout=180)[2] for _ in workers]
         assert central.pid is not None
         r = measure(central.pid, seconds, start, counting)
+        ask.set()
+        alive = ready.get(timeout=60)[1]  # the central's liveliness view, vehicles still up
         sent = sum(out.get(timeout=120)[2] for _ in workers)
         stop.set()
-        alive = ready.get(timeout=60)[1]  # the central's liveliness view, at the end
         _, latencies, heard = out.get(timeout=60)
         for p in [central, observer, *workers]:
             p.join(30)
@@ -496,12 +500,19 @@ def run_link(n: int, seconds: float, procs: int) -> dict[str, Any]:
             w.start()
         joined_mb = [ready.get(timeout=300)[2] for _ in workers]
         r = measure(proc.pid, seconds, start, counting)
+        # the drones serve registered whose telemetry is fresh (GET /api/v1/health, no token)
+        with urllib.request.urlopen(f"http://{HOST}:{port}/api/v1/health", timeout=30) as resp:
+            registered = sum(bool(ok) for ok in json.load(resp)["drones"].values())
         sent = sum(out.get(timeout=120)[2] for _ in workers)
         stop.set()
         _, latencies, heard = out.get(timeout=60)
         for p in [observer, *workers]:
             p.join(30)
-    return summarize("link", n, r, latencies, heard, joined_mb, sent, heard)
+        text = (Path(tmp) / "data" / "serve.log").read_text(errors="replace")
+    warnings = [line for line in text.splitlines() if "WARNING" in line or "refused" in line]
+    if warnings:
+        print(f"serve logged {len(warnings)} warnings, e.g. {warnings[0][:160]}", file=sys.stderr)
+    return summarize("link", n, r, latencies, heard, joined_mb, sent, registered)
 
 
 # ---------------------------------------------------------------------- measuring
@@ -552,7 +563,7 @@ def row(r: dict[str, Any]) -> str:
         f"| {r['n']} | {r['transport']} | {r['p50_ms']:.1f} ms | {r['p99_ms']:.1f} ms | "
         f"{r['central_cores']:.2f} | {r['cpu_us_per_msg']:.0f} | "
         f"{r['msgs_per_s']:.0f} ({r['expected_per_s']}) | {r['mb_per_vehicle']:.2f} | "
-        f"{r['heard']}/{r['n']} | {r['load']:.1f} |"
+        f"{r['heard']}/{r['n']} ({r['alive']}) | {r['load']:.1f} |"
     )
 
 
@@ -585,7 +596,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average at start: {os.getloadavg()[0]:.1f}; {os.cpu_count()} cores", flush=True)
     print(
         "| N | transport | telemetry p50 | p99 | central CPU (cores) | CPU µs/msg "
-        "| msgs/s (expected) | MB per vehicle | vehicles heard | load avg |"
+        "| msgs/s (expected) | MB per vehicle | vehicles heard (at the central) | load avg |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|", flush=True)
     rows: list[dict[str, Any]] = []
