@@ -149,7 +149,6 @@ def due(tick: int, k: int, hz: int) -> bool:
 # ---------------------------------------------------------------------- bus row
 def bus_vehicle_worker(
     names: list[str],
-    first: int,
     creds: dict[str, tuple[list[str], str, str]],
     seconds: float,
     ready: Any,
@@ -164,7 +163,7 @@ def bus_vehicle_worker(
 
     base = rss_mb()
     fleet = []
-    for i, name in enumerate(names):
+    for name in names:
         connect, user, password = creds[name]
         bus = VehicleBus(connect, user, password, FLEET, name)
         bus.start()
@@ -172,7 +171,7 @@ def bus_vehicle_worker(
         status = bus.session.declare_publisher(
             f"{keys.ROOT}/{FLEET}/{name}/status", congestion_control=zenoh.CongestionControl.DROP
         )
-        fleet.append((LightVehicle(name, first + i), bus, bus._publisher, status))
+        fleet.append((LightVehicle(name, int(name[1:])), bus, bus._publisher, status))
     ready.put(("ready", os.getpid(), rss_mb() - base))
     start.wait()
     dt = 1.0 / PHYSICS_HZ
@@ -258,7 +257,7 @@ def run_bus(n: int, seconds: float, procs: int) -> dict[str, Any]:
         workers = [
             ctx.Process(
                 target=bus_vehicle_worker,
-                args=(names[i::procs], i, creds, seconds, ready, start, out),
+                args=(names[i::procs], creds, seconds, ready, start, out),
             )
             for i in range(procs)
             if names[i::procs]
@@ -275,14 +274,13 @@ def run_bus(n: int, seconds: float, procs: int) -> dict[str, Any]:
         _, latencies, heard = out.get(timeout=60)
         for p in [central, observer, *workers]:
             p.join(30)
-    return summarize("bus", n, r, latencies, heard, joined_mb, sent, alive)
+    return summarize("bus", n, r, latencies, heard, joined_mb, sent, alive, seconds)
 
 
 # ---------------------------------------------------------------------- link row
 def link_vehicle_worker(
     url: str,
     names: list[str],
-    first: int,
     keys: dict[str, str],
     seconds: float,
     ready: Any,
@@ -290,13 +288,16 @@ def link_vehicle_worker(
     out: Any,
 ) -> None:
     """Fly ``names``, each a rosbridge v2 client on ``/vehicle-link`` with its vehicle key."""
-    asyncio.run(_link_vehicles(url, names, first, keys, seconds, ready, start, out))
+    try:
+        asyncio.run(_link_vehicles(url, names, keys, seconds, ready, start, out))
+    except Exception as exc:  # tell the bench at once rather than leave it waiting
+        ready.put(("failed", os.getpid(), repr(exc)))
+        raise
 
 
 async def _link_vehicles(
     url: str,
     names: list[str],
-    first: int,
     keys: dict[str, str],
     seconds: float,
     ready: Any,
@@ -317,13 +318,16 @@ async def _link_vehicles(
             async for _ in ws:
                 pass
 
-    for i, name in enumerate(names):
+    for name in names:
         ws = None
         for _attempt in range(10):
             try:
                 ws = await websockets.connect(
                     url,
                     additional_headers={"Authorization": f"Bearer {keys[name]}"},
+                    # its own source address, as vehicles on their own computers have: serve
+                    # caps the WebSockets from one address (rosbridge/context.py)
+                    local_addr=(source_address(int(name[1:])), 0),
                     open_timeout=20,
                     max_queue=None,
                 )
@@ -358,7 +362,7 @@ async def _link_vehicles(
         for frame in hello:
             await ws.send(json.dumps(frame))
         readers.append(asyncio.create_task(drain(ws)))
-        fleet.append((LightVehicle(name, first + i), ws, telemetry, status))
+        fleet.append((LightVehicle(name, int(name[1:])), ws, telemetry, status))
     ready.put(("ready", os.getpid(), rss_mb() - base))
     await asyncio.to_thread(start.wait)
     dt = 1.0 / PHYSICS_HZ
@@ -426,6 +430,11 @@ async def _link_observer(
     out.put(("observer", latencies, len(heard)))
 
 
+def source_address(index: int) -> str:
+    """A loopback address of vehicle ``index``'s own (127.1.0.1, 127.1.0.2, …)."""
+    return f"127.1.{index // 250}.{index % 250 + 1}"
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind((HOST, 0))
@@ -491,14 +500,19 @@ def run_link(n: int, seconds: float, procs: int) -> dict[str, Any]:
         workers = [
             ctx.Process(
                 target=link_vehicle_worker,
-                args=(url, names[i::procs], i, keys, seconds, ready, start, out),
+                args=(url, names[i::procs], keys, seconds, ready, start, out),
             )
             for i in range(procs)
             if names[i::procs]
         ]
         for w in workers:
             w.start()
-        joined_mb = [ready.get(timeout=300)[2] for _ in workers]
+        joined = [ready.get(timeout=300) for _ in workers]
+        failed = [item for item in joined if item[0] != "ready"]
+        if failed:
+            stop.set()
+            raise RuntimeError(f"vehicles failed to join: {failed[0][2]}")
+        joined_mb = [item[2] for item in joined]
         r = measure(proc.pid, seconds, start, counting)
         # the drones serve registered whose telemetry is fresh (GET /api/v1/health, no token)
         with urllib.request.urlopen(f"http://{HOST}:{port}/api/v1/health", timeout=30) as resp:
@@ -512,7 +526,7 @@ def run_link(n: int, seconds: float, procs: int) -> dict[str, Any]:
     warnings = [line for line in text.splitlines() if "WARNING" in line or "refused" in line]
     if warnings:
         print(f"serve logged {len(warnings)} warnings, e.g. {warnings[0][:160]}", file=sys.stderr)
-    return summarize("link", n, r, latencies, heard, joined_mb, sent, registered)
+    return summarize("link", n, r, latencies, heard, joined_mb, sent, registered, seconds)
 
 
 # ---------------------------------------------------------------------- measuring
@@ -538,6 +552,7 @@ def summarize(
     joined_mb: list[float],
     sent: int,
     alive: int,
+    seconds: float,
 ) -> dict[str, Any]:
     lat_ms = sorted(x * 1000 for x in latencies)
     p99 = lat_ms[min(len(lat_ms) - 1, int(0.99 * len(lat_ms)))] if lat_ms else math.nan
@@ -553,7 +568,7 @@ def summarize(
         "mb_per_vehicle": sum(joined_mb) / n,
         "heard": heard,
         "alive": alive,
-        "sent": sent,
+        "sent_per_s": sent / seconds,
         "load": r["load"],
     }
 
@@ -562,7 +577,8 @@ def row(r: dict[str, Any]) -> str:
     return (
         f"| {r['n']} | {r['transport']} | {r['p50_ms']:.1f} ms | {r['p99_ms']:.1f} ms | "
         f"{r['central_cores']:.2f} | {r['cpu_us_per_msg']:.0f} | "
-        f"{r['msgs_per_s']:.0f} ({r['expected_per_s']}) | {r['mb_per_vehicle']:.2f} | "
+        f"{r['msgs_per_s']:.0f} ({r['sent_per_s']:.0f}; {r['expected_per_s']}) | "
+        f"{r['mb_per_vehicle']:.2f} | "
         f"{r['heard']}/{r['n']} ({r['alive']}) | {r['load']:.1f} |"
     )
 
@@ -596,7 +612,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average at start: {os.getloadavg()[0]:.1f}; {os.cpu_count()} cores", flush=True)
     print(
         "| N | transport | telemetry p50 | p99 | central CPU (cores) | CPU µs/msg "
-        "| msgs/s (expected) | MB per vehicle | vehicles heard (at the central) | load avg |"
+        "| msgs/s received (sent; expected) | MB per vehicle "
+        "| vehicles heard (at the central) | load avg |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|", flush=True)
     rows: list[dict[str, Any]] = []
