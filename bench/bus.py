@@ -266,7 +266,8 @@ def run_bus(n: int, seconds: float, procs: int) -> dict[str, Any]:
             w.start()
         joined_mb = [ready.get(timeout=180)[2] for _ in workers]
         assert central.pid is not None
-        r = measure(central.pid, seconds, start, counting)
+        assert observer.pid is not None
+        r = measure(central.pid, observer.pid, seconds, start, counting)
         ask.set()
         alive = ready.get(timeout=60)[1]  # the central's liveliness view, vehicles still up
         sent = sum(out.get(timeout=120)[2] for _ in workers)
@@ -513,7 +514,8 @@ def run_link(n: int, seconds: float, procs: int) -> dict[str, Any]:
             stop.set()
             raise RuntimeError(f"vehicles failed to join: {failed[0][2]}")
         joined_mb = [item[2] for item in joined]
-        r = measure(proc.pid, seconds, start, counting)
+        assert observer.pid is not None
+        r = measure(proc.pid, observer.pid, seconds, start, counting)
         # the drones serve registered whose telemetry is fresh (GET /api/v1/health, no token)
         with urllib.request.urlopen(f"http://{HOST}:{port}/api/v1/health", timeout=30) as resp:
             registered = sum(bool(ok) for ok in json.load(resp)["drones"].values())
@@ -530,17 +532,18 @@ def run_link(n: int, seconds: float, procs: int) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------- measuring
-def measure(pid: int, seconds: float, start: Any, counting: Any) -> dict[str, float]:
+def measure(pid: int, observer: int, seconds: float, start: Any, counting: Any) -> dict[str, float]:
     """Start the vehicles; over the window (after the warm-up, before the last second) count at
     the observer and read the central's CPU from /proc."""
     start.set()
     time.sleep(WARM_S)
-    cpu0, wall0, load0 = cpu_s(pid), time.monotonic(), os.getloadavg()[0]
+    cpu0, obs0, wall0, load0 = cpu_s(pid), cpu_s(observer), time.monotonic(), os.getloadavg()[0]
     counting.set()
     time.sleep(max(1.0, seconds - WARM_S - 1.0))
     counting.clear()
-    cpu, wall = cpu_s(pid) - cpu0, time.monotonic() - wall0
-    return {"cpu_s": cpu, "wall_s": wall, "load": (load0 + os.getloadavg()[0]) / 2}
+    cpu, obs, wall = cpu_s(pid) - cpu0, cpu_s(observer) - obs0, time.monotonic() - wall0
+    load = (load0 + os.getloadavg()[0]) / 2
+    return {"cpu_s": cpu, "observer_s": obs, "wall_s": wall, "load": load}
 
 
 def summarize(
@@ -562,6 +565,7 @@ def summarize(
         "p50_ms": statistics.median(lat_ms) if lat_ms else math.nan,
         "p99_ms": p99,
         "central_cores": r["cpu_s"] / r["wall_s"],
+        "observer_cores": r["observer_s"] / r["wall_s"],
         "cpu_us_per_msg": 1e6 * r["cpu_s"] / max(1, len(lat_ms)),
         "msgs_per_s": len(lat_ms) / r["wall_s"],
         "expected_per_s": n * TELEMETRY_HZ,
@@ -579,7 +583,7 @@ def row(r: dict[str, Any]) -> str:
         f"{r['central_cores']:.2f} | {r['cpu_us_per_msg']:.0f} | "
         f"{r['msgs_per_s']:.0f} ({r['sent_per_s']:.0f}; {r['expected_per_s']}) | "
         f"{r['mb_per_vehicle']:.2f} | "
-        f"{r['heard']}/{r['n']} ({r['alive']}) | {r['load']:.1f} |"
+        f"{r['heard']}/{r['n']} ({r['alive']}) | {r['observer_cores']:.2f} | {r['load']:.1f} |"
     )
 
 
@@ -590,7 +594,7 @@ def ratio_row(bus: dict[str, Any], link: dict[str, Any]) -> str:
 
     return (
         f"| {bus['n']} | bus/link | {q('p50_ms')} | {q('p99_ms')} | {q('central_cores')} | "
-        f"{q('cpu_us_per_msg')} | {q('msgs_per_s')} | {q('mb_per_vehicle')} | | |"
+        f"{q('cpu_us_per_msg')} | {q('msgs_per_s')} | {q('mb_per_vehicle')} | | | |"
     )
 
 
@@ -613,9 +617,9 @@ def main(argv: list[str] | None = None) -> int:
     print(
         "| N | transport | telemetry p50 | p99 | central CPU (cores) | CPU µs/msg "
         "| msgs/s received (sent; expected) | MB per vehicle "
-        "| vehicles heard (at the central) | load avg |"
+        "| vehicles heard (at the central) | observer CPU | load avg |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    print("|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     rows: list[dict[str, Any]] = []
     runs: list[tuple[str, Callable[[int, float, int], dict[str, Any]]]] = [("bus", run_bus)]
     if args.link:
