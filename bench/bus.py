@@ -1,48 +1,68 @@
-"""The fleet's bus at scale: N light simulated vehicles publishing on Zenoh to a central.
+"""The fleet's bus at scale: N light simulated vehicles on Zenoh, against today's /vehicle-link.
 
 Each light vehicle is the simulator's physics and battery flying a circle (50 Hz physics, no
-camera) with its own bus credential and session, publishing telemetry at 10 Hz and a status at
-1 Hz under its own name, as a vehicle process does; many run in one process (``--procs`` worker
-processes share them out). The central is a separate process: the console's embedded router
-(``drone.bus.console.ConsoleBus``, with its access control) plus a subscriber to every drone's
-telemetry. Figures, per N:
+camera) with its own credential, publishing telemetry at 10 Hz and a status (the LTM's
+``LtmStatus``) at 1 Hz under its own name, as a vehicle process does; many run in one process
+(``--procs`` worker processes share them out). Two transports, the same N, in the same run:
 
-- telemetry end to end (vehicle's stamp → the central's callback, one machine, one clock):
-  p50 / p99;
-- the central's CPU (its process's CPU seconds per wall second: 1.0 is one core) and its work
-  per message (CPU µs per message received);
-- messages per second received by the central;
-- memory per vehicle (RSS of the vehicle processes over the same processes with no vehicle, /N).
+- **bus**: each vehicle its own Zenoh session (``drone.bus.vehicle.VehicleBus``, its bus
+  credential) to the central, a separate process running the console's embedded router with its
+  access control (``drone.bus.console.ConsoleBus``, which subscribes to every drone's telemetry);
+- **link** (baseline, ``--link``, on by default): a real ``uav-console serve --fleet 0 --drone
+  none`` (vehicle keys made with ``uav-console vehicle-key`` before it starts); each vehicle a
+  ``websockets`` client on ``/vehicle-link`` with its key, a rosbridge v2 client as
+  ``server.vehicles.link_core`` speaks it: advertises ``/NAME/vehicle/info`` (latched),
+  ``/NAME/vehicle/telemetry`` and ``/NAME/fleet/ltm_status``, subscribes to the console's
+  heartbeat, publishes. The telemetry's ``data`` is the same JSON as the bus payload.
 
-Baseline in the same run: the same N over today's ``/vehicle-link`` (``--link``, a real
-``serve --fleet 0`` with vehicle keys), when given.
+Both rows are measured the same way, through a real client of the central: an observer
+(a Zenoh session with the console's ``client.json5``; a rosbridge subscription on
+``/rosbridge`` to every ``/NAME/vehicle/telemetry``) stamps each telemetry on arrival. Figures:
 
-Usage: ``python bench/bus.py [--quick] [--n 10 50 200] [--seconds S] [--procs P]``.
-On 2 cores the vehicles and the central contend: read the central's CPU and the growth with N
-beside the latency.
+- telemetry end to end (vehicle's stamp → the observer, one machine, one clock): p50 / p99;
+- the central's CPU (``/proc/<pid>/stat`` of the central process / of ``serve``: CPU seconds per
+  wall second, 1.0 is one core) and its work per message (CPU µs per telemetry received);
+- telemetry messages per second at the observer (expected N × 10), how many vehicles it heard
+  and how many the central knows (bus: alive by liveliness; link: drones registered with
+  fresh telemetry, from ``GET /api/v1/health``);
+- memory per vehicle (RSS of the vehicle processes after joining over before, /N).
+
+Usage: ``python bench/bus.py [--quick] [--n 10 50 200] [--seconds S] [--procs P] [--no-link]``.
+On 2 cores the vehicles, the observer and the central contend: read the central's CPU and the
+load average beside the latency.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import contextlib
 import json
 import math
 import multiprocessing as mp
 import os
 import resource
+import secrets
+import socket
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
+import urllib.request
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
 FLEET = "bench"
 PHYSICS_HZ = 50
 TELEMETRY_HZ = 10
 STATUS_HZ = 1
+HOST = "127.0.0.1"
+WARM_S = 3.0  # after the start: every vehicle joined and publishing before the window opens
 
 
 def rss_mb(pid: int | None = None) -> float:
@@ -52,7 +72,82 @@ def rss_mb(pid: int | None = None) -> float:
     return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
 
 
-def vehicle_worker(
+def cpu_s(pid: int) -> float:
+    """CPU seconds (user + system, all threads) of process ``pid`` so far, from /proc."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+# ---------------------------------------------------------------------- the light vehicle
+class LightVehicle:
+    """Physics + battery flying a circle; the telemetry and status payloads it publishes."""
+
+    def __init__(self, name: str, index: int) -> None:
+        from drone.sim.physics import Physics
+
+        self.name = name
+        self.index = index
+        self.seq = 0
+        self.phys = Physics(bounds=(-60.0, 60.0, -60.0, 60.0, 0.0, 30.0))
+        self.phys.body.x, self.phys.body.y = math.cos(index), math.sin(index)
+        self.phys.takeoff()
+
+    def step(self, elapsed: float, dt: float) -> None:
+        phase = 2 * math.pi * elapsed / 30.0 + self.index
+        self.phys.command(0.2 * math.cos(phase), -0.2 * math.sin(phase), 0.0, 0.0, True)
+        self.phys.step(dt)
+
+    def telemetry(self) -> bytes:
+        """The bus's telemetry payload (schema 1), stamped now."""
+        from drone.bus.payloads import Telemetry, encode
+
+        b = self.phys.body
+        return encode(
+            Telemetry(
+                drone=self.name,
+                stamp=time.time(),
+                x=b.x,
+                y=b.y,
+                z=b.z,
+                yaw_deg=math.degrees(b.yaw_rad),
+                battery_pct=self.phys.battery.pct,
+                state=self.phys.ctrl.name,
+                flying=self.phys.flying,
+            )
+        )
+
+    def status(self) -> str:
+        """An ``LtmStatus`` as the vehicle's LTM reports it (server/fleet/messages.py)."""
+        b = self.phys.body
+        self.seq += 1
+        return json.dumps(
+            {
+                "name": self.name,
+                "t": time.monotonic(),
+                "seq": self.seq,
+                "x": b.x,
+                "y": b.y,
+                "z": b.z,
+                "yaw_deg": math.degrees(b.yaw_rad),
+                "battery_pct": self.phys.battery.pct,
+                "flying": self.phys.flying,
+                "state": self.phys.ctrl.name,
+                "link_ok": True,
+                "emergency": False,
+                "station": {"x": 0.0, "y": 0.0, "z": 0.0},
+            }
+        )
+
+
+def due(tick: int, k: int, hz: int) -> bool:
+    """Whether vehicle ``k`` publishes at ``hz`` on this physics tick (staggered over the
+    period, as independent processes would be)."""
+    return (tick + k) % (PHYSICS_HZ // hz) == 0
+
+
+# ---------------------------------------------------------------------- bus row
+def bus_vehicle_worker(
     names: list[str],
     creds: dict[str, tuple[list[str], str, str]],
     seconds: float,
@@ -60,195 +155,500 @@ def vehicle_worker(
     start: Any,
     out: Any,
 ) -> None:
-    """Fly ``names`` (physics + battery, a circle each) and publish their telemetry/status."""
+    """Fly ``names``, each with its own Zenoh session, publishing telemetry and status."""
     import zenoh
 
     from drone.bus import keys
-    from drone.bus.payloads import Telemetry, encode
     from drone.bus.vehicle import VehicleBus
-    from drone.sim.physics import Physics
 
     base = rss_mb()
     fleet = []
-    for i, name in enumerate(names):
+    for name in names:
         connect, user, password = creds[name]
         bus = VehicleBus(connect, user, password, FLEET, name)
         bus.start()
-        assert bus.session is not None
+        assert bus.session is not None and bus._publisher is not None
         status = bus.session.declare_publisher(
             f"{keys.ROOT}/{FLEET}/{name}/status", congestion_control=zenoh.CongestionControl.DROP
         )
-        phys = Physics(bounds=(-60.0, 60.0, -60.0, 60.0, 0.0, 30.0))
-        phys.body.x, phys.body.y = math.cos(i), math.sin(i)
-        phys.takeoff()
-        fleet.append((name, bus, status, phys))
+        fleet.append((LightVehicle(name, int(name[1:])), bus, bus._publisher, status))
     ready.put(("ready", os.getpid(), rss_mb() - base))
     start.wait()
     dt = 1.0 / PHYSICS_HZ
     t0 = time.monotonic()
-    tick = 0
-    sent = 0
+    tick = sent = 0
     while (now := time.monotonic()) - t0 < seconds:
-        for k, (name, bus, status, phys) in enumerate(fleet):
-            phase = 2 * math.pi * (now - t0) / 30.0 + k
-            phys.command(0.2 * math.cos(phase), -0.2 * math.sin(phase), 0.0, 0.0, True)
-            phys.step(dt)
-            # stagger the vehicles over the telemetry period, as independent processes would be
-            if (tick + k) % (PHYSICS_HZ // TELEMETRY_HZ) == 0:
-                b = phys.body
-                message = Telemetry(
-                    drone=name,
-                    stamp=time.time(),
-                    x=b.x,
-                    y=b.y,
-                    z=b.z,
-                    yaw_deg=math.degrees(b.yaw_rad),
-                    battery_pct=phys.battery.pct,
-                    state=phys.ctrl.name,
-                    flying=phys.flying,
-                )
-                assert bus._publisher is not None
-                bus._publisher.put(encode(message))
+        for k, (v, _, telemetry, status) in enumerate(fleet):
+            v.step(now - t0, dt)
+            if due(tick, k, TELEMETRY_HZ):
+                telemetry.put(v.telemetry())
                 sent += 1
-            if (tick + k) % (PHYSICS_HZ // STATUS_HZ) == 0:
-                status.put(json.dumps({"drone": name, "battery_pct": phys.battery.pct}))
+            if due(tick, k, STATUS_HZ):
+                status.put(v.status())
         tick += 1
         time.sleep(max(0.0, t0 + tick * dt - time.monotonic()))
-    out.put(("done", os.getpid(), sent, rss_mb()))
+    out.put(("done", os.getpid(), sent))
     for _, bus, _, _ in fleet:
         bus.close()
 
 
-def central_worker(
-    directory: str, names: list[str], seconds: float, ready: Any, start: Any, out: Any
-) -> None:
-    """The console's router with its ACL, and a subscriber that stamps every telemetry."""
-    from drone.bus import keys
+def bus_central_worker(directory: str, names: list[str], ready: Any, ask: Any, stop: Any) -> None:
+    """The console's router with its access control (and its telemetry subscriber)."""
     from drone.bus.console import ConsoleBus
-    from drone.bus.payloads import decode_telemetry
     from drone.bus.session import free_listen_endpoint
 
     bus = ConsoleBus(
         Path(directory), FLEET, names, listen=[free_listen_endpoint("tcp/127.0.0.1:17447")]
     )
     bus.start()
-    latencies: list[float] = []
-    counted = {"on": False, "n": 0}
-
-    def on_sample(sample: Any) -> None:
-        t = time.time()
-        message = decode_telemetry(sample.payload.to_bytes())
-        if counted["on"]:
-            latencies.append(t - message.stamp)
-            counted["n"] += 1
-
-    assert bus.session is not None
-    sub = bus.session.declare_subscriber(keys.all_telemetry(FLEET), on_sample)
     creds = {n: bus.vehicle_credential(n) for n in names}
-    ready.put(("creds", {n: (list(c.connect), c.user, c.password) for n, c in creds.items()}))
-    start.wait()
-    time.sleep(min(2.0, seconds / 4))  # every vehicle joined and publishing
-    counted["on"] = True
-    cpu0, wall0 = time.process_time(), time.monotonic()
-    time.sleep(seconds - min(2.0, seconds / 4) - 1.0)
-    cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-    counted["on"] = False
-    out.put(
+    ready.put(
         (
-            "central",
-            {
-                "latencies": latencies,
-                "received": counted["n"],
-                "cpu_s": cpu,
-                "wall_s": wall,
-                "alive": len(bus.alive()),
-            },
+            "creds",
+            {n: (list(c.connect), c.user, c.password) for n, c in creds.items()},
+            str(bus.client_file),
         )
     )
-    sub.undeclare()  # type: ignore[no-untyped-call]
+    ask.wait()
+    ready.put(("alive", len(bus.alive())))
+    stop.wait()
     bus.close()
 
 
-def run_bus(n: int, seconds: float, procs: int) -> dict[str, float]:
+def bus_observer_worker(client_file: str, counting: Any, ready: Any, stop: Any, out: Any) -> None:
+    """A third-party Zenoh client (the observer credential) stamping every telemetry."""
+    import zenoh
+
+    from drone.bus import keys
+
+    latencies: list[float] = []
+    heard: set[str] = set()
+
+    def on_sample(sample: Any) -> None:
+        t = time.time()
+        if counting.is_set():
+            msg = json.loads(sample.payload.to_bytes())
+            latencies.append(t - msg["stamp"])
+            heard.add(msg["drone"])
+
+    with zenoh.open(zenoh.Config.from_file(client_file)) as session:
+        sub = session.declare_subscriber(keys.all_telemetry(FLEET), on_sample)
+        ready.put(("observer",))
+        stop.wait()
+        sub.undeclare()  # type: ignore[no-untyped-call]
+    out.put(("observer", latencies, len(heard)))
+
+
+def run_bus(n: int, seconds: float, procs: int) -> dict[str, Any]:
     ctx = mp.get_context("spawn")  # Zenoh is opened in the children only, after the spawn
     names = [f"v{i:03d}" for i in range(n)]
     ready, out = ctx.Queue(), ctx.Queue()
-    start = ctx.Event()
+    start, counting, stop, ask = ctx.Event(), ctx.Event(), ctx.Event(), ctx.Event()
     with tempfile.TemporaryDirectory() as tmp:
-        central = ctx.Process(target=central_worker, args=(tmp, names, seconds, ready, start, out))
+        central = ctx.Process(target=bus_central_worker, args=(tmp, names, ready, ask, stop))
         central.start()
-        tag, creds = ready.get(timeout=60)
+        tag, creds, client_file = ready.get(timeout=60)
         assert tag == "creds"
-        groups = [names[i::procs] for i in range(procs)]
+        observer = ctx.Process(
+            target=bus_observer_worker, args=(client_file, counting, ready, stop, out)
+        )
+        observer.start()
+        assert ready.get(timeout=60)[0] == "observer"
         workers = [
-            ctx.Process(target=vehicle_worker, args=(g, creds, seconds, ready, start, out))
-            for g in groups
-            if g
+            ctx.Process(
+                target=bus_vehicle_worker,
+                args=(names[i::procs], creds, seconds, ready, start, out),
+            )
+            for i in range(procs)
+            if names[i::procs]
         ]
         for w in workers:
             w.start()
-        joined_mb = [ready.get(timeout=120)[2] for _ in workers]
-        start.set()
-        results: dict[str, Any] = {}
-        sent = 0
-        for _ in range(len(workers) + 1):
-            item = out.get(timeout=seconds + 120)
-            if item[0] == "central":
-                results = item[1]
-            else:
-                sent += item[2]
-        for p in [central, *workers]:
+        joined_mb = [ready.get(timeout=180)[2] for _ in workers]
+        assert central.pid is not None
+        assert observer.pid is not None
+        r = measure(central.pid, observer.pid, seconds, start, counting)
+        ask.set()
+        alive = ready.get(timeout=60)[1]  # the central's liveliness view, vehicles still up
+        sent = sum(out.get(timeout=120)[2] for _ in workers)
+        stop.set()
+        _, latencies, heard = out.get(timeout=60)
+        for p in [central, observer, *workers]:
             p.join(30)
-    lat_ms = sorted(x * 1000 for x in results["latencies"])
+    return summarize("bus", n, r, latencies, heard, joined_mb, sent, alive, seconds)
+
+
+# ---------------------------------------------------------------------- link row
+def link_vehicle_worker(
+    url: str,
+    names: list[str],
+    keys: dict[str, str],
+    seconds: float,
+    ready: Any,
+    start: Any,
+    out: Any,
+) -> None:
+    """Fly ``names``, each a rosbridge v2 client on ``/vehicle-link`` with its vehicle key."""
+    try:
+        asyncio.run(_link_vehicles(url, names, keys, seconds, ready, start, out))
+    except Exception as exc:  # tell the bench at once rather than leave it waiting
+        ready.put(("failed", os.getpid(), repr(exc)))
+        raise
+
+
+async def _link_vehicles(
+    url: str,
+    names: list[str],
+    keys: dict[str, str],
+    seconds: float,
+    ready: Any,
+    start: Any,
+    out: Any,
+) -> None:
+    import websockets
+
+    from server.fleet.messages import STATUS_TOPIC, STATUS_TYPE
+    from server.vehicles import names as vn
+
+    base = rss_mb()
+    fleet: list[tuple[LightVehicle, Any, str, str]] = []
+    readers: list[asyncio.Task[None]] = []
+
+    async def drain(ws: Any) -> None:  # the console's heartbeat and status frames
+        with contextlib.suppress(websockets.ConnectionClosed):
+            async for _ in ws:
+                pass
+
+    for name in names:
+        ws = None
+        for _attempt in range(10):
+            try:
+                ws = await websockets.connect(
+                    url,
+                    additional_headers={"Authorization": f"Bearer {keys[name]}"},
+                    # its own source address, as vehicles on their own computers have: serve
+                    # caps the WebSockets from one address (rosbridge/context.py)
+                    local_addr=(source_address(int(name[1:])), 0),
+                    open_timeout=20,
+                    max_queue=None,
+                )
+                break
+            except (OSError, TimeoutError, websockets.InvalidStatus):
+                await asyncio.sleep(0.5)
+        if ws is None:
+            raise RuntimeError(f"{name} could not join {url}")
+        telemetry, status = vn.telemetry_topic(name), f"/{name}/{STATUS_TOPIC}"
+        hello = [
+            {"op": "advertise", "topic": vn.info_topic(name), "type": vn.STRING, "latch": True},
+            {"op": "advertise", "topic": telemetry, "type": vn.STRING, "latch": False},
+            {"op": "advertise", "topic": status, "type": STATUS_TYPE, "latch": False},
+            {"op": "subscribe", "topic": vn.HEARTBEAT, "type": vn.STRING},
+            {
+                "op": "publish",
+                "topic": vn.info_topic(name),
+                "msg": {
+                    "data": json.dumps(
+                        {
+                            "name": name,
+                            "prefix": f"/{name}",
+                            "simulated": True,
+                            "door_url": "",
+                            "door_tickets": False,
+                            "pid": os.getpid(),
+                        }
+                    )
+                },
+            },
+        ]
+        for frame in hello:
+            await ws.send(json.dumps(frame))
+        readers.append(asyncio.create_task(drain(ws)))
+        fleet.append((LightVehicle(name, int(name[1:])), ws, telemetry, status))
+    ready.put(("ready", os.getpid(), rss_mb() - base))
+    await asyncio.to_thread(start.wait)
+    dt = 1.0 / PHYSICS_HZ
+    t0 = time.monotonic()
+    tick = sent = 0
+    while (now := time.monotonic()) - t0 < seconds:
+        for k, (v, ws, telemetry, status) in enumerate(fleet):
+            v.step(now - t0, dt)
+            if due(tick, k, TELEMETRY_HZ):
+                data = v.telemetry().decode()
+                await ws.send(
+                    json.dumps({"op": "publish", "topic": telemetry, "msg": {"data": data}})
+                )
+                sent += 1
+            if due(tick, k, STATUS_HZ):
+                await ws.send(
+                    json.dumps({"op": "publish", "topic": status, "msg": {"data": v.status()}})
+                )
+        tick += 1
+        await asyncio.sleep(max(0.0, t0 + tick * dt - time.monotonic()))
+    out.put(("done", os.getpid(), sent))
+    for _, ws, _, _ in fleet:
+        await ws.close()
+    for task in readers:
+        task.cancel()
+
+
+def link_observer_worker(
+    url: str, names: list[str], counting: Any, ready: Any, stop: Any, out: Any
+) -> None:
+    """A rosbridge client of ``serve`` subscribed to every vehicle's telemetry."""
+    asyncio.run(_link_observer(url, names, counting, ready, stop, out))
+
+
+async def _link_observer(
+    url: str, names: list[str], counting: Any, ready: Any, stop: Any, out: Any
+) -> None:
+    import websockets
+
+    from server.vehicles import names as vn
+
+    latencies: list[float] = []
+    heard: set[str] = set()
+    async with websockets.connect(url, max_size=None, max_queue=None) as ws:
+        for name in names:
+            topic = vn.telemetry_topic(name)
+            await ws.send(json.dumps({"op": "subscribe", "topic": topic, "type": vn.STRING}))
+        ready.put(("observer",))
+
+        async def read() -> None:
+            async for text in ws:
+                t = time.time()
+                if not counting.is_set():
+                    continue
+                frame = json.loads(text)
+                if frame.get("op") != "publish":
+                    continue
+                msg = json.loads(frame["msg"]["data"])
+                latencies.append(t - msg["stamp"])
+                heard.add(msg["drone"])
+
+        reader = asyncio.create_task(read())
+        await asyncio.to_thread(stop.wait)
+        reader.cancel()
+    out.put(("observer", latencies, len(heard)))
+
+
+def source_address(index: int) -> str:
+    """A loopback address of vehicle ``index``'s own (127.1.0.1, 127.1.0.2, …)."""
+    return f"127.1.{index // 250}.{index % 250 + 1}"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind((HOST, 0))
+        return int(s.getsockname()[1])
+
+
+@contextlib.contextmanager
+def serve(data: Path, names: list[str]) -> Iterator[tuple[subprocess.Popen[bytes], int, str]]:
+    """Vehicle keys for ``names``, then a real ``serve --fleet 0 --drone none`` on loopback."""
+    env = {**os.environ, "UAVC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
+    cli = [sys.executable, "-m", "server"]
+    subprocess.run(
+        [*cli, "vehicle-key", *names, "--data-dir", str(data)],
+        cwd=ROOT,
+        env=env,
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
+    port, token = free_port(), secrets.token_urlsafe(16)
+    argv = [*cli, "serve", "--host", HOST, "--port", str(port), "--drone", "none"]
+    argv += ["--fleet", "0", "--vehicles", "process", "--token", token]
+    log_path = data / "serve.log"
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
+    try:
+        deadline = time.monotonic() + 90
+        while True:
+            health = f"http://{HOST}:{port}/api/v1/health"
+            with contextlib.suppress(OSError), urllib.request.urlopen(health, timeout=5):
+                break
+            if proc.poll() is not None or time.monotonic() > deadline:
+                tail = log_path.read_text(errors="replace")[-2000:]
+                raise RuntimeError(f"serve did not start:\n{tail}")
+            time.sleep(0.3)
+        yield proc, port, token
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def run_link(n: int, seconds: float, procs: int) -> dict[str, Any]:
+    from server.vehicles.keys import VehicleKeys
+
+    ctx = mp.get_context("spawn")
+    names = [f"v{i:03d}" for i in range(n)]
+    ready, out = ctx.Queue(), ctx.Queue()
+    start, counting, stop = ctx.Event(), ctx.Event(), ctx.Event()
+    with tempfile.TemporaryDirectory() as tmp, serve(Path(tmp) / "data", names) as served:
+        proc, port, token = served
+        store = VehicleKeys(Path(tmp) / "data")
+        keys = {name: key.secret for name in names if (key := store.get(name)) is not None}
+        observer = ctx.Process(
+            target=link_observer_worker,
+            args=(f"ws://{HOST}:{port}/rosbridge?token={token}", names, counting, ready, stop, out),
+        )
+        observer.start()
+        assert ready.get(timeout=60)[0] == "observer"
+        url = f"ws://{HOST}:{port}/vehicle-link"
+        workers = [
+            ctx.Process(
+                target=link_vehicle_worker,
+                args=(url, names[i::procs], keys, seconds, ready, start, out),
+            )
+            for i in range(procs)
+            if names[i::procs]
+        ]
+        for w in workers:
+            w.start()
+        joined = [ready.get(timeout=300) for _ in workers]
+        failed = [item for item in joined if item[0] != "ready"]
+        if failed:
+            stop.set()
+            raise RuntimeError(f"vehicles failed to join: {failed[0][2]}")
+        joined_mb = [item[2] for item in joined]
+        assert observer.pid is not None
+        r = measure(proc.pid, observer.pid, seconds, start, counting)
+        # the drones serve registered whose telemetry is fresh (GET /api/v1/health, no token)
+        with urllib.request.urlopen(f"http://{HOST}:{port}/api/v1/health", timeout=30) as resp:
+            registered = sum(bool(ok) for ok in json.load(resp)["drones"].values())
+        sent = sum(out.get(timeout=120)[2] for _ in workers)
+        stop.set()
+        _, latencies, heard = out.get(timeout=60)
+        for p in [observer, *workers]:
+            p.join(30)
+        text = (Path(tmp) / "data" / "serve.log").read_text(errors="replace")
+    warnings = [line for line in text.splitlines() if "WARNING" in line or "refused" in line]
+    if warnings:
+        print(f"serve logged {len(warnings)} warnings, e.g. {warnings[0][:160]}", file=sys.stderr)
+    return summarize("link", n, r, latencies, heard, joined_mb, sent, registered, seconds)
+
+
+# ---------------------------------------------------------------------- measuring
+def measure(pid: int, observer: int, seconds: float, start: Any, counting: Any) -> dict[str, float]:
+    """Start the vehicles; over the window (after the warm-up, before the last second) count at
+    the observer and read the central's CPU from /proc."""
+    start.set()
+    time.sleep(WARM_S)
+    cpu0, obs0, wall0, load0 = cpu_s(pid), cpu_s(observer), time.monotonic(), os.getloadavg()[0]
+    counting.set()
+    time.sleep(max(1.0, seconds - WARM_S - 1.0))
+    counting.clear()
+    cpu, obs, wall = cpu_s(pid) - cpu0, cpu_s(observer) - obs0, time.monotonic() - wall0
+    load = (load0 + os.getloadavg()[0]) / 2
+    return {"cpu_s": cpu, "observer_s": obs, "wall_s": wall, "load": load}
+
+
+def summarize(
+    transport: str,
+    n: int,
+    r: dict[str, float],
+    latencies: list[float],
+    heard: int,
+    joined_mb: list[float],
+    sent: int,
+    alive: int,
+    seconds: float,
+) -> dict[str, Any]:
+    lat_ms = sorted(x * 1000 for x in latencies)
     p99 = lat_ms[min(len(lat_ms) - 1, int(0.99 * len(lat_ms)))] if lat_ms else math.nan
     return {
+        "transport": transport,
         "n": n,
         "p50_ms": statistics.median(lat_ms) if lat_ms else math.nan,
         "p99_ms": p99,
-        "central_cores": results["cpu_s"] / results["wall_s"],
-        "cpu_us_per_msg": 1e6 * results["cpu_s"] / max(1, results["received"]),
-        "msgs_per_s": results["received"] / results["wall_s"],
+        "central_cores": r["cpu_s"] / r["wall_s"],
+        "observer_cores": r["observer_s"] / r["wall_s"],
+        "cpu_us_per_msg": 1e6 * r["cpu_s"] / max(1, len(lat_ms)),
+        "msgs_per_s": len(lat_ms) / r["wall_s"],
         "expected_per_s": n * TELEMETRY_HZ,
         "mb_per_vehicle": sum(joined_mb) / n,
-        "alive": results["alive"],
+        "heard": heard,
+        "alive": alive,
+        "sent_per_s": sent / seconds,
+        "load": r["load"],
     }
+
+
+def row(r: dict[str, Any]) -> str:
+    return (
+        f"| {r['n']} | {r['transport']} | {r['p50_ms']:.1f} ms | {r['p99_ms']:.1f} ms | "
+        f"{r['central_cores']:.2f} | {r['cpu_us_per_msg']:.0f} | "
+        f"{r['msgs_per_s']:.0f} ({r['sent_per_s']:.0f}; {r['expected_per_s']}) | "
+        f"{r['mb_per_vehicle']:.2f} | "
+        f"{r['heard']}/{r['n']} ({r['alive']}) | {r['observer_cores']:.2f} | {r['load']:.1f} |"
+    )
+
+
+def ratio_row(bus: dict[str, Any], link: dict[str, Any]) -> str:
+    def q(key: str, digits: int = 2) -> str:
+        a, b = bus[key], link[key]
+        return f"{a / b:.{digits}f}×" if b and math.isfinite(a) and math.isfinite(b) else "–"
+
+    return (
+        f"| {bus['n']} | bus/link | {q('p50_ms')} | {q('p99_ms')} | {q('central_cores')} | "
+        f"{q('cpu_us_per_msg')} | {q('msgs_per_s')} | {q('mb_per_vehicle')} | | | |"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="N = 10 and 50, 8 s each")
+    ap.add_argument("--quick", action="store_true", help="N = 10 and 50, 10 s each")
     ap.add_argument("--n", type=int, nargs="+", default=None)
     ap.add_argument("--seconds", type=float, default=None)
     ap.add_argument("--procs", type=int, default=4, help="vehicle processes")
+    ap.add_argument(
+        "--link",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the baseline over /vehicle-link (a real serve) beside each bus row (default: on)",
+    )
     args = ap.parse_args(argv)
     ns = args.n or ([10, 50] if args.quick else [10, 50, 200])
-    seconds = args.seconds or (8.0 if args.quick else 20.0)
-    print(f"load average at start: {os.getloadavg()[0]:.1f}; {os.cpu_count()} cores")
+    seconds = args.seconds or (10.0 if args.quick else 20.0)
+    print(f"load average at start: {os.getloadavg()[0]:.1f}; {os.cpu_count()} cores", flush=True)
     print(
-        "| N | telemetry p50 | p99 | central CPU (cores) | CPU µs/msg | msgs/s (expected) "
-        "| MB per vehicle | alive |"
+        "| N | transport | telemetry p50 | p99 | central CPU (cores) | CPU µs/msg "
+        "| msgs/s received (sent; expected) | MB per vehicle "
+        "| vehicles heard (at the central) | observer CPU | load avg |"
     )
-    print("|---|---|---|---|---|---|---|---|")
-    rows = []
+    print("|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    rows: list[dict[str, Any]] = []
+    runs: list[tuple[str, Callable[[int, float, int], dict[str, Any]]]] = [("bus", run_bus)]
+    if args.link:
+        runs.append(("link", run_link))
     for n in ns:
-        r = run_bus(n, seconds, min(args.procs, n))
-        rows.append(r)
-        print(
-            f"| {n} | {r['p50_ms']:.1f} ms | {r['p99_ms']:.1f} ms | {r['central_cores']:.2f} | "
-            f"{r['cpu_us_per_msg']:.0f} | {r['msgs_per_s']:.0f} ({r['expected_per_s']}) | "
-            f"{r['mb_per_vehicle']:.2f} | {r['alive']} |",
-            flush=True,
-        )
-    if len(rows) > 1:
-        first, last = rows[0], rows[-1]
-        growth = last["central_cores"] / max(first["central_cores"], 1e-9)
-        peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
-        print(
-            f"\ncentral CPU grows {growth:.1f}x from N={first['n']} to N={last['n']} "
-            f"({last['n'] / first['n']:.0f}x the vehicles); p99 ratio "
-            f"{last['p99_ms'] / max(first['p99_ms'], 1e-9):.2f}; "
-            f"peak RSS of this process {peak_mb:.0f} MB"
-        )
+        got = {}
+        for transport, run in runs:
+            try:
+                got[transport] = r = run(n, seconds, min(args.procs, n))
+            except Exception as exc:  # one transport failing must not lose the other's row
+                print(f"| {n} | {transport} | failed: {exc!r} |", flush=True)
+                continue
+            rows.append(r)
+            print(row(r), flush=True)
+        if "bus" in got and "link" in got:
+            print(ratio_row(got["bus"], got["link"]), flush=True)
+    for transport, _ in runs:
+        mine = [r for r in rows if r["transport"] == transport]
+        if len(mine) > 1:
+            first, last = mine[0], mine[-1]
+            growth = last["central_cores"] / max(first["central_cores"], 1e-9)
+            print(
+                f"\n{transport}: central CPU grows {growth:.1f}x from N={first['n']} to "
+                f"N={last['n']} ({last['n'] / first['n']:.0f}x the vehicles); p99 "
+                f"{first['p99_ms']:.1f} → {last['p99_ms']:.1f} ms",
+                end="",
+            )
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
+    print(f"\npeak RSS of this process {peak_mb:.0f} MB")
     return 0
 
 
