@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from drone.sim.server import SimPorts, in_use, sim_sockets
+from server.vehicles.keys import new_key
 from tests.e2e.served import ROOT, serve
 from tests.loopback import for_worker
 
@@ -80,7 +81,12 @@ def test_two_consoles_fly_their_own_drones(tmp_path: Path) -> None:
             vehicle = subprocess.run(
                 [*argv, "--central", link, "--world", "indoor"],
                 cwd=ROOT,
-                env={**os.environ, "UAVC_SIM_BASE_ADDR": BASE, "UAVC_TOKEN": "first-pilot"},
+                env={
+                    **os.environ,
+                    "UAVC_SIM_BASE_ADDR": BASE,
+                    "UAVC_TOKEN": "first-pilot",
+                    "UAVC_VEHICLE_KEY": new_key(),  # a vehicle joins with its own key
+                },
                 capture_output=True,
                 text=True,
                 timeout=60,
