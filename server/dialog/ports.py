@@ -96,11 +96,16 @@ class FleetPort(Protocol):
 
     A vehicle process reaches it over the link: its answers are awaitables. ``stop`` answers
     ``ok`` False when no patrol runs (the dialog then stops the drone's own task); a port in
-    this process also has ``running()``, asked first."""
+    this process also has ``running()``, asked first. ``pause`` and ``resume`` pause and
+    resume the patrol (server.fleet.states)."""
 
     def start(self, threshold: float = ...) -> FleetReply | Awaitable[FleetReply]: ...
 
     def stop(self) -> FleetReply | Awaitable[FleetReply]: ...
+
+    def pause(self) -> FleetReply | Awaitable[FleetReply]: ...
+
+    def resume(self) -> FleetReply | Awaitable[FleetReply]: ...
 
 
 class DescribePort(Protocol):

@@ -25,10 +25,12 @@ STATUS_TYPE = "std_msgs/String"
 PLAN_SERVICE_TYPE = "uav_console/FlightPlan"
 FLEET_TOPIC = "/fleet/status"
 FLEET_TYPE = "uav_console/FleetStatus"
-# The Central patrol (the console's button, "start/stop the patrol"): args {op: start|stop,
-# threshold?} -> {ok, text, mission}; a vehicle process's dialog calls it over the link.
+# The Central patrol (the console's buttons, "start/stop/pause/resume the patrol"): args
+# {op: start|stop|pause|resume, threshold?} -> {ok, text, mission}; a vehicle process's dialog
+# calls it over the link.
 PATROL_SERVICE = "/fleet/patrol"
 PATROL_SERVICE_TYPE = "uav_console/Patrol"
+MAX_WORD = 64  # a status's free-text words (``operator``)
 
 
 class Role(enum.Enum):
@@ -40,6 +42,9 @@ class Role(enum.Enum):
     CHARGING = "charging"
     IDLE = "idle"
     LOST = "lost"
+    # in a paused mission (server.fleet.states): the CTM sends it nothing; it does what the
+    # operator last told it (landed, hovering) or holds where it was
+    PAUSED = "paused"
 
 
 class PlanKind(enum.Enum):
@@ -69,6 +74,14 @@ def _bool(d: Mapping[str, Any], key: str, default: bool | None = None) -> bool:
     v = d.get(key, default)
     if not isinstance(v, bool):
         raise MessageError(f"field {key!r} must be true or false, got {v!r}")
+    return v
+
+
+def _word(d: Mapping[str, Any], key: str) -> str:
+    """A short free-text field (at most ``MAX_WORD`` characters, "" when absent)."""
+    v = _str(d, key, "")
+    if len(v) > MAX_WORD:
+        raise MessageError(f"field {key!r} is longer than {MAX_WORD} characters")
     return v
 
 
@@ -107,6 +120,10 @@ class LtmStatus:
     task_state: str = "idle"
     progress: float = 0.0
     autonomous: str = ""  # what the LTM did on its own ("ctm_silent", "battery_reserve")
+    # what the operator did to the CTM's patrol plan (land, hover, emergency, stop, jog…), from
+    # any door (page, REST, speech, rosbridge, the safety door): "" until then, and again once
+    # the next plan is applied
+    operator: str = ""
 
     @property
     def position(self) -> Enu:
@@ -148,6 +165,7 @@ class LtmStatus:
             task_state=_str(d, "task_state", "idle"),
             progress=_num(d, "progress", default=0.0),
             autonomous=_str(d, "autonomous", ""),
+            operator=_word(d, "operator"),
         )
 
 

@@ -92,8 +92,12 @@ class FleetService:
             reply = self.central.start(threshold)
         elif op == "stop":
             reply = self.central.stop()
+        elif op == "pause":
+            reply = self.central.pause()
+        elif op == "resume":
+            reply = self.central.resume()
         else:
-            raise ValueError(f"unknown op {op!r} (start, stop)")
+            raise ValueError(f"unknown op {op!r} (start, stop, pause, resume)")
         return {"ok": reply.ok, "text": reply.text, "mission": reply.mission}
 
     async def _run(self) -> None:

@@ -158,6 +158,12 @@ class RemoteFleet:
     def stop(self) -> Awaitable[PatrolAnswer]:
         return self._call({"op": "stop"})
 
+    def pause(self) -> Awaitable[PatrolAnswer]:
+        return self._call({"op": "pause"})
+
+    def resume(self) -> Awaitable[PatrolAnswer]:
+        return self._call({"op": "resume"})
+
 
 class VehicleHost:
     """See the module docstring: ``await start()``, ``await run(stop)``, ``await stop()``."""
