@@ -32,7 +32,7 @@ from pydantic import BaseModel, Field
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.errors import MissionError
 from server.fleet.geo import Enu
-from server.fleet.messages import Role
+from server.fleet.messages import Handoff, Role
 from server.fleet.states import MissionState
 
 STANDOFF_M = 1.0  # indoors: as GotoMarkerTask.standoff_m, where the marker fills the camera
@@ -89,7 +89,7 @@ class CentralPatrol:
         """The missions not ended (waiting, running, paused or stalled): what ``stop`` ends."""
         return [mid for mid, ms in self.ctm.missions.items() if ms.state.live]
 
-    def start(self, threshold: float = 0.30) -> PatrolReply:
+    def start(self, threshold: float = 0.30, handoff: Handoff = Handoff.PREDICTIVE) -> PatrolReply:
         """Start the world's patrol with every drone of the fleet (idempotent)."""
         now = self.clock()
         live = self.running()
@@ -113,12 +113,14 @@ class CentralPatrol:
                 threshold=threshold,
                 mission_id=f"{MISSION_PREFIX}{k}",
                 headings_deg=heads,
+                handoff=handoff,
             )
         except MissionError as exc:
             return PatrolReply(False, f"I cannot start the patrol: {exc}.")
         if self.on_change is not None:
             self.on_change()
         drones = [r for r in self.ctm.drones.values() if r.role is not Role.LOST]
+        reactive = handoff is Handoff.REACTIVE
         if not drones:
             text = (
                 f"Patrol of {len(route)} waypoints set up, but no drone has joined the fleet "
@@ -129,7 +131,8 @@ class CentralPatrol:
             text = (
                 f"Starting the patrol of {len(route)} waypoints with {len(drones)} "
                 f"drone{'s' if len(drones) != 1 else ''}; they hand over at "
-                f"{100 * threshold:.0f} percent battery."
+                f"{100 * threshold:.0f} percent battery"
+                + (", leaving at the threshold as in the paper." if reactive else ".")
             )
             if not ready:
                 text += " No drone is ready yet; the first one ready takes off."
@@ -218,6 +221,7 @@ class PatrolStart(BaseModel):
 
     action: Literal["start", "pause", "resume", "end"] = "start"
     handoff_threshold: float = Field(default=0.30, gt=0.0, lt=1.0)
+    handoff: Handoff = Handoff.PREDICTIVE
 
 
 def make_patrol_router(
@@ -239,7 +243,7 @@ def make_patrol_router(
         is none)."""
         body = body or PatrolStart()
         if body.action == "start":
-            reply = central.start(body.handoff_threshold)
+            reply = central.start(body.handoff_threshold, body.handoff)
         elif body.action == "pause":
             reply = central.pause()
         elif body.action == "resume":

@@ -27,7 +27,7 @@ import itertools
 import math
 import re
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +46,7 @@ from server.fleet.messages import (
     MAX_ROUTE_POINTS,
     MISSION_NAME_PATTERN,
     FlightPlan,
+    Handoff,
     LtmStatus,
     Mission,
     MissionRequest,
@@ -68,6 +69,7 @@ MARKER_STANDOFF_M = 1.0  # a marker-id waypoint lies this far in front of the ma
 
 
 RETURN_LAYER_M = 2.0  # drones fly home this far above the route (clear of the relief)
+STATION_RADIUS_M = 1.5  # a drone this near its station's pad is on it (charges there)
 
 
 @dataclass(frozen=True)
@@ -91,6 +93,7 @@ class DroneRecord:
     plan_sent_t: float = -math.inf
     lost_reason: str = ""
     lost_from: Role = Role.IDLE  # the role it had when it was lost
+    charging_since: float = -math.inf  # when it landed at its station to charge
     samples: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=400))
 
     def drain_pct_s(self, default: float) -> float:
@@ -124,7 +127,9 @@ class MissionRecord:
     join_sent_t: float = 0.0  # when that relief was sent
     relief_on_route_t: float | None = None  # when it reached the route (the handoff's time)
     last_known: Enu | None = None  # the last position of an active drone lost (or paused)
-    last_active: str = "(lost)"  # who that was, for the coverage's handoff record
+    # the route is empty: who left it and why (handoff, replacement, resume), for the handoff
+    # the next drone on the route makes
+    gap_from: tuple[str, str] | None = None
     ended_t: float | None = None
 
 
@@ -174,13 +179,21 @@ class CentralTaskManager:
         self.drones: dict[str, DroneRecord] = {}
         self.missions: dict[str, MissionRecord] = {}
         self.events: deque[tuple[float, str]] = deque(maxlen=200)
+        # what the operator must hear (a mission stalled, resumed): (t, level, text), drained
+        # by the node that runs the CTM onto the console's replies
+        self.notices: deque[tuple[float, str, str]] = deque(maxlen=50)
         self._plan_ids = itertools.count(1)
+        self._now = 0.0  # the latest step's time (for changes made between steps)
         self._mission_ids = itertools.count(1)
         self.decisions = 0
 
     # ------------------------------------------------------------------ inputs
     def event(self, now: float, text: str) -> None:
         self.events.append((now, text))
+
+    def notify(self, now: float, level: str, text: str) -> None:
+        """Tell the operator (``notices``; ``level`` info, warn or alert)."""
+        self.notices.append((now, level, text))
 
     def on_status(self, status: LtmStatus, now: float) -> None:
         """An LTM report (from any transport)."""
@@ -219,6 +232,7 @@ class CentralTaskManager:
         threshold: float = 0.30,
         mission_id: str | None = None,
         headings_deg: Sequence[float] = (),
+        handoff: Handoff = Handoff.PREDICTIVE,
     ) -> Mission:
         """Hold a new patrol mission; drones are assigned at the next ``step``.
 
@@ -255,9 +269,12 @@ class CentralTaskManager:
             geo = tuple((g.lat_deg, g.lon_deg, g.alt_m) for g in gs)
         if headings_deg and len(headings_deg) != len(route):
             raise MissionError("give one heading per waypoint, or none")
-        m = Mission(mid, tuple(route), loop, threshold, now, geo, tuple(headings_deg))
+        m = Mission(mid, tuple(route), loop, threshold, now, geo, tuple(headings_deg), handoff)
         self.missions[mid] = MissionRecord(m, coverage=CoverageTracker(tuple(route), now))
-        self.event(now, f"mission {mid}: {len(route)} waypoints, handoff at {threshold:.0%}")
+        self.event(
+            now,
+            f"mission {mid}: {len(route)} waypoints, handoff at {threshold:.0%} ({handoff.value})",
+        )
         return m
 
     def _check_limits(self, route: Sequence[Enu]) -> None:
@@ -302,7 +319,12 @@ class CentralTaskManager:
                 p = marker.standoff(MARKER_STANDOFF_M)
                 route.append(Enu(float(p.x), float(p.y), req.altitude_m))
         return self.add_mission(
-            route, now=now, loop=req.loop, threshold=req.handoff_threshold, mission_id=req.name
+            route,
+            now=now,
+            loop=req.loop,
+            threshold=req.handoff_threshold,
+            mission_id=req.name,
+            handoff=req.handoff,
         )
 
     def _get(self, mission_id: str) -> MissionRecord:
@@ -353,7 +375,7 @@ class CentralTaskManager:
         if ms.active is not None:
             st = self.drones[ms.active].status
             if st is not None:  # a drone resuming it carries on from there
-                ms.last_known, ms.last_active = st.position, ms.active
+                ms.last_known, ms.gap_from = st.position, (ms.active, "resume")
         for name in (ms.active, ms.relief):
             if name is None:
                 continue
@@ -425,6 +447,7 @@ class CentralTaskManager:
             rec.role = Role.IDLE
         elif st is not None and st.battery_pct < self.stations.ready_pct:
             rec.role = Role.CHARGING
+            rec.charging_since = self._now
         else:
             rec.role = Role.IDLE
 
@@ -451,6 +474,7 @@ class CentralTaskManager:
             "drones": self._mission_drones(ms),
             "loop": m.loop,
             "handoff_threshold": m.threshold,
+            "handoff": m.handoff.value,
             "route": [{"x": p.x, "y": p.y, "z": p.z} for p in m.route],
             "route_geo": [{"lat": a, "lon": b, "alt": c} for a, b, c in m.geo],
             "active": ms.active,
@@ -492,12 +516,13 @@ class CentralTaskManager:
     def step(self, now: float) -> list[Dispatch]:
         """Decide; returns the plans to send now."""
         self.decisions += 1
+        self._now = now
         self.expire_ended(now)
         out: list[Dispatch] = []
         for rec in self.drones.values():
             self._update_role(rec, now, out)
         for ms in self.missions.values():
-            if ms.state.flying:
+            if ms.state.flying or ms.state is MissionState.STALLED:
                 self._run_mission(ms, now, out)
         for rec in self.drones.values():
             self._home_if_unused(rec, now, out)
@@ -556,9 +581,10 @@ class CentralTaskManager:
             else:
                 # Landed, or someone's manual flight (never the CTM's to end): not taken over.
                 rec.role = Role.IDLE if st.flying else Role.CHARGING
+                rec.charging_since = now
             return
         if rec.role is Role.RETURNING and not st.flying and st.state in ("LANDED", "DEFAULT"):
-            rec.role = Role.CHARGING
+            rec.role, rec.charging_since = Role.CHARGING, now
             self.event(now, f"{rec.name} landed at its station ({st.battery_pct:.0f} %)")
         elif rec.role is Role.CHARGING and st.battery_pct >= self.stations.ready_pct:
             rec.role = Role.IDLE
@@ -594,37 +620,74 @@ class CentralTaskManager:
                 ms.relief = None
         rec.mission = ""
 
-    def _candidates(self, exclude: Iterable[str] = ()) -> list[DroneRecord]:
-        ex = set(exclude)
+    def _candidates(self) -> list[DroneRecord]:
+        """Drones free for a mission: idle, or on the ground charging (how much charge is
+        enough is the mission's, ``_need_pct``)."""
         return [
             r
             for r in self.drones.values()
-            if r.role is Role.IDLE and r.name not in ex and r.status is not None
+            if r.status is not None
+            and (r.role is Role.IDLE or (r.role is Role.CHARGING and not r.status.flying))
         ]
 
     def _takeoff_s(self, rec: DroneRecord) -> float:
         """Take-off time ``rec`` needs before it can fly anywhere (none in the air)."""
         return 0.0 if rec.status is not None and rec.status.flying else self.model.takeoff_s
 
-    def _best(self, ms: MissionRecord) -> tuple[DroneRecord, float] | None:
-        """The idle drone that reaches the route first (ties: fuller battery), with its lead:
-        from its station's entry point on the ground, from the nearest route point in the air
-        (a paused mission's drone, still hovering when the operator resumes it)."""
+    def _lead(self, r: DroneRecord, route: Sequence[Enu]) -> float:
+        """Dispatch-to-arrival time of ``r``: from its station's entry point on the ground,
+        from the nearest route point in the air (a paused mission's drone, still hovering
+        when the operator resumes it)."""
+        assert r.status is not None
+        here = r.status.position
+        if r.status.flying:
+            i = min(range(len(route)), key=lambda k: here.dist_xy(route[k]))
+            return transit_s(here, route[i], self.model) + self.model.margin_s
+        i = self.entry_index(r.status.station, route)
+        return lead_time_s(here, route[i], self.model)
+
+    def _need_pct(self, ms: MissionRecord, lead_s: float) -> float:
+        """The charge a drone needs to be worth sending: the flight out and ``min_shift_s``
+        on the route, above the mission's threshold (the mission's reserve)."""
+        m = self.model
+        return 100.0 * ms.mission.threshold + (lead_s + m.min_shift_s) * m.drain_pct_s
+
+    def _best(self, ms: MissionRecord, now: float) -> tuple[DroneRecord, float] | None:
+        """The drone able to fly ``ms`` now (charged above its reserve) that reaches the route
+        first (ties: fuller battery), with its lead; None when no drone is able."""
         best: tuple[float, float, DroneRecord] | None = None
-        route = ms.mission.route
         for r in self._candidates():
             assert r.status is not None
-            here = r.status.position
-            if r.status.flying:
-                i = min(range(len(route)), key=lambda k: here.dist_xy(route[k]))
-                lead = transit_s(here, route[i], self.model) + self.model.margin_s
-            else:
-                i = self.entry_index(r.status.station, route)
-                lead = lead_time_s(here, route[i], self.model)
+            lead = self._lead(r, ms.mission.route)
+            if r.status.battery_pct < self._need_pct(ms, lead):
+                continue
             key = (lead, -r.status.battery_pct)
             if best is None or key < (best[0], best[1]):
                 best = (lead, -r.status.battery_pct, r)
         return None if best is None else (best[2], best[0])
+
+    def _soonest_ready(self, ms: MissionRecord, now: float) -> tuple[str, float] | None:
+        """The drone that will be able to fly ``ms`` first and in how many seconds, from the
+        charge it will have: on its station at the station's rate (or when its swap is done),
+        and a drone flying home once it has landed there; None when none will."""
+        best: tuple[str, float] | None = None
+        m = self.model
+        for r in self.drones.values():
+            st = r.status
+            if st is None or r.role not in (Role.CHARGING, Role.RETURNING):
+                continue
+            need = self._need_pct(ms, lead_time_s(st.station, ms.mission.route[0], m))
+            if r.role is Role.RETURNING:
+                home = transit_s(st.position, st.station, m) + m.land_s
+                landed = st.battery_pct - home * m.drain_pct_s
+                t = home + self.stations.time_to_s(landed, need, 0.0)
+            elif st.position.dist_xy(st.station) <= STATION_RADIUS_M:
+                t = self.stations.time_to_s(st.battery_pct, need, now - r.charging_since)
+            else:
+                continue  # landed away from its station: it does not charge
+            if best is None or t < best[1]:
+                best = (r.name, t)
+        return best
 
     def _run_mission(self, ms: MissionRecord, now: float, out: list[Dispatch]) -> None:
         m = ms.mission
@@ -637,74 +700,121 @@ class CentralTaskManager:
                 lost = self.drones[name].status
                 if slot == "active" and lost is not None:
                     ms.last_known = lost.position  # the replacement carries on from there
+                    ms.gap_from = ("(lost)", "replacement")
                 if ms.coverage is not None:
                     ms.coverage.forget(name)
                 setattr(ms, slot, None)
                 ms.replacements += 1
         # relief on the route: hand over
         if ms.relief is not None:
-            rr = self.drones[ms.relief]
-            assert rr.status is not None
-            on_route = rr.status.flying and self.on_route(rr.status.position, m)
-            if on_route and ms.relief_on_route_t is None:
-                ms.relief_on_route_t = now  # the relief covers the route from now on
-            if ms.relief_on_route_t is not None and not self._owed(ms, now):
-                took_over = ms.relief_on_route_t
-                old = ms.active
-                ms.active, ms.relief = ms.relief, None
-                rr.role = Role.PATROLLING
-                if ms.started_t is None:
-                    ms.started_t = now
-                if ms.state is MissionState.WAITING:
-                    self._set(ms, MissionEvent.ON_ROUTE, now, f"running: {rr.name} patrolling")
-                joined_at = ms.join.index if ms.join is not None else -1
-                if old is not None:
-                    ms.handoffs += 1
-                    orec = self.drones[old]
-                    b = orec.status.battery_pct if orec.status else float("nan")
-                    self.event(now, f"handoff on {m.id}: {rr.name} relieves {old} ({b:.0f} %)")
-                    self._send_home(orec, now, m, out)
-                    if ms.coverage is not None:
-                        ms.coverage.forget(old)
-                        ms.coverage.handoff(took_over, old, rr.name, joined_at, "handoff")
-                else:
-                    self.event(now, f"{rr.name} patrolling {m.id}")
-                    if ms.last_known is not None and ms.coverage is not None:
-                        kind = "replacement" if ms.last_active == "(lost)" else "resume"
-                        ms.coverage.handoff(took_over, ms.last_active, rr.name, joined_at, kind)
-                ms.join, ms.last_known, ms.relief_on_route_t = None, None, None
-                ms.last_active = "(lost)"
-        # the active drone must go home now (reserve), relief or not
+            self._take_over(ms, now, out)
+        # the active drone leaves: at its reserve (relief or not), or at the threshold when the
+        # mission hands over reactively (the paper's rule: the relief is sent then)
         if ms.active is not None:
             ar = self.drones[ms.active]
             st = ar.status
             assert st is not None
-            need = reserve_pct(st.position, st.station, self.model)
-            if st.battery_pct <= need:
+            reserve = reserve_pct(st.position, st.station, self.model)
+            reactive = m.handoff is Handoff.REACTIVE and st.battery_pct <= 100.0 * m.threshold
+            if st.battery_pct <= reserve or reactive:
+                why = "at the threshold" if reactive else "at reserve"
                 self.event(
-                    now, f"{ar.name} at reserve ({st.battery_pct:.0f} %) leaves {m.id} unrelieved"
+                    now, f"{ar.name} {why} ({st.battery_pct:.0f} %) leaves {m.id} unrelieved"
                 )
                 ms.active = None
+                ms.last_known, ms.gap_from = st.position, (ar.name, "handoff")
+                if ms.coverage is not None:
+                    ms.coverage.forget(ar.name)
                 self._send_home(ar, now, m, out)
         if ms.active is None and ms.state is MissionState.RUNNING:
             who = f"; {ms.relief} on its way" if ms.relief else ""
             self._set(ms, MissionEvent.OFF_ROUTE, now, f"waiting: no drone on the route{who}")
-        # dispatch a relief (or the first drone)
-        if ms.relief is None:
-            choice = self._best(ms)
-            if choice is None:
+        if ms.relief is not None:
+            return
+        # dispatch a relief (or the first drone): reactive missions only once the route is empty
+        if ms.active is not None and m.handoff is Handoff.REACTIVE:
+            return
+        choice = self._best(ms, now)
+        if choice is None:
+            if ms.active is None:
+                self._stall(ms, now)
+            return
+        rec, lead = choice
+        join = self._join(rec, ms) if self.continuity else None
+        if join is not None:
+            lead = join.relief_eta_s + self.model.margin_s
+        if ms.active is not None:
+            ast = self.drones[ms.active].status
+            assert ast is not None
+            drain = self.drones[ms.active].drain_pct_s(self.model.drain_pct_s)
+            if not should_dispatch(ast.battery_pct, 100.0 * m.threshold, drain, lead):
                 return
-            rec, lead = choice
-            join = self._join(rec, ms) if self.continuity else None
-            if join is not None:
-                lead = join.relief_eta_s + self.model.margin_s
-            if ms.active is not None:
-                ast = self.drones[ms.active].status
-                assert ast is not None
-                drain = self.drones[ms.active].drain_pct_s(self.model.drain_pct_s)
-                if not should_dispatch(ast.battery_pct, 100.0 * m.threshold, drain, lead):
-                    return
-            self._dispatch(rec, ms, now, out, join)
+        if ms.state is MissionState.STALLED:
+            assert rec.status is not None
+            b = rec.status.battery_pct
+            self._set(ms, MissionEvent.READY, now, f"waiting: {rec.name} ready ({b:.0f} %)")
+            self.notify(now, "info", f"{rec.name} is ready at {b:.0f} percent; {m.id} resumes.")
+        self._dispatch(rec, ms, now, out, join)
+
+    def _take_over(self, ms: MissionRecord, now: float, out: list[Dispatch]) -> None:
+        """The relief in flight takes the route over once it is on it (and the drone it
+        relieves has flown the waypoints it still owed)."""
+        m = ms.mission
+        assert ms.relief is not None
+        rr = self.drones[ms.relief]
+        assert rr.status is not None
+        on_route = rr.status.flying and self.on_route(rr.status.position, m)
+        if on_route and ms.relief_on_route_t is None:
+            ms.relief_on_route_t = now  # the relief covers the route from now on
+        if ms.relief_on_route_t is None or self._owed(ms, now):
+            return
+        took_over = ms.relief_on_route_t
+        old = ms.active
+        ms.active, ms.relief = ms.relief, None
+        rr.role = Role.PATROLLING
+        if ms.started_t is None:
+            ms.started_t = now
+        if ms.state is MissionState.WAITING:
+            self._set(ms, MissionEvent.ON_ROUTE, now, f"running: {rr.name} patrolling")
+        joined_at = ms.join.index if ms.join is not None else -1
+        if old is not None:
+            ms.handoffs += 1
+            orec = self.drones[old]
+            b = orec.status.battery_pct if orec.status else float("nan")
+            self.event(now, f"handoff on {m.id}: {rr.name} relieves {old} ({b:.0f} %)")
+            self._send_home(orec, now, m, out)
+            if ms.coverage is not None:
+                ms.coverage.forget(old)
+                ms.coverage.handoff(took_over, old, rr.name, joined_at, "handoff")
+        else:
+            self.event(now, f"{rr.name} patrolling {m.id}")
+            if ms.gap_from is not None:
+                left, kind = ms.gap_from
+                ms.handoffs += kind == "handoff"  # it left, the relief came after a gap
+                if ms.coverage is not None:
+                    ms.coverage.handoff(took_over, left, rr.name, joined_at, kind)
+        ms.join, ms.last_known, ms.relief_on_route_t, ms.gap_from = None, None, None, None
+
+    def _stall(self, ms: MissionRecord, now: float) -> None:
+        """Nobody on the route and no drone able to fly it: say so (once), with when the
+        first charging drone will be ready; ``_run_mission`` resumes it when one is."""
+        if not self.drones:
+            return  # no drone has joined yet: still waiting
+        soonest = self._soonest_ready(ms, now)
+        detail = "stalled: no drone above the reserve"
+        if soonest is not None:
+            detail += f" ({soonest[0]} ready in {soonest[1]:.0f} s)"
+        if ms.state is MissionState.STALLED:
+            ms.detail = detail  # the countdown, without an event a step
+            return
+        self._set(ms, MissionEvent.STALL, now, detail)
+        when = f"; {soonest[0]} is ready in about {soonest[1]:.0f} seconds" if soonest else ""
+        self.notify(
+            now,
+            "warn",
+            f"Patrol {ms.mission.id} has stalled: no drone is charged above the reserve{when}. "
+            "It resumes by itself.",
+        )
 
     def _join(self, rec: DroneRecord, ms: MissionRecord) -> Join:
         """Where ``rec`` would join ``ms``'s route if dispatched now (continuity.py)."""

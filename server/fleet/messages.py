@@ -47,6 +47,18 @@ class Role(enum.Enum):
     PAUSED = "paused"
 
 
+class Handoff(enum.Enum):
+    """When the patrolling drone hands over (``POST /missions``' ``handoff``).
+
+    ``predictive``: its relief is sent ahead so it is on the route when the patrolling drone
+    reaches the threshold (no gap). ``reactive``: the paper's rule, the patrolling drone leaves
+    when its battery drops below the threshold and its relief is sent then (a gap of the relief's
+    flight to the route at each handoff)."""
+
+    PREDICTIVE = "predictive"
+    REACTIVE = "reactive"
+
+
 class PlanKind(enum.Enum):
     PATROL = "patrol"  # take off if needed, fly the route (loop) from ``start_index``
     RETURN = "return"  # fly to the station at ``cruise_z`` and land
@@ -272,6 +284,11 @@ class MissionRequest(BaseModel):
     altitude_m: float = Field(default=5.0, gt=0.3, le=100, description="height over the origin")
     loop: bool = True
     handoff_threshold: float = Field(default=0.30, gt=0.0, lt=1.0)
+    handoff: Handoff = Field(
+        default=Handoff.PREDICTIVE,
+        description="predictive: the relief is on the route before the threshold; reactive: "
+        "the patrolling drone leaves at the threshold and the relief is sent then (the paper)",
+    )
     name: str | None = Field(
         default=None,
         pattern=MISSION_NAME_PATTERN,
@@ -297,6 +314,7 @@ class Mission:
     created_t: float = 0.0
     geo: tuple[tuple[float, float, float], ...] = field(default=())
     headings_deg: tuple[float, ...] = ()  # per waypoint (FlightPlan.headings_deg)
+    handoff: Handoff = Handoff.PREDICTIVE
 
     @property
     def altitude_m(self) -> float:
