@@ -561,7 +561,7 @@ class DialogManager:
         alarms = self.ans.step(snap, self._state, now)
         for alarm in alarms:
             if alarm.action is not None:
-                self.tasks.preempt(alarm.action)
+                self.tasks.preempt(alarm.action, by=f"{alarm.monitor} monitor")
                 self._event(str(alarm.action["action"]))
             self._reply(alarm.text, alarm.level, alarm=alarm.monitor)
             self._log(

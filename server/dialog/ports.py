@@ -66,8 +66,9 @@ class TaskPort(Protocol):
         """Drop every queued and running voluntary task (the drone hovers)."""
         ...
 
-    def preempt(self, command: Command) -> None:
-        """Drop the queue and run ``command`` now (land, hover, emergency, ANS actions)."""
+    def preempt(self, command: Command, by: str = "") -> None:
+        """Drop the queue and run ``command`` now (land, hover, emergency, ANS actions);
+        ``by`` names the safety monitor that acted ("" for the operator)."""
         ...
 
     def on_event(self, callback: Callable[[TaskEvent], None]) -> None:

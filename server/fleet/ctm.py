@@ -42,6 +42,7 @@ from server.fleet.continuity import (
 )
 from server.fleet.errors import MissionError, NotFoundError
 from server.fleet.geo import Enu, Geo, to_enu, to_geo
+from server.fleet.ltm import HELD
 from server.fleet.messages import (
     MAX_ROUTE_POINTS,
     MISSION_NAME_PATTERN,
@@ -589,11 +590,17 @@ class CentralTaskManager:
         elif rec.role is Role.CHARGING and st.battery_pct >= self.stations.ready_pct:
             rec.role = Role.IDLE
             self.event(now, f"{rec.name} ready ({st.battery_pct:.0f} %)")
-        if st.autonomous and rec.role in (Role.PATROLLING, Role.RELIEVING):
-            # the LTM flew home on its own (CTM silent, battery reserve): free its post
+        if (
+            st.autonomous
+            and rec.role in (Role.PATROLLING, Role.RELIEVING)
+            and (rec.plan is None or st.plan_id == rec.plan.plan_id)
+        ):
+            # the LTM flew home on its own (CTM silent, battery reserve), it was sent home, or
+            # its own safety held it (a monitor, the central server's silence): free its post.
+            # A held drone is free for a mission again (the same one, once able).
             self.event(now, f"{rec.name} left on its own ({st.autonomous})")
             self._release(rec, now)
-            rec.role = Role.RETURNING
+            rec.role = Role.IDLE if st.autonomous.startswith(HELD) else Role.RETURNING
 
     def _home_if_unused(self, rec: DroneRecord, now: float, out: list[Dispatch]) -> None:
         """A fleet drone flying with nothing left to do (its post went to another, its mission
@@ -601,21 +608,23 @@ class CentralTaskManager:
         their drones, so a drone still in the air is used before it is sent home. A drone the
         CTM never sent anywhere is someone's manual flight: left alone."""
         st = rec.status
-        if (
-            st is not None
-            and rec.role is Role.IDLE
-            and st.flying
-            and not rec.mission
-            and st.autonomous == ""
-            and rec.plan is not None
-            and rec.plan.kind is not PlanKind.RETURN
-        ):
+        if st is None or rec.role is not Role.IDLE or not st.flying or rec.mission:
+            return
+        # held in a hover by its own safety and given no post again: home too (a drone its
+        # safety is landing is left to land)
+        if st.autonomous and not st.autonomous.startswith(f"{HELD}hover"):
+            return
+        if rec.plan is not None and rec.plan.kind is not PlanKind.RETURN:
             self._send_home(rec, now, None, out)
 
     def _release(self, rec: DroneRecord, now: float) -> None:
         for ms in self.missions.values():
             if ms.active == rec.name:
                 ms.active = None
+                if rec.status is not None:  # whoever takes over carries on from there
+                    ms.last_known, ms.gap_from = rec.status.position, (rec.name, "replacement")
+                if ms.coverage is not None:
+                    ms.coverage.forget(rec.name)
             if ms.relief == rec.name:
                 ms.relief = None
         rec.mission = ""

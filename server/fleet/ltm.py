@@ -12,9 +12,12 @@ The operator may take the drone off the CTM's patrol at any time, through any do
 buttons, REST, speech, rosbridge topics, the vehicle's safety door): every one of them ends in
 the task manager, which drops the plan's task with a reason. The LTM hears that and reports what
 the operator did (``operator`` in the status: land, hover, emergency, cancel, jog…) until the
-next plan, so the CTM pauses the mission instead of believing it still runs. A return home
-(asked by the operator or by the battery monitor) is the drone leaving its post: reported as
-``autonomous = "sent home"``, and the CTM relieves it.
+next plan, so the CTM pauses the mission instead of believing it still runs. What the drone's
+own safety acts on is not the operator's: a safety monitor's or the central server's silence's
+hover, land or climb-down (the reason names it, ``TaskManager.preempt(by=…)``) is reported as
+``autonomous = "held: hover (central server silent)"``, and a return home (the operator's or the
+battery monitor's) as ``autonomous = "sent home"``: the drone has left its post, and the CTM
+gives the post to a drone able to fly it (the same one again, once it may).
 """
 
 from __future__ import annotations
@@ -34,23 +37,31 @@ ALTITUDE_MAX_MM = 20000  # control:altitude_max for outdoor flight (firmware def
 NAVDATA_OPTIONS = (1 << 0) | (1 << 21) | (1 << 27)
 GPS_PERIOD_S = 1.0  # fuse one GPS fix a second (the flight recorder's rate)
 SENT_HOME = "sent home"  # ``autonomous``: someone sent it home (return_home) off its patrol
+HELD = "held: "  # ``autonomous`` prefix: its own safety acted ("held: hover (…)")
+
+
+def interruption(reason: str) -> tuple[str, str]:
+    """What dropped the plan's task and who did it, from the reason the task manager gives
+    (``server.tasks.manager``: "preempted by land", "preempted by hover (central server
+    silent)", "manual control took over", "take-off requested", "cancelled"…): (action, by),
+    ``by`` "" when it was the operator."""
+    if reason.startswith("preempted by "):
+        what, _, by = reason.removeprefix("preempted by ").partition(" (")
+        return what.replace("_", " "), by.removesuffix(")")
+    if reason == "manual control took over":
+        return "jog", ""
+    if reason.endswith(" requested"):
+        return reason.removesuffix(" requested"), ""
+    if reason == "cancelled":
+        return "cancel", ""
+    if reason == "replaced by a new command":  # only the safety monitors replace the LTM's
+        return "move", "altitude monitor"
+    return reason, ""
 
 
 def operator_action(reason: str) -> str:
-    """What the operator did, from the reason the task manager gives for dropping a task
-    (``server.tasks.manager``: "preempted by land", "manual control took over", "take-off
-    requested", "cancelled"…)."""
-    if reason.startswith("preempted by "):
-        return reason.removeprefix("preempted by ").replace("_", " ")
-    if reason == "manual control took over":
-        return "jog"
-    if reason.endswith(" requested"):
-        return reason.removesuffix(" requested")
-    if reason == "cancelled":
-        return "cancel"
-    if reason == "replaced by a new command":
-        return "new command"
-    return reason
+    """The action of :func:`interruption`, in the operator's words."""
+    return interruption(reason)[0]
 
 
 # GPS_SIGMA_M: horizontal σ of a fix at HDOP 1 (server/fleet/accuracy.py)
@@ -194,9 +205,11 @@ class LocalTaskManager:
             return
         if self.plan is None or self.plan.kind is not PlanKind.PATROL:
             return
-        action = operator_action(self._reason(notice))
+        action, by = interruption(self._reason(notice))
         if action == "return home":
             self.autonomous = SENT_HOME
+        elif by:
+            self.autonomous = f"{HELD}{action} ({by})"
         else:
             self.operator = action
 

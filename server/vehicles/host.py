@@ -417,7 +417,7 @@ class VehicleHost:
         self.loss_actions.append(action.value)
         log.warning("%s: central server silent for %.1f s: %s", self.name, silent_s, action.value)
         if self.stack.tasks is not None:
-            self.stack.tasks.preempt(action.value)
+            self.stack.tasks.preempt(action.value, by="central server silent")
 
     async def run(self, stop: asyncio.Event) -> None:
         async def relay() -> None:

@@ -113,3 +113,22 @@ async def test_land_pauses_then_resume_and_end(api: httpx.AsyncClient) -> None:
     # everyone lands again
     await api.post("/api/v1/drones/uav1/land")
     await api.post("/api/v1/drones/uav2/land")
+
+
+async def test_missions_take_the_handoff_rule(api: httpx.AsyncClient) -> None:
+    route = {"markers": [1, 4], "altitude_m": 1.4, "handoff": "reactive", "name": "paper"}
+    made = await api.post("/api/v1/missions", json=route)
+    assert made.status_code == 201, made.text
+    assert made.json()["handoff"] == "reactive" and made.json()["state"] == "waiting"
+    bad = await api.post("/api/v1/missions", json=route | {"handoff": "sideways", "name": "x"})
+    assert bad.status_code == 422 and "handoff" in bad.text
+    plain = await api.post("/api/v1/missions", json=route | {"name": "ours"} | {"handoff": None})
+    assert plain.status_code == 422  # null is not a rule; leave it out for the default
+    default = {k: v for k, v in route.items() if k != "handoff"} | {"name": "ours"}
+    made = await api.post("/api/v1/missions", json=default)
+    assert made.status_code == 201 and made.json()["handoff"] == "predictive"
+    for mid in ("paper", "ours"):
+        ended = await api.post(f"/api/v1/missions/{mid}", json={"action": "end"})
+        assert ended.status_code == 200 and ended.json()["state"] == "ended"
+    bad = await api.post("/api/v1/missions/paper", json={"action": "fly"})
+    assert bad.status_code == 422

@@ -21,7 +21,7 @@ from server.dialog.adapters import TaskManagerPort, VehiclePort
 from server.dialog.manager import DialogManager
 from server.fleet.central import CentralPatrol
 from server.fleet.errors import IllegalTransition, MessageError
-from server.fleet.ltm import operator_action
+from server.fleet.ltm import interruption, operator_action
 from server.fleet.messages import LtmStatus, Role
 from server.fleet.patrol import PatrolConfig, PatrolExperiment
 from server.fleet.states import MissionEvent, MissionState, transition
@@ -53,6 +53,13 @@ def test_operator_words_from_the_task_managers_reasons() -> None:
     assert operator_action("manual control took over") == "jog"
     assert operator_action("hover requested") == "hover"
     assert operator_action("cancelled") == "cancel"
+    # the drone's own safety is not the operator
+    assert interruption("preempted by land") == ("land", "")
+    assert interruption("preempted by hover (central server silent)") == (
+        "hover",
+        "central server silent",
+    )
+    assert interruption("preempted by land (battery monitor)") == ("land", "battery monitor")
 
 
 def test_status_carries_the_operator_and_refuses_a_long_one() -> None:
@@ -261,3 +268,46 @@ def test_sent_home_is_relieved_not_paused() -> None:
     assert "paused" not in [s for _, s, _ in pilot.states]
     assert ms.state is MissionState.RUNNING and ms.active == _other(pilot.victim)
     assert "returning" in pilot.roles[pilot.victim]
+
+
+def test_the_drones_own_safety_is_not_the_operator() -> None:
+    """The vehicle's watch of the central server hovers a drone the console went silent on
+    (``host._on_loss``): not the operator's doing, so the mission is not paused; the drone is
+    free again and, still the nearest, flies the patrol on."""
+    exp = PatrolExperiment(PatrolConfig(drones=2, duration_s=50.0, **FAST))
+
+    def silent(name: str, now: float) -> None:
+        exp.tasks[_index(name)].preempt("hover", by="central server silent")
+
+    pilot = Pilot(exp, silent)
+    exp.run()
+    states = [s for _, s, _ in pilot.states]
+    assert "paused" not in states, pilot.states
+    assert states[-1] == "running"
+    ms = pilot.mission()
+    assert ms.active == pilot.victim and ms.replacements == 0
+    left = [t for _, t in exp.ctm.events if "left on its own" in t]
+    assert left == [f"{pilot.victim} left on its own (held: hover (central server silent))"]
+    assert pilot.roles[_other(pilot.victim)] == {"idle"}
+
+
+def test_a_safety_monitors_landing_hands_the_post_to_another_drone() -> None:
+    """The battery monitor lands a patrolling drone whose battery fell off a cliff: the
+    mission is not paused by anyone; the other drone takes the route over."""
+    # the paper's 12-minute battery: its LTM's own reserve (a few percent) stays below the
+    # monitor's critical level (12 %), so the monitor acts first
+    exp = PatrolExperiment(PatrolConfig(drones=2, duration_s=75.0, swap_s=20.0))
+    _dialogs(exp)  # each drone's safety monitors, as the console runs them
+
+    def cliff(name: str, now: float) -> None:
+        exp.rig.sims[_index(name)].physics.battery.drain_to(10.0)
+
+    pilot = Pilot(exp, cliff)
+    exp.run()
+    states = [s for _, s, _ in pilot.states]
+    assert "paused" not in states, pilot.states
+    ms = pilot.mission()
+    assert ms.state is MissionState.RUNNING and ms.active == _other(pilot.victim)
+    left = [t for _, t in exp.ctm.events if "left on its own" in t]
+    assert left == [f"{pilot.victim} left on its own (held: land (battery monitor))"]
+    assert not exp.rig.sims[_index(pilot.victim)].truth.flying  # it landed where it was
