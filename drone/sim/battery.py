@@ -5,9 +5,6 @@ The stock 1000 mAh pack gives about 12 minutes of flight (Parrot's specification
 at full ``control_vz_max``. Landed with motors off the electronics draw little. The drone sets the
 VBAT_LOW state bit below 20 % and refuses to take off while it is set (firmware behaviour reported
 in the Developer Guide §7.1.2 state bits and by ARDroneLib's ``ARDRONE_VBAT_LOW``).
-
-Charging is the station's, not the drone's: a world's charging pad (``Station.charge_pct_s``)
-adds charge to a drone landed on it (``charge``); the drain above is unchanged by it.
 """
 
 from __future__ import annotations
@@ -53,7 +50,8 @@ class Battery:
         return self.pct <= 0.0
 
     def charge(self, pct: float) -> None:
-        """Add ``pct`` percent (a charging pad), up to 100."""
+        """Add ``pct`` percent, up to 100: a world's charging pad (``Station.charge_pct_s``)
+        charging a drone landed on it. The drain in flight is the model's, unchanged."""
         if pct > 0.0:
             self.pct = min(100.0, self.pct + pct)
 
