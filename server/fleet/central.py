@@ -101,6 +101,8 @@ class CentralPatrol:
                     f"The patrol is {ms.detail}; resume the patrol or end the patrol.",
                     live[0],
                 )
+            if ms.state is MissionState.STALLED:
+                return PatrolReply(False, f"The patrol is {ms.detail}.", live[0])
             who = f"; {ms.active} is patrolling" if ms.active else ""
             return PatrolReply(False, f"The patrol is already running{who}.", live[0])
         try:

@@ -361,18 +361,26 @@ class CentralTaskManager:
             self.end_mission(mission_id, now)
 
     def pause_mission(
-        self, mission_id: str, now: float, action: str, taken: str | None = None
+        self,
+        mission_id: str,
+        now: float,
+        action: str,
+        taken: str | None = None,
+        detail: str | None = None,
     ) -> None:
         """Pause a mission: the operator did ``action`` (to drone ``taken``, which is left to
-        them) or paused it. Its other flying drones hold where they are; nothing is sent to
-        them until it is resumed or ended.
+        them) or paused it, or a safety monitor holds ``taken`` asking the operator (``detail``
+        says so). Its other flying drones hold where they are; nothing is sent to them until it
+        is resumed or ended.
 
         Raises:
             NotFoundError: no such mission.
             IllegalTransition: it has ended.
         """
         ms = self._get(mission_id)
-        self._set(ms, MissionEvent.OPERATOR, now, f"paused by the operator ({action})")
+        self._set(ms, MissionEvent.OPERATOR, now, detail or f"paused by the operator ({action})")
+        if detail is not None:
+            self.notify(now, "warn", f"Patrol {mission_id} is {detail}; resume or end it.")
         if ms.active is not None:
             st = self.drones[ms.active].status
             if st is not None:  # a drone resuming it carries on from there
@@ -564,6 +572,17 @@ class CentralTaskManager:
             # the operator took it off the CTM's plan (before the failure check: an emergency
             # the operator pressed pauses the mission, it does not hand it to another drone)
             self.pause_mission(rec.mission, now, st.operator, taken=rec.name)
+        elif (
+            st is not None
+            and st.held
+            and rec.role in (Role.PATROLLING, Role.RELIEVING)
+            and rec.plan is not None
+            and st.plan_id == rec.plan.plan_id
+            and rec.mission in self.missions
+        ):
+            # its safety monitor holds it and asks the operator: the mission waits for them
+            why = f"paused: {rec.name} held by its {st.held}"
+            self.pause_mission(rec.mission, now, st.held, taken=rec.name, detail=why)
         why = self._failure(rec, now)
         if why:
             if rec.role is not Role.LOST:

@@ -13,11 +13,14 @@ buttons, REST, speech, rosbridge topics, the vehicle's safety door): every one o
 the task manager, which drops the plan's task with a reason. The LTM hears that and reports what
 the operator did (``operator`` in the status: land, hover, emergency, cancel, jog…) until the
 next plan, so the CTM pauses the mission instead of believing it still runs. What the drone's
-own safety acts on is not the operator's: a safety monitor's or the central server's silence's
-hover, land or climb-down (the reason names it, ``TaskManager.preempt(by=…)``) is reported as
-``autonomous = "held: hover (central server silent)"``, and a return home (the operator's or the
-battery monitor's) as ``autonomous = "sent home"``: the drone has left its post, and the CTM
-gives the post to a drone able to fly it (the same one again, once it may).
+own safety does is not the operator's (the reason names it, ``TaskManager.preempt(by=…)``): a
+safety monitor's hover holds the drone and asks the operator what to do (navdata in doubt,
+outside the geofence), reported as ``held = "navdata monitor (hover)"`` and the CTM pauses the
+mission for the operator too; any other (a monitor's landing or climb-down, the hover or landing
+of the vehicle's watch of a silent central server) as ``autonomous = "held: hover (central
+server silent)"``, and a return home (the operator's or the battery monitor's) as ``autonomous =
+"sent home"``: the drone has left its post, and the CTM gives the post to a drone able to fly it
+(the same one again, once it may).
 """
 
 from __future__ import annotations
@@ -112,6 +115,7 @@ class LocalTaskManager:
         self.gps_fixes = 0
         self._last_gps: Any | None = None
         self.operator = ""  # what the operator did to the CTM's plan (module docstring)
+        self.held = ""  # what its safety monitor holds it for, asking the operator
         self._plan_tasks: frozenset[int] = frozenset()  # the tasks the plan is flown with
         self._own = False  # the LTM itself is replacing tasks (not the operator)
         on_event = getattr(tasks, "on_event", None)
@@ -192,7 +196,7 @@ class LocalTaskManager:
             self._own = False
 
     def _applied(self, plan: FlightPlan, decisions: Any) -> None:
-        self.plan, self.autonomous, self.operator = plan, "", ""
+        self.plan, self.autonomous, self.operator, self.held = plan, "", "", ""
         ids = (getattr(d, "task_id", None) for d in decisions)
         self._plan_tasks = frozenset(i for i in ids if i is not None)
 
@@ -201,13 +205,17 @@ class LocalTaskManager:
         doing (module docstring); the first such event counts until the next plan."""
         if self._own or notice.kind not in ("preempted", "cancelled"):
             return
-        if notice.task_id not in self._plan_tasks or self.operator or self.autonomous:
+        if notice.task_id not in self._plan_tasks:
+            return
+        if self.operator or self.autonomous or self.held:
             return
         if self.plan is None or self.plan.kind is not PlanKind.PATROL:
             return
         action, by = interruption(self._reason(notice))
         if action == "return home":
             self.autonomous = SENT_HOME
+        elif action == "hover" and by.endswith(" monitor"):
+            self.held = f"{by} ({action})"  # the monitor asks the operator what to do
         elif by:
             self.autonomous = f"{HELD}{action} ({by})"
         else:
@@ -332,4 +340,5 @@ class LocalTaskManager:
             progress=float(ts.progress),
             autonomous=self.autonomous,
             operator=self.operator,
+            held=self.held,
         )

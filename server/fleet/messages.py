@@ -136,6 +136,9 @@ class LtmStatus:
     # any door (page, REST, speech, rosbridge, the safety door): "" until then, and again once
     # the next plan is applied
     operator: str = ""
+    # what the drone's own safety holds it for, asking the operator ("navdata monitor (hover)":
+    # a safety monitor's hover that waits for the operator to say), until the next plan
+    held: str = ""
 
     @property
     def position(self) -> Enu:
@@ -178,6 +181,7 @@ class LtmStatus:
             progress=_num(d, "progress", default=0.0),
             autonomous=_str(d, "autonomous", ""),
             operator=_word(d, "operator"),
+            held=_word(d, "held"),
         )
 
 

@@ -24,8 +24,9 @@ class MissionState(enum.Enum):
 
     WAITING = "waiting"  # no drone on the route yet: one is on its way (or none has joined)
     RUNNING = "running"  # a drone patrols the route
-    # the operator took one of its drones (land, hover, stop, emergency, a jog) or paused it:
-    # the CTM sends its drones nothing until the operator resumes or ends it
+    # the operator took one of its drones (land, hover, stop, emergency, a jog) or paused it, or
+    # a drone's safety monitor holds it asking the operator (navdata in doubt, out of the
+    # geofence): the CTM sends its drones nothing until the operator resumes or ends it
     PAUSED = "paused"
     STALLED = "stalled"  # nobody on the route and no drone able to fly it: resumes by itself
     ENDED = "ended"  # ended by the operator; its drones flew home

@@ -311,3 +311,23 @@ def test_a_safety_monitors_landing_hands_the_post_to_another_drone() -> None:
     left = [t for _, t in exp.ctm.events if "left on its own" in t]
     assert left == [f"{pilot.victim} left on its own (held: land (battery monitor))"]
     assert not exp.rig.sims[_index(pilot.victim)].truth.flying  # it landed where it was
+
+
+def test_a_monitor_that_holds_the_drone_for_the_operator_pauses_the_mission() -> None:
+    """A safety monitor's hover that asks the operator (navdata in doubt, out of the geofence)
+    is not the CTM's to override: the mission waits for the operator."""
+    exp = PatrolExperiment(PatrolConfig(drones=2, duration_s=45.0, **FAST))
+
+    def doubt(name: str, now: float) -> None:  # as the dialog's ANS preempts for an alarm
+        TaskManagerPort(exp.tasks[_index(name)]).preempt({"action": "hover"}, by="navdata monitor")
+
+    pilot = Pilot(exp, doubt)
+    exp.run()
+    ms = pilot.mission()
+    assert ms.state is MissionState.PAUSED, pilot.states
+    assert ms.detail == f"paused: {pilot.victim} held by its navdata monitor (hover)"
+    assert [t for _, lv, t in exp.ctm.notices if lv == "warn"] == [
+        f"Patrol m1 is {ms.detail}; resume or end it."
+    ]
+    assert exp.rig.sims[_index(pilot.victim)].truth.flying  # hovering where it was held
+    assert pilot.roles[_other(pilot.victim)] == {"idle"}
