@@ -804,6 +804,8 @@ class CentralTaskManager:
             ms.started_t = now
         if ms.state is MissionState.WAITING:
             self._set(ms, MissionEvent.ON_ROUTE, now, f"running: {rr.name} patrolling")
+        else:  # a handoff: the event below says so
+            ms.detail = f"running: {rr.name} patrolling"
         joined_at = ms.join.index if ms.join is not None else -1
         if old is not None:
             ms.handoffs += 1

@@ -27,6 +27,7 @@ class Watch:
         self.exp = exp
         self.states: list[tuple[float, str, str]] = []
         self.dispatched: list[tuple[float, str, float]] = []  # (t, drone, battery)
+        self.wrong: list[tuple[float, str | None, str]] = []  # running, detail not its drone
         self._seen: set[float] = set()
         exp.hooks.append(self)
 
@@ -34,6 +35,8 @@ class Watch:
         ms = next(iter(self.exp.ctm.missions.values()), None)
         if ms is None:
             return
+        if ms.state.value == "running" and ms.detail != f"running: {ms.active} patrolling":
+            self.wrong.append((now, ms.active, ms.detail))
         state = (ms.state.value, ms.detail.split(" (")[0])
         if not self.states or self.states[-1][1:] != state:
             self.states.append((now, *state))
@@ -69,6 +72,7 @@ def test_relief_flies_on_the_charge_it_has_not_a_fixed_95_percent_bar() -> None:
     assert report.max_gap_s <= 0.5, report.gaps
     assert report.coverage >= 0.995
     assert "stalled" not in [s for _, s, _ in watch.states]
+    assert not watch.wrong, watch.wrong[:3]  # the mission names the drone patrolling now
 
 
 def test_a_mission_with_no_drone_able_to_fly_stalls_says_so_and_resumes_by_itself() -> None:
