@@ -831,7 +831,12 @@ class CentralTaskManager:
         if not self.drones:
             return  # no drone has joined yet: still waiting
         soonest = self._soonest_ready(ms, now)
-        detail = "stalled: no drone above the reserve"
+        lost = [r.name for r in self.drones.values() if r.role is Role.LOST]
+        if soonest is None and len(lost) == len(self.drones):
+            # nobody low on charge: every drone is lost (silent, in emergency, no link)
+            detail = f"stalled: no drone able to fly ({', '.join(sorted(lost))} lost)"
+        else:
+            detail = "stalled: no drone above the reserve"
         if soonest is not None:
             detail += f" ({soonest[0]} ready in {soonest[1]:.0f} s)"
         if ms.state is MissionState.STALLED:
@@ -839,11 +844,13 @@ class CentralTaskManager:
             return
         self._set(ms, MissionEvent.STALL, now, detail)
         when = f"; {soonest[0]} is ready in about {soonest[1]:.0f} seconds" if soonest else ""
+        why = (
+            "no drone is charged above the reserve"
+            if "reserve" in detail
+            else "no drone is able to fly"
+        )
         self.notify(
-            now,
-            "warn",
-            f"Patrol {ms.mission.id} has stalled: no drone is charged above the reserve{when}. "
-            "It resumes by itself.",
+            now, "warn", f"Patrol {ms.mission.id} has stalled: {why}{when}. It resumes by itself."
         )
 
     def _join(self, rec: DroneRecord, ms: MissionRecord) -> Join:

@@ -179,3 +179,28 @@ def test_a_charging_drone_is_a_candidate_once_above_the_missions_reserve() -> No
     ctm.on_status(status(60.0), 2.0)  # charged above the reserve (30 % + lead + a shift)
     (sent,) = ctm.step(2.5)
     assert sent.drone == "uav1" and ctm.mission_info(mid)["state"] == "waiting"
+
+
+def test_a_mission_whose_drones_are_all_lost_says_so() -> None:
+    from server.fleet.geo import Enu
+    from server.fleet.messages import LtmStatus
+
+    ctm = CentralTaskManager(lost_after_s=3.0)
+    mid = ctm.add_mission([Enu(10.0, 0.0, 5.0), Enu(10.0, 10.0, 5.0)], now=0.0).id
+    st = LtmStatus(
+        "uav1", 0.0, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 100.0, False, "LANDED", True, False,
+        Enu(0.0, 0.0, 0.0),
+    )  # fmt: skip
+    ctm.on_status(st, 0.0)
+    assert ctm.step(10.0) == []  # silent for 10 s: lost
+    info = ctm.mission_info(mid)
+    assert (info["state"], info["detail"]) == (
+        "stalled",
+        "stalled: no drone able to fly (uav1 lost)",
+    )
+    assert [t for _, _, t in ctm.notices] == [
+        "Patrol m1 has stalled: no drone is able to fly. It resumes by itself."
+    ]
+    ctm.on_status(st, 10.5)  # heard again: back, and sent at once
+    (sent,) = ctm.step(11.0)
+    assert sent.drone == "uav1" and ctm.mission_info(mid)["state"] == "waiting"
