@@ -31,7 +31,17 @@ FLOOR_M = 0.3
 CEILING_CLEARANCE_M = 0.3
 JOG_SLOW_ZONE_M = 1.0  # within this distance of a limit the jog towards it is scaled down
 JOG_STOP_M = 0.15  # this close to a limit the jog towards it stops (and brakes)
-JOG_BRAKE_PER_M_S = 0.5  # braking command (fraction) per m/s of speed towards the limit
+JOG_AT_STOP_M = 0.05  # this near the stop line the jog is said to have stopped
+JOG_BRAKE_PER_M_S = 2.0  # braking command (fraction) per m/s over the speed allowed
+# A full horizontal jog flies at g·tan(12°) / drag ≈ 2.3 m/s (the indoor euler_angle_max and the
+# simulator's drag, drone/sim/physics.py); a full vertical one at control_vz_max, 0.7 m/s.
+JOG_TOP_SPEED_M_S = 2.3
+JOG_TOP_VZ_M_S = 0.7
+# Braking the jog plans with: well under the ~2 m/s² a full 12° tilt gives, for the attitude lag
+# (0.15 s) and the estimate's.
+JOG_DECEL_M_S2 = 1.0
+JOG_DECEL_Z_M_S2 = 1.0
+JOG_LAG_S = 0.25  # attitude lag (0.15 s) plus the estimate's, before a brake slows the drone
 
 
 class LimitsError(ValueError):
@@ -100,10 +110,14 @@ class FlightLimits:
     ) -> JogClamp:
         """Limit a map-frame jog (fractions) at position (x, y, z) moving at (vx, vy, vz).
 
-        Per axis and direction: beyond ``JOG_SLOW_ZONE_M`` from the limit the jog passes;
-        inside it the component towards the limit scales down linearly, and within
-        ``JOG_STOP_M`` (or when the drone could not stop in time at its speed) it becomes a
-        brake against the speed towards the limit. Moving away from a limit is never limited.
+        Per axis and direction, towards a limit: the stop line lies ``JOG_STOP_M`` before the
+        limit. Over the slow zone the jog is scaled down linearly to nothing at the stop line.
+        The speed allowed is the lower of that ramp's and the speed the drone can still brake
+        from before the stop line (``sqrt(2·a·d)``, ``d`` left after ``JOG_LAG_S`` of flight at
+        its speed); measured faster than that, the command is that speed's own command less a
+        brake on the excess. So a held jog rests on the stop line (within the estimate's
+        error) whatever its run-up, without overshooting it.
+        Moving away from a limit is never limited.
         """
         m = self.wall_margin_m
         reasons: list[str] = []
@@ -114,9 +128,9 @@ class FlightLimits:
             ("z", z, vz, up, self.floor_m, self.ceiling_m, "floor", "ceiling"),
         ):
             if cmd > 0:
-                dist, toward, name = hi - pos, max(vel, 0.0), hi_name
+                dist, toward, name = hi - pos, vel, hi_name
             elif cmd < 0:
-                dist, toward, name = pos - lo, max(-vel, 0.0), lo_name
+                dist, toward, name = pos - lo, -vel, lo_name
             else:
                 out.append(cmd)
                 continue
@@ -125,25 +139,29 @@ class FlightLimits:
             if axis == "z":
                 where = f"the {name} limit of {hi if cmd > 0 else lo:g} m"
                 shown = dist
+                top, decel, gain = JOG_TOP_VZ_M_S, JOG_DECEL_Z_M_S2, 0.0
             else:
                 where = f"the {name}" if self.indoor else "the fence"
                 shown = dist + m
-            scale = 1.0
-            if dist < JOG_SLOW_ZONE_M:
-                scale = max(0.0, (dist - JOG_STOP_M) / (JOG_SLOW_ZONE_M - JOG_STOP_M))
-            # stopping distance at the hover brake's ~1.5 m/s²: v² / (2a)
-            if toward * toward / 3.0 > max(dist - JOG_STOP_M, 0.0):
-                scale = 0.0
-            if scale >= 1.0:
+                top, decel, gain = JOG_TOP_SPEED_M_S, JOG_DECEL_M_S2, JOG_BRAKE_PER_M_S
+            left = dist - JOG_STOP_M  # to the stop line
+            ramp = min(1.0, max(0.0, left / (JOG_SLOW_ZONE_M - JOG_STOP_M)))
+            # the drone flies on for ``JOG_LAG_S`` before a brake bites: plan from there
+            ahead = left - max(toward, 0.0) * JOG_LAG_S
+            allowed = min(top * ramp, math.sqrt(2.0 * decel * max(ahead, 0.0)))
+            # the speed's own command (the drone flies at ``top`` on a full command) and a
+            # brake on any speed above it (the attitude lags: brake on what is measured)
+            mag = abs(cmd) * ramp
+            if toward > allowed:
+                mag = min(mag, allowed / top + gain * (allowed - toward))
+            if mag >= abs(cmd):
                 out.append(cmd)
                 continue
             sign = 1.0 if cmd > 0 else -1.0
-            if scale <= 0.0:
-                out.append(-sign * min(1.0, JOG_BRAKE_PER_M_S * toward))
-                reasons.append(f"stopped {max(shown, 0.0):.1f} m from {where}")
-            else:
-                out.append(cmd * scale)
-                reasons.append(f"slowed {max(shown, 0.0):.1f} m from {where}")
+            mag = max(mag, -1.0)
+            out.append(sign * mag)
+            verb = "stopped" if mag <= 0.0 or left <= JOG_AT_STOP_M else "slowed"
+            reasons.append(f"{verb} {max(shown, 0.0):.1f} m from {where}")
         return JogClamp(out[0], out[1], out[2], tuple(reasons))
 
 

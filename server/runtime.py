@@ -86,7 +86,7 @@ class DroneStack:
             self.tasks.preempt(action)
             return f"{action} sent"
         if action in ("hover",) and self.tasks is not None:
-            self.tasks.cancel()
+            self.tasks.cancel("hover requested")
         getattr(self.vehicle, action)()
         return f"{action} sent"
 

@@ -73,6 +73,12 @@ class Battery:
     def empty(self) -> bool:
         return self.pct <= 0.0
 
+    def charge(self, pct: float) -> None:
+        """Add ``pct`` percent, up to 100: a world's charging pad (``Station.charge_pct_s``)
+        charging a drone landed on it. The drain in flight is the model's, unchanged."""
+        if pct > 0.0:
+            self.pct = min(100.0, self.pct + pct)
+
     def drain_to(self, pct: float) -> None:
         """Set the charge (fault injection); clipped to 0..100."""
         self.pct = min(100.0, max(0.0, float(pct)))

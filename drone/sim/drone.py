@@ -110,7 +110,8 @@ class SimDrone:
     """The simulated drone. Not thread-safe: one owner calls it (server task or lockstep rig).
 
     Args:
-        world: a ``drone.sim.world.World`` (uses ``bounds``, ``start``, ``gps_origin``) or None.
+        world: a ``drone.sim.world.World`` (uses ``bounds``, ``start``, ``gps_origin``, and its
+            charging pads: ``pad_at``) or None.
         bounds: box ``(x_min, x_max, y_min, y_max, z_min, z_max)`` when there is no world.
         start: ``(x, y, yaw_rad)`` on the floor; default the world's start or the room's centre.
         params: onboard-controller limits and model constants.
@@ -168,6 +169,7 @@ class SimDrone:
         self.frames = 0
         self._last_seq = 0
         self._last_at_time = -math.inf
+        self._pad: Any | None = None  # the charging pad it landed on (``_charge``)
         self._ref_emergency = False
         self._ack = False
         self._com_watchdog = True  # raised until the client's first AT*COMWDG, as on boot
@@ -283,7 +285,30 @@ class SimDrone:
         if self.command_lost:
             self.physics.hover()
             self._com_watchdog = True
+        flew = self.physics.motors_on
         self.physics.step(dt)
+        self._charge(dt, flew)
+
+    def _charge(self, dt: float, flew: bool) -> None:
+        """Charging: a drone that lands (its motors stop) on a charging pad of the world charges
+        there at the pad's rate until it starts its motors again. A drone that has not landed
+        on the pad since the simulator started, or since a battery fault set its charge, does
+        not: the charge a fault sets is what the drone has."""
+        ph = self.physics
+        if ph.motors_on:
+            self._pad = None
+            return
+        pad_at = getattr(self.world, "pad_at", None)
+        if flew and pad_at is not None:  # it has just landed (or cut its motors) here
+            pad = pad_at(ph.body.x, ph.body.y)
+            self._pad = pad if pad is not None and pad.charge_pct_s > 0.0 else None
+        if self._pad is not None:
+            ph.battery.charge(self._pad.charge_pct_s * dt)
+
+    @property
+    def charging(self) -> bool:
+        """On a charging pad, charging (or full)."""
+        return self._pad is not None
 
     @property
     def command_lost(self) -> bool:
@@ -494,6 +519,7 @@ class SimDrone:
             if not 0.0 <= vals["pct"] <= 100.0:
                 raise FaultError(f"battery pct must be in 0..100, got {vals['pct']}")
             self.physics.battery.drain_to(vals["pct"])
+            self._pad = None  # the charge the fault sets stays until the next landing
         elif kind == "wind_gust":
             self.physics.gust(vals["vx"], vals["vy"], vals["duration_s"])
         elif kind == "wind":

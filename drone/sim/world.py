@@ -189,12 +189,23 @@ class SceneObject:
         return (x, y, z + self.size[2] / 2.0)
 
 
+PAD_RADIUS_M = 1.5  # a drone landed this close to a pad's centre sits on it (GPS-guided landings)
+MAX_CHARGE_PCT_S = 10.0  # a full charge in 10 s at the most: anything faster is a typo
+
+
 @dataclass(frozen=True)
 class Station:
-    """A home/charging station (take-off and landing spot), map frame."""
+    """A home station (take-off and landing spot), map frame. A charging pad charges a drone
+    landed on it (motors off) at ``charge_pct_s`` percent a second; 0 is a plain pad."""
 
     id: str
     position: Vec3
+    charge_pct_s: float = 0.0
+    radius_m: float = PAD_RADIUS_M
+
+    def holds(self, x: float, y: float) -> bool:
+        """Whether a drone at (x, y) sits on this pad."""
+        return math.hypot(x - self.position[0], y - self.position[1]) <= self.radius_m
 
 
 @dataclass(frozen=True)
@@ -254,6 +265,18 @@ class World:
         """Ids of all markers, in file order."""
         return tuple(m.id for m in self.markers)
 
+    def pad_at(self, x: float, y: float) -> Station | None:
+        """The station a drone at (x, y) sits on: the nearest whose pad holds it, or None."""
+        on = [s for s in self.stations if s.holds(x, y)]
+        if not on:
+            return None
+        return min(on, key=lambda s: math.hypot(x - s.position[0], y - s.position[1]))
+
+    @property
+    def charge_pct_s(self) -> float:
+        """The fastest charging pad's rate (%/s); 0 when no pad charges."""
+        return max((s.charge_pct_s for s in self.stations), default=0.0)
+
     def station(self, station_id: str) -> Station:
         """The station with this id (KeyError if absent)."""
         for s in self.stations:
@@ -295,6 +318,8 @@ class World:
                 {
                     "id": s.id,
                     "position": {"x": s.position[0], "y": s.position[1], "z": s.position[2]},
+                    "charge_pct_s": s.charge_pct_s,
+                    "radius_m": s.radius_m,
                 }
                 for s in self.stations
             ],
@@ -538,7 +563,12 @@ def parse_world(data: Any, source: str = "<memory>") -> World:
         pos = c.vec3(c.req(sd, "position", f"stations[{i}]"), f"stations[{i}].position")
         if not bounds.contains(*pos):
             raise c.fail(f"stations[{i}].position", f"{pos} lies outside the bounds")
-        stations.append(Station(id=str(sd.get("id", f"home{i + 1}")), position=pos))
+        rate = c.num(
+            sd.get("charge_pct_s", 0.0), f"stations[{i}].charge_pct_s", lo=0.0, hi=MAX_CHARGE_PCT_S
+        )
+        radius = c.num(sd.get("radius_m", PAD_RADIUS_M), f"stations[{i}].radius_m", lo=0.1, hi=10.0)
+        sid = str(sd.get("id", f"home{i + 1}"))
+        stations.append(Station(id=sid, position=pos, charge_pct_s=rate, radius_m=radius))
 
     gps = None
     if d.get("gps_origin") is not None:

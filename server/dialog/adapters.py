@@ -31,10 +31,10 @@ class TaskManagerPort:
     def cancel(self) -> None:
         self.tm.cancel()
 
-    def preempt(self, command: Mapping[str, Any]) -> None:
+    def preempt(self, command: Mapping[str, Any], by: str = "") -> None:
         action = str(command.get("action", ""))
         if action in SAFETY_ACTIONS and len(command) == 1:
-            self.tm.preempt(action)
+            self.tm.preempt(action, by=by)
         else:  # e.g. the ANS altitude ceiling: "move down 0.4 m" replacing everything
             self.tm.submit([dict(command)], replace=True)
 

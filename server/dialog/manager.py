@@ -56,7 +56,8 @@ REPLY = "/console/reply"
 STATE = "/console/state"
 INTERPRET = "/console/interpret"
 PREEMPTING = ("emergency", "land", "hover")
-FLEET_ACTIONS = ("patrol_start", "patrol_stop")  # the whole fleet's, not this drone's state
+# the whole fleet's (server/fleet/central.py), not this drone's state
+FLEET_ACTIONS = ("patrol_start", "patrol_stop", "patrol_pause", "patrol_resume")
 # Task-manager notices the operator hears (issue 13 item 8) and their levels; "failed" covers
 # a search that gave up.
 NOTICES = {"marker_lost": "warn", "marker_found": "info", "progress": "info"}
@@ -492,9 +493,11 @@ class DialogManager:
                 said.append(replies.answer(item, self.vehicle.snapshot(), self._state))
             elif action == "describe":
                 said.append(await self._describe())
-            elif action == "patrol_start" or (action == "patrol_stop" and self._fleet_may_run()):
+            elif action in ("patrol_start", "patrol_pause", "patrol_resume") or (
+                action == "patrol_stop" and self._fleet_may_run()
+            ):
                 ok, text = await self._fleet_command(cmd)
-                if ok or action == "patrol_start":
+                if ok or action != "patrol_stop":
                     said.append(text)
                 else:  # no fleet patrol running: stop this drone's own task
                     said.append(self._cancel_own(queue))
@@ -537,13 +540,18 @@ class DialogManager:
         return "OK, cancelled."
 
     async def _fleet_command(self, cmd: dict[str, Any]) -> tuple[bool, str]:
-        """Start or stop the Central patrol (the console's button does the same): (ok, reply).
+        """Start, stop, pause or resume the Central patrol (the console's buttons do the
+        same): (ok, reply).
 
         The fleet port answers at once in the server's process, or, from a vehicle process,
         after a call to the central server (an awaitable)."""
         if self.fleet is None:
             return False, "There is no fleet manager here to run a patrol."
-        reply = self.fleet.start() if cmd["action"] == "patrol_start" else self.fleet.stop()
+        verb = str(cmd["action"]).removeprefix("patrol_")
+        method = getattr(self.fleet, verb, None)
+        if method is None:
+            return False, f"The fleet manager here cannot {verb} a patrol."
+        reply = method()
         if inspect.isawaitable(reply):
             reply = await reply
         return bool(reply.ok), str(reply.text)
@@ -595,7 +603,7 @@ class DialogManager:
         alarms = self.ans.step(snap, self._state, now)
         for alarm in alarms:
             if alarm.action is not None:
-                self.tasks.preempt(alarm.action)
+                self.tasks.preempt(alarm.action, by=f"{alarm.monitor} monitor")
                 self._event(str(alarm.action["action"]))
             self._reply(alarm.text, alarm.level, alarm=alarm.monitor)
             self._log(

@@ -68,8 +68,9 @@ class TaskPort(Protocol):
         """Drop every queued and running voluntary task (the drone hovers)."""
         ...
 
-    def preempt(self, command: Command) -> None:
-        """Drop the queue and run ``command`` now (land, hover, emergency, ANS actions)."""
+    def preempt(self, command: Command, by: str = "") -> None:
+        """Drop the queue and run ``command`` now (land, hover, emergency, ANS actions);
+        ``by`` names the safety monitor that acted ("" for the operator)."""
         ...
 
     def on_event(self, callback: Callable[[TaskEvent], None]) -> None:
@@ -98,11 +99,16 @@ class FleetPort(Protocol):
 
     A vehicle process reaches it over the link: its answers are awaitables. ``stop`` answers
     ``ok`` False when no patrol runs (the dialog then stops the drone's own task); a port in
-    this process also has ``running()``, asked first."""
+    this process also has ``running()``, asked first. ``pause`` and ``resume`` pause and
+    resume the patrol (server.fleet.states)."""
 
     def start(self, threshold: float = ...) -> FleetReply | Awaitable[FleetReply]: ...
 
     def stop(self) -> FleetReply | Awaitable[FleetReply]: ...
+
+    def pause(self) -> FleetReply | Awaitable[FleetReply]: ...
+
+    def resume(self) -> FleetReply | Awaitable[FleetReply]: ...
 
 
 class DescribePort(Protocol):

@@ -24,9 +24,20 @@ def _qty(value: float, unit: str) -> str:
     return f"{text} {unit}{plural}"
 
 
+# The whole fleet's patrol (server/fleet/central.py), read back before it runs.
+FLEET_WORDS = {
+    "patrol_start": "Starting the patrol with all drones",
+    "patrol_stop": "Ending the patrol",
+    "patrol_pause": "Pausing the patrol",
+    "patrol_resume": "Resuming the patrol",
+}
+
+
 def confirmation(cmd: Mapping[str, Any]) -> str:
     """What the drone is about to do, with the understood values ("Climbing 1 meter")."""
     a = cmd.get("action")
+    if a in FLEET_WORDS:
+        return FLEET_WORDS[str(a)]
     if a == "takeoff":
         return "Taking off"
     if a == "land":

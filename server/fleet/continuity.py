@@ -222,7 +222,7 @@ class HandoffRecord:
     relieved: str
     relief: str
     join_index: int
-    kind: str = "handoff"  # handoff | replacement
+    kind: str = "handoff"  # handoff | replacement | resume (after the operator's pause)
 
 
 @dataclass

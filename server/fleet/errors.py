@@ -6,6 +6,8 @@ FleetError
 ├── MissionError      a mission that cannot be flown (no route, bad threshold, unknown marker)
 ├── PlanError         planner inputs that make no sense (negative speed, threshold ≥ 1)
 ├── NotFoundError     no such mission or drone
+├── IllegalTransition a mission state change the table in states.py forbids (resume a running
+│                     mission, end an ended one)
 └── ClientError       the ``vehicle`` client cannot reach or talk to the central server
 """
 
@@ -35,6 +37,10 @@ class PlanError(FleetError, ValueError):
 class NotFoundError(FleetError, KeyError):
     def __str__(self) -> str:  # KeyError quotes its argument; keep the plain message
         return str(self.args[0]) if self.args else ""
+
+
+class IllegalTransition(FleetError, RuntimeError):
+    pass
 
 
 class ClientError(FleetError):

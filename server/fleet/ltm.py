@@ -7,6 +7,20 @@ height and land), and keeps the drone safe on its own: if it hears nothing from 
 flies home and lands (``autonomous`` in the status says why). Sans-I/O: ``step(now)`` returns
 the status to publish when one is due; the transport (in-process graph, rosbridge client,
 lockstep link) does the sending.
+
+The operator may take the drone off the CTM's patrol at any time, through any door (the page's
+buttons, REST, speech, rosbridge topics, the vehicle's safety door): every one of them ends in
+the task manager, which drops the plan's task with a reason. The LTM hears that and reports what
+the operator did (``operator`` in the status: land, hover, emergency, cancel, jog…) until the
+next plan, so the CTM pauses the mission instead of believing it still runs. What the drone's
+own safety does is not the operator's (the reason names it, ``TaskManager.preempt(by=…)``): a
+safety monitor's hover holds the drone and asks the operator what to do (navdata in doubt,
+outside the geofence), reported as ``held = "navdata monitor (hover)"`` and the CTM pauses the
+mission for the operator too; any other (a monitor's landing or climb-down, the hover or landing
+of the vehicle's watch of a silent central server) as ``autonomous = "held: hover (central
+server silent)"``, and a return home (the operator's or the battery monitor's) as ``autonomous =
+"sent home"``: the drone has left its post, and the CTM gives the post to a drone able to fly it
+(the same one again, once it may).
 """
 
 from __future__ import annotations
@@ -25,6 +39,34 @@ ALTITUDE_MAX_MM = 20000  # control:altitude_max for outdoor flight (firmware def
 # + GPS (tag 27, firmware 2.4 flight recorder); drone.vehicle.navdata_options asks the same
 NAVDATA_OPTIONS = (1 << 0) | (1 << 21) | (1 << 27)
 GPS_PERIOD_S = 1.0  # fuse one GPS fix a second (the flight recorder's rate)
+SENT_HOME = "sent home"  # ``autonomous``: someone sent it home (return_home) off its patrol
+HELD = "held: "  # ``autonomous`` prefix: its own safety acted ("held: hover (…)")
+
+
+def interruption(reason: str) -> tuple[str, str]:
+    """What dropped the plan's task and who did it, from the reason the task manager gives
+    (``server.tasks.manager``: "preempted by land", "preempted by hover (central server
+    silent)", "manual control took over", "take-off requested", "cancelled"…): (action, by),
+    ``by`` "" when it was the operator."""
+    if reason.startswith("preempted by "):
+        what, _, by = reason.removeprefix("preempted by ").partition(" (")
+        return what.replace("_", " "), by.removesuffix(")")
+    if reason == "manual control took over":
+        return "jog", ""
+    if reason.endswith(" requested"):
+        return reason.removesuffix(" requested"), ""
+    if reason == "cancelled":
+        return "cancel", ""
+    if reason == "replaced by a new command":  # only the safety monitors replace the LTM's
+        return "move", "altitude monitor"
+    return reason, ""
+
+
+def operator_action(reason: str) -> str:
+    """The action of :func:`interruption`, in the operator's words."""
+    return interruption(reason)[0]
+
+
 # GPS_SIGMA_M: horizontal σ of a fix at HDOP 1 (server/fleet/accuracy.py)
 
 
@@ -72,6 +114,13 @@ class LocalTaskManager:
         self._next_gps = -math.inf
         self.gps_fixes = 0
         self._last_gps: Any | None = None
+        self.operator = ""  # what the operator did to the CTM's plan (module docstring)
+        self.held = ""  # what its safety monitor holds it for, asking the operator
+        self._plan_tasks: frozenset[int] = frozenset()  # the tasks the plan is flown with
+        self._own = False  # the LTM itself is replacing tasks (not the operator)
+        on_event = getattr(tasks, "on_event", None)
+        if callable(on_event):
+            on_event(self._on_task)
         if origin is not None and hasattr(vehicle, "add_navdata_listener"):
             vehicle.add_navdata_listener(self._on_navdata)
 
@@ -121,18 +170,64 @@ class LocalTaskManager:
         self.configure_drone()
         commands = self._commands(plan)
         if plan.kind is PlanKind.NONE:
-            self.tasks.cancel("plan cancelled by the central task manager")
-            self.plan, self.autonomous = plan, ""
+            self._submit(None)
+            self._applied(plan, ())
             return True, "cancelled"
         if not commands:
-            self.plan, self.autonomous = plan, ""
+            self._applied(plan, ())
             return True, "nothing to do"
-        decisions = self.tasks.submit(commands, replace=True)
+        decisions = self._submit(commands)
         refused = [d for d in decisions if not d.accepted]
         if refused:
             return False, f"refused: {refused[0].reason}"
-        self.plan, self.autonomous = plan, ""
+        self._applied(plan, decisions)
         return True, f"flying plan {plan.plan_id} ({plan.kind.value})"
+
+    def _submit(self, commands: list[dict[str, Any]] | None) -> list[Any]:
+        """Replace what the task manager runs with ``commands`` (None: cancel), as the LTM:
+        the tasks this drops were the LTM's, not taken by the operator."""
+        self._own = True
+        try:
+            if commands is None:
+                self.tasks.cancel("plan cancelled by the central task manager")
+                return []
+            return list(self.tasks.submit(commands, replace=True))
+        finally:
+            self._own = False
+
+    def _applied(self, plan: FlightPlan, decisions: Any) -> None:
+        self.plan, self.autonomous, self.operator, self.held = plan, "", "", ""
+        ids = (getattr(d, "task_id", None) for d in decisions)
+        self._plan_tasks = frozenset(i for i in ids if i is not None)
+
+    def _on_task(self, notice: Any) -> None:
+        """A task-manager event: the plan's task dropped by someone else is the operator's
+        doing (module docstring); the first such event counts until the next plan."""
+        if self._own or notice.kind not in ("preempted", "cancelled"):
+            return
+        if notice.task_id not in self._plan_tasks:
+            return
+        if self.operator or self.autonomous or self.held:
+            return
+        if self.plan is None or self.plan.kind is not PlanKind.PATROL:
+            return
+        action, by = interruption(self._reason(notice))
+        if action == "return home":
+            self.autonomous = SENT_HOME
+        elif action == "hover" and by.endswith(" monitor"):
+            self.held = f"{by} ({action})"  # the monitor asks the operator what to do
+        elif by:
+            self.autonomous = f"{HELD}{action} ({by})"
+        else:
+            self.operator = action
+
+    def _reason(self, notice: Any) -> str:
+        """Why the task manager dropped the notice's task (its history), else the notice's
+        text after the task's description."""
+        for task, reason in reversed(getattr(self.tasks, "history", ())):
+            if getattr(task, "id", None) == notice.task_id:
+                return str(reason)
+        return str(notice.text).rpartition(": ")[2]
 
     def apply_plan_dict(self, obj: Mapping[str, Any], now: float) -> dict[str, Any]:
         """Service handler body: parse (``MessageError`` propagates) and apply."""
@@ -206,7 +301,7 @@ class LocalTaskManager:
             going_home = self.plan is not None and self.plan.kind is PlanKind.RETURN
             if (silent or low) and not going_home:
                 self.autonomous = "ctm_silent" if silent else "battery_reserve"
-                self.tasks.submit(self._home_commands(self.home_cruise_z, s), replace=True)
+                self._submit(self._home_commands(self.home_cruise_z, s))
         if now < self._next_status:
             return None
         self._next_status = now + self.period_s
@@ -244,4 +339,6 @@ class LocalTaskManager:
             task_state=ts.state,
             progress=float(ts.progress),
             autonomous=self.autonomous,
+            operator=self.operator,
+            held=self.held,
         )

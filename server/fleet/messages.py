@@ -25,10 +25,12 @@ STATUS_TYPE = "std_msgs/String"
 PLAN_SERVICE_TYPE = "uav_console/FlightPlan"
 FLEET_TOPIC = "/fleet/status"
 FLEET_TYPE = "uav_console/FleetStatus"
-# The Central patrol (the console's button, "start/stop the patrol"): args {op: start|stop,
-# threshold?} -> {ok, text, mission}; a vehicle process's dialog calls it over the link.
+# The Central patrol (the console's buttons, "start/stop/pause/resume the patrol"): args
+# {op: start|stop|pause|resume, threshold?} -> {ok, text, mission}; a vehicle process's dialog
+# calls it over the link.
 PATROL_SERVICE = "/fleet/patrol"
 PATROL_SERVICE_TYPE = "uav_console/Patrol"
+MAX_WORD = 64  # a status's free-text words (``operator``)
 
 
 class Role(enum.Enum):
@@ -40,6 +42,21 @@ class Role(enum.Enum):
     CHARGING = "charging"
     IDLE = "idle"
     LOST = "lost"
+    # in a paused mission (server.fleet.states): the CTM sends it nothing; it does what the
+    # operator last told it (landed, hovering) or holds where it was
+    PAUSED = "paused"
+
+
+class Handoff(enum.Enum):
+    """When the patrolling drone hands over (``POST /missions``' ``handoff``).
+
+    ``predictive``: its relief is sent ahead so it is on the route when the patrolling drone
+    reaches the threshold (no gap). ``reactive``: the paper's rule, the patrolling drone leaves
+    when its battery drops below the threshold and its relief is sent then (a gap of the relief's
+    flight to the route at each handoff)."""
+
+    PREDICTIVE = "predictive"
+    REACTIVE = "reactive"
 
 
 class PlanKind(enum.Enum):
@@ -69,6 +86,14 @@ def _bool(d: Mapping[str, Any], key: str, default: bool | None = None) -> bool:
     v = d.get(key, default)
     if not isinstance(v, bool):
         raise MessageError(f"field {key!r} must be true or false, got {v!r}")
+    return v
+
+
+def _word(d: Mapping[str, Any], key: str) -> str:
+    """A short free-text field (at most ``MAX_WORD`` characters, "" when absent)."""
+    v = _str(d, key, "")
+    if len(v) > MAX_WORD:
+        raise MessageError(f"field {key!r} is longer than {MAX_WORD} characters")
     return v
 
 
@@ -107,6 +132,13 @@ class LtmStatus:
     task_state: str = "idle"
     progress: float = 0.0
     autonomous: str = ""  # what the LTM did on its own ("ctm_silent", "battery_reserve")
+    # what the operator did to the CTM's patrol plan (land, hover, emergency, stop, jog…), from
+    # any door (page, REST, speech, rosbridge, the safety door): "" until then, and again once
+    # the next plan is applied
+    operator: str = ""
+    # what the drone's own safety holds it for, asking the operator ("navdata monitor (hover)":
+    # a safety monitor's hover that waits for the operator to say), until the next plan
+    held: str = ""
 
     @property
     def position(self) -> Enu:
@@ -148,6 +180,8 @@ class LtmStatus:
             task_state=_str(d, "task_state", "idle"),
             progress=_num(d, "progress", default=0.0),
             autonomous=_str(d, "autonomous", ""),
+            operator=_word(d, "operator"),
+            held=_word(d, "held"),
         )
 
 
@@ -254,6 +288,11 @@ class MissionRequest(BaseModel):
     altitude_m: float = Field(default=5.0, gt=0.3, le=100, description="height over the origin")
     loop: bool = True
     handoff_threshold: float = Field(default=0.30, gt=0.0, lt=1.0)
+    handoff: Handoff = Field(
+        default=Handoff.PREDICTIVE,
+        description="predictive: the relief is on the route before the threshold; reactive: "
+        "the patrolling drone leaves at the threshold and the relief is sent then (the paper)",
+    )
     name: str | None = Field(
         default=None,
         pattern=MISSION_NAME_PATTERN,
@@ -279,6 +318,7 @@ class Mission:
     created_t: float = 0.0
     geo: tuple[tuple[float, float, float], ...] = field(default=())
     headings_deg: tuple[float, ...] = ()  # per waypoint (FlightPlan.headings_deg)
+    handoff: Handoff = Handoff.PREDICTIVE
 
     @property
     def altitude_m(self) -> float:

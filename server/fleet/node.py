@@ -31,13 +31,17 @@ from server.fleet.messages import (
     LtmStatus,
 )
 from server.graph import Graph, GraphError
-from server.msgs import stamp
+from server.msgs import header, stamp
 
 log = logging.getLogger(__name__)
 STATUS_SUFFIX = "/" + STATUS_TOPIC
 # Live missions with coverage (``std_msgs/String``, ``data`` = ``{"missions": [mission_info…]}``,
 # latched): time since each waypoint's last visit, longest wait, each handoff's revisit change.
 MISSIONS_TOPIC = "/fleet/missions"
+# What the operator must hear from the fleet (a mission stalled, resumed by itself): the
+# console's replies, as the dialog speaks them (server.dialog.manager.REPLY)
+REPLY_TOPIC = "/console/reply"
+REPLY_TYPE = "uav_console/Reply"
 
 
 def status_topic(name: str) -> str:
@@ -75,6 +79,7 @@ class CtmNode:
         self._wake = asyncio.Event()
         graph.advertise(FLEET_TOPIC, FLEET_TYPE, latch=True)
         graph.advertise(MISSIONS_TOPIC, "std_msgs/String", latch=True)
+        graph.advertise(REPLY_TOPIC, REPLY_TYPE)
         self._had_missions = False
 
     def poke(self) -> None:
@@ -104,6 +109,7 @@ class CtmNode:
             t = asyncio.create_task(self._send(d.drone, d.plan.to_dict(), d.plan.plan_id))
             self._pending.add(t)
             t.add_done_callback(self._pending.discard)
+        self.tell()
         if now >= self._next_publish:
             self._next_publish = now + self.publish_period_s
             self.graph.publish(FLEET_TOPIC, self.ctm.fleet_status(now, stamp()))
@@ -111,6 +117,23 @@ class CtmNode:
             if missions or self._had_missions:
                 self.graph.publish(MISSIONS_TOPIC, {"data": json.dumps({"missions": missions})})
             self._had_missions = bool(missions)
+
+    def tell(self) -> None:
+        """Say the CTM's notices on the console's replies (spoken, like the drones' alarms)."""
+        while self.ctm.notices:
+            _t, level, text = self.ctm.notices.popleft()
+            msg = {
+                "header": header(now=None),
+                "text": text,
+                "level": level,
+                "speak": True,
+                "utterance": "",
+                "commands": "[]",
+                "drone": "",
+                "alarm": "fleet",
+                "expects": "",
+            }
+            self.graph.publish(REPLY_TOPIC, msg)
 
     async def _send(self, name: str, plan: dict[str, Any], plan_id: int) -> None:
         try:

@@ -3,11 +3,15 @@
 ``uav-console patrol --drones 2 --duration 3600`` builds a ``LockstepRig`` on the outdoor world
 (real simulator, AR.Drone wire protocol in memory, EKF, the paper's PID, the task manager), one
 LTM per drone, one CTM, and a station per drone that restores a landed drone (battery swap,
-default 120 s, or charging at a rate). The mission is the world's four waypoints (a 30 m square
-at 5 m near 36.367164 N, 127.363472 E) given to the CTM as lat/lon/alt, as ``POST /missions``
-would. Coverage is measured from the simulator's *true* positions: a drone covers the route
-while it flies (not in emergency) within ``corridor_m`` of the route at route height. The window
-starts when the route is first reached (take-off and first transit are reported apart).
+default 120 s, or charging at a rate: the world's pads then charge in the simulator). The
+mission is the world's four waypoints (a 30 m square at 5 m near 36.367164 N, 127.363472 E)
+given to the CTM as lat/lon/alt, as ``POST /missions`` would, with its handoff rule:
+``predictive`` (the relief is on the route before the threshold) or ``reactive`` (the paper's:
+the patrolling drone leaves at the threshold and the relief is sent then); ``--handoff both``
+flies both on the same seed and reports them side by side. Coverage is measured from the
+simulator's *true* positions: a drone covers the route while it flies (not in emergency) within
+``corridor_m`` of the route at route height. The window starts when the route is first reached
+(take-off and first transit are reported apart).
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from typing import Any
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import Enu, origin_of, to_geo
 from server.fleet.ltm import LocalTaskManager
-from server.fleet.messages import GeoWaypoint, MissionRequest, Role
+from server.fleet.messages import GeoWaypoint, Handoff, MissionRequest, Role
 from server.fleet.planner import FlightModel, StationModel, coverage_bound
 
 MAX_DRONES = 16
@@ -56,6 +60,7 @@ class PatrolConfig:
     ctm_timeout_s: float = 15.0
     corridor_m: float = 2.5
     continuity: bool = True  # relief joins where the patrolling drone goes next (continuity.py)
+    handoff: str = "predictive"  # or "reactive" (the paper's rule), server.fleet.messages.Handoff
     protocol: str = "ardrone"  # "mavlink": simulated PX4 quadrotors (issue 16)
 
 
@@ -71,8 +76,24 @@ def station_positions(world: Any, n: int) -> list[Enu]:
     return pads
 
 
+def charging_world(world: Any, pads: Sequence[Enu], charge_pct_s: float | None) -> Any:
+    """``world`` with one station per pad, each charging at ``charge_pct_s`` (None: plain
+    pads, the experiment's stations swap batteries instead)."""
+    import dataclasses
+
+    from drone.sim.world import Station
+
+    stations = tuple(
+        Station(f"home{k + 1}", (p.x, p.y, p.z), charge_pct_s=charge_pct_s or 0.0)
+        for k, p in enumerate(pads)
+    )
+    return dataclasses.replace(world, stations=stations)
+
+
 class StationService:
-    """A home station: restores a drone that lands on it (swap after ``swap_s``, or charging)."""
+    """A home station: restores a drone that lands on it, with a battery swap after ``swap_s``
+    or by charging (the AR.Drone simulator charges on the world's pads itself; a simulator
+    without pads of its own, MAVLink's, is charged here)."""
 
     def __init__(self, sim: Any, position: Enu, model: StationModel) -> None:
         self.sim = sim
@@ -91,7 +112,7 @@ class StationService:
             self.landed_since = now
         bat = self.sim.physics.battery
         if self.model.charge_pct_s is not None:
-            if bat.pct < 100.0:
+            if not hasattr(self.sim, "charging") and bat.pct < 100.0:
                 bat.drain_to(bat.pct + self.model.charge_pct_s * dt)
         elif bat.pct < self.model.ready_pct and now - self.landed_since >= self.model.swap_s:
             bat.drain_to(100.0)
@@ -145,6 +166,17 @@ class PatrolReport:
     route: list[tuple[float, float, float]] = field(repr=False, default_factory=list)
 
     @property
+    def handoff_gap_s(self) -> float:
+        """The longest coverage gap after the first drone reached the route: the gaps at
+        handoffs (the reactive rule's, a late relief's)."""
+        return max((b - a for a, b in self.gaps), default=0.0)
+
+    @property
+    def battery_lowest(self) -> float:
+        """The lowest charge any drone reached."""
+        return min(self.battery_min.values(), default=float("nan"))
+
+    @property
     def realtime_factor(self) -> float:
         return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
 
@@ -166,6 +198,9 @@ class PatrolReport:
             "revisit_s": self.revisit_s,
             "handoff_revisit": self.handoff_revisit,
             "continuity": self.config.continuity,
+            "handoff": self.config.handoff,
+            "handoff_gap_s": round(self.handoff_gap_s, 2),
+            "battery_lowest_pct": round(self.battery_lowest, 1),
             "battery_min_pct": {k: round(v, 1) for k, v in self.battery_min.items()},
             "bound": self.bound,
             "fail_at_s": self.config.fail_at_s,
@@ -185,7 +220,7 @@ class PatrolReport:
             f"persistent patrol: {c.drones} drones, {self.duration_s:.0f} s simulated "
             f"in {self.wall_s:.1f} s wall ({self.realtime_factor:.0f}× real time; "
             f"{self.realtime_factor_cpu:.0f}× per CPU second), "
-            f"handoff at {c.threshold:.0%}"
+            f"handoff at {c.threshold:.0%} ({c.handoff})"
             + (f", failure ({c.fail_kind}) at {c.fail_at_s:.0f} s" if c.fail_at_s else ""),
             f"  first drone on the route after   {self.first_on_route_s or float('nan'):.1f} s",
             f"  coverage (from then on)          {100 * self.coverage:.2f} %",
@@ -274,9 +309,15 @@ class PatrolExperiment:
             raise ValueError(f"--drones must be in 1..{MAX_DRONES}, got {cfg.drones}")
         if not cfg.duration_s > 0:
             raise ValueError(f"--duration must be > 0, got {cfg.duration_s}")
+        try:
+            self.handoff = Handoff(cfg.handoff)
+        except ValueError:
+            raise ValueError(
+                f"--handoff must be reactive or predictive, got {cfg.handoff!r}"
+            ) from None
         self.cfg = cfg
-        self.world = load_world("outdoor")
-        pads = station_positions(self.world, cfg.drones)
+        pads = station_positions(load_world("outdoor"), cfg.drones)
+        self.world = charging_world(load_world("outdoor"), pads, cfg.charge_pct_s)
         yaw = self.world.start.yaw_rad
         self.rig: Any
         if cfg.protocol == "mavlink":
@@ -297,7 +338,10 @@ class PatrolExperiment:
         flight = cfg.flight_time_s or FLIGHT_TIME_S
         for sim in self.rig.sims:
             sim.physics.battery.flight_time_s = flight
-        self.model = FlightModel(drain_pct_s=100.0 / flight)
+        # the least shift worth a take-off scales with the battery (60 s of a 12-minute one)
+        self.model = FlightModel(
+            drain_pct_s=100.0 / flight, min_shift_s=60.0 * flight / FLIGHT_TIME_S
+        )
         self.station_model = StationModel(swap_s=cfg.swap_s, charge_pct_s=cfg.charge_pct_s)
         self.origin = origin_of(self.world)
         self.ctm = CentralTaskManager(
@@ -341,7 +385,9 @@ class PatrolExperiment:
         for w in self.world.waypoints:
             g = to_geo(Enu(*map(float, w.position)), self.origin)
             wps.append(GeoWaypoint(lat=g.lat_deg, lon=g.lon_deg, alt=g.alt_m))
-        return MissionRequest(waypoints=wps, loop=True, handoff_threshold=self.cfg.threshold)
+        return MissionRequest(
+            waypoints=wps, loop=True, handoff_threshold=self.cfg.threshold, handoff=self.handoff
+        )
 
     def _tick(self, now: float, dt: float) -> None:
         for tm in self.tasks:
@@ -501,6 +547,28 @@ def handoff_revisits(visits: dict[int, list[float]], ms: Any, t0: float) -> list
     return out
 
 
+def compare_text(reports: Sequence[PatrolReport]) -> str:
+    """The handoff rules side by side (same seed, same everything else): the paper's reactive
+    rule and the predictive one."""
+    c = reports[0].config
+    head = (
+        f"handoff rules compared: {c.drones} drones, {c.duration_s:.0f} s simulated, seed "
+        f"{c.seed}, handoff at {c.threshold:.0%}"
+    )
+    rows: list[tuple[str, list[Any], str]] = [
+        ("", [r.config.handoff for r in reports], "{}"),
+        ("coverage (%)", [100 * r.coverage for r in reports], "{:.2f}"),
+        ("longest gap at a handoff (s)", [r.handoff_gap_s for r in reports], "{:.1f}"),
+        ("gaps", [len(r.gaps) for r in reports], "{}"),
+        ("handoffs", [r.handoffs for r in reports], "{}"),
+        ("lowest battery (%)", [r.battery_lowest for r in reports], "{:.1f}"),
+    ]
+    lines = [head]
+    for label, vals, fmt in rows:
+        lines.append(f"  {label:<30}" + "".join(f"{fmt.format(v):>14}" for v in vals))
+    return "\n".join(lines)
+
+
 def run_patrol(cfg: PatrolConfig) -> PatrolReport:
     """Build and run one experiment."""
     return PatrolExperiment(cfg).run()
@@ -521,6 +589,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--dt", type=float, default=0.1, help="lockstep tick (s)")
     p.add_argument("--events", action="store_true", help="also print the CTM's event log")
     p.add_argument("--protocol", choices=("ardrone", "mavlink"), default="ardrone")
+    p.add_argument(
+        "--handoff",
+        choices=("predictive", "reactive", "both"),
+        default="predictive",
+        help="predictive: the relief is on the route before the threshold; reactive: the "
+        "paper's rule, leave at the threshold and send the relief then; both: fly both on "
+        "the same seed and report them side by side",
+    )
     return p
 
 
@@ -530,24 +606,37 @@ def patrol_main(argv: Sequence[str]) -> int:
     if not 0.0 < args.threshold < 1.0:
         print("uav-console patrol: --threshold must be in (0, 1)", file=sys.stderr)
         return 2
+    rules = ("reactive", "predictive") if args.handoff == "both" else (args.handoff,)
     try:
-        cfg = PatrolConfig(
-            drones=args.drones,
-            duration_s=args.duration,
-            threshold=args.threshold,
-            seed=args.seed,
-            dt=args.dt,
-            swap_s=args.swap,
-            charge_pct_s=args.charge_rate,
-            fail_at_s=args.fail_at,
-            fail_kind=args.fail_kind,
-            protocol=args.protocol,
-        )
-        exp = PatrolExperiment(cfg)
+        exps = [
+            PatrolExperiment(
+                PatrolConfig(
+                    drones=args.drones,
+                    duration_s=args.duration,
+                    threshold=args.threshold,
+                    seed=args.seed,
+                    dt=args.dt,
+                    swap_s=args.swap,
+                    charge_pct_s=args.charge_rate,
+                    fail_at_s=args.fail_at,
+                    fail_kind=args.fail_kind,
+                    protocol=args.protocol,
+                    handoff=rule,
+                )
+            )
+            for rule in rules
+        ]
     except ValueError as exc:
         print(f"uav-console patrol: {exc}", file=sys.stderr)
         return 2
-    report = exp.run()
+    if len(exps) > 1:
+        reports = [e.run() for e in exps]
+        if args.json:
+            print(json.dumps({r.config.handoff: r.to_json() for r in reports}))
+        else:
+            print(compare_text(reports))
+        return 0
+    report = exps[0].run()
     if args.png is not None:
         report.plot(args.png)
     if args.json:

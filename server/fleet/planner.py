@@ -35,6 +35,8 @@ class FlightModel:
         land_s: landing from cruise height at ~0.5 m/s plus the descent leg.
         drain_pct_s: battery drain in flight (100 % / 720 s, drone/sim/battery.py).
         margin_s: extra lead so the relief is on the route before the threshold.
+        min_shift_s: the least time on the route worth a take-off: a drone is able to fly a
+            mission when its charge covers the flight out and this long above the threshold.
     """
 
     speed_m_s: float = 1.8
@@ -43,13 +45,14 @@ class FlightModel:
     land_s: float = 12.0
     drain_pct_s: float = 100.0 / FLIGHT_TIME_S
     margin_s: float = 15.0
+    min_shift_s: float = 60.0
 
     def __post_init__(self) -> None:
         for name in ("speed_m_s", "climb_m_s", "drain_pct_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise PlanError(f"{name} must be > 0, got {v!r}")
-        for name in ("takeoff_s", "land_s", "margin_s"):
+        for name in ("takeoff_s", "land_s", "margin_s", "min_shift_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise PlanError(f"{name} must be >= 0, got {v!r}")
@@ -74,9 +77,16 @@ class StationModel:
 
     def restore_s(self, battery_pct: float) -> float:
         """Seconds from landing with ``battery_pct`` to ``ready_pct``."""
+        return self.time_to_s(battery_pct, self.ready_pct, 0.0)
+
+    def time_to_s(self, battery_pct: float, target_pct: float, since_s: float) -> float:
+        """Seconds until a drone on its station, there for ``since_s`` with ``battery_pct``
+        now, has ``target_pct``: charging at the rate, or when the swap is done."""
+        if battery_pct >= target_pct:
+            return 0.0
         if self.charge_pct_s is None:
-            return self.swap_s
-        return max(0.0, self.ready_pct - battery_pct) / self.charge_pct_s
+            return max(0.0, self.swap_s - since_s)
+        return (min(target_pct, 100.0) - battery_pct) / self.charge_pct_s
 
 
 def transit_s(a: Enu, b: Enu, model: FlightModel) -> float:

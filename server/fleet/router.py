@@ -1,17 +1,25 @@
 """REST doors onto the CTM: ``POST /missions``, ``GET /missions``, ``GET /missions/{id}``,
-``DELETE /missions/{id}``, ``GET /fleet`` (mounted by the app under ``/api/v1``)."""
+``POST /missions/{id}`` (``{"action": "pause" | "resume" | "end"}``), ``DELETE /missions/{id}``
+(end), ``GET /fleet`` (mounted by the app under ``/api/v1``)."""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Literal
 
 from fastapi import APIRouter, HTTPException, params
+from pydantic import BaseModel
 
 from server.fleet.ctm import CentralTaskManager
-from server.fleet.errors import MissionError, NotFoundError
+from server.fleet.errors import IllegalTransition, MissionError, NotFoundError
 from server.fleet.messages import MissionRequest
+
+
+class MissionControl(BaseModel):
+    """``POST /missions/{id}``: the operator pauses, resumes or ends a mission."""
+
+    action: Literal["pause", "resume", "end"]
 
 
 def make_fleet_router(
@@ -50,11 +58,24 @@ def make_fleet_router(
         except NotFoundError as exc:
             raise HTTPException(status_code=404, detail=str(exc)) from exc
 
-    @router.delete("/missions/{mission_id}")
-    async def stop_mission(mission_id: str) -> dict[str, Any]:
-        """Stop a mission; its drones fly home."""
+    @router.post("/missions/{mission_id}")
+    async def control_mission(mission_id: str, body: MissionControl) -> dict[str, Any]:
+        """Pause, resume or end a mission (409 when its state does not allow it: resuming a
+        mission that is not paused, pausing an ended one)."""
         try:
-            ctm.stop_mission(mission_id, clock())
+            ctm.control_mission(mission_id, body.action, clock())
+        except NotFoundError as exc:
+            raise HTTPException(status_code=404, detail=str(exc)) from exc
+        except IllegalTransition as exc:
+            raise HTTPException(status_code=409, detail=str(exc)) from exc
+        changed()
+        return ctm.mission_info(mission_id, clock())
+
+    @router.delete("/missions/{mission_id}")
+    async def end_mission(mission_id: str) -> dict[str, Any]:
+        """End a mission; its drones fly home."""
+        try:
+            ctm.end_mission(mission_id, clock())
         except NotFoundError as exc:
             raise HTTPException(status_code=404, detail=str(exc)) from exc
         changed()

@@ -28,12 +28,19 @@ from server.fleet.central import CentralPatrol, make_patrol_router
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import origin_of
 from server.fleet.ltm import LocalTaskManager
-from server.fleet.messages import PATROL_SERVICE, PATROL_SERVICE_TYPE
+from server.fleet.messages import PATROL_SERVICE, PATROL_SERVICE_TYPE, Handoff
 from server.fleet.node import CtmNode, LtmNode
 from server.fleet.patrol import station_positions
 from server.fleet.planner import FlightModel, StationModel
 from server.fleet.router import make_fleet_router
 from server.graph import Graph
+
+
+def station_model(world: Any) -> StationModel:
+    """How the world's stations restore a drone: its charging pads' rate (``charge_pct_s``),
+    else the swap of :class:`StationModel` (a world with plain pads)."""
+    rate = float(getattr(world, "charge_pct_s", 0.0) or 0.0)
+    return StationModel(charge_pct_s=rate) if rate > 0 else StationModel()
 
 
 class FleetService:
@@ -53,7 +60,10 @@ class FleetService:
         self.world = world
         self.clock = clock
         self.ctm = CentralTaskManager(
-            model=model, stations=stations, origin=origin_of(world), world=world
+            model=model,
+            stations=stations or station_model(world),
+            origin=origin_of(world),
+            world=world,
         )
         self.node = CtmNode(graph, self.ctm, clock=clock)
         # the console's Central button and voice (start/stop the world's patrol)
@@ -89,11 +99,21 @@ class FleetService:
             threshold = float(args.get("threshold", 0.30))
             if not 0.0 < threshold < 1.0:
                 raise ValueError(f"threshold must be between 0 and 1, not {threshold}")
-            reply = self.central.start(threshold)
+            try:
+                handoff = Handoff(args.get("handoff", Handoff.PREDICTIVE.value))
+            except ValueError:
+                raise ValueError(
+                    f"handoff must be reactive or predictive, not {args.get('handoff')!r}"
+                ) from None
+            reply = self.central.start(threshold, handoff)
         elif op == "stop":
             reply = self.central.stop()
+        elif op == "pause":
+            reply = self.central.pause()
+        elif op == "resume":
+            reply = self.central.resume()
         else:
-            raise ValueError(f"unknown op {op!r} (start, stop)")
+            raise ValueError(f"unknown op {op!r} (start, stop, pause, resume)")
         return {"ok": reply.ok, "text": reply.text, "mission": reply.mission}
 
     async def _run(self) -> None:

@@ -284,11 +284,14 @@ class TaskManager(Context):
         self._flush()
         return had
 
-    def preempt(self, action: str) -> Decision:
+    def preempt(self, action: str, *, by: str = "") -> Decision:
         """Run a safety action now: ``land``, ``emergency``, ``return_home`` or ``hover``.
 
         Everything running or queued is preempted. Refused (with a reason) only when the action
-        is not one of these or cannot be planned (e.g. return home with no station).
+        is not one of these or cannot be planned (e.g. return home with no station). ``by``
+        names what acted when it was not the operator (a safety monitor, the central server's
+        silence): the preempted tasks' reason says so ("preempted by hover (central server
+        silent)"), and the fleet's LTM tells an automatic action from the operator's by it.
         """
         cmd = {"action": action}
         if action not in SAFETY_ACTIONS:
@@ -305,12 +308,13 @@ class TaskManager(Context):
                     )
             except CommandError as exc:
                 return Decision(cmd, False, exc.reason)
-            self._preempt_with(task)
+            self._preempt_with(task, by)
         self._flush()
         return Decision(cmd, True, f"now: {task.describe()}", task.id)
 
-    def _preempt_with(self, task: Task) -> None:
-        self._cancel_all(f"preempted by {task.name}", TaskEvent.PREEMPT)
+    def _preempt_with(self, task: Task, by: str = "") -> None:
+        why = f"preempted by {task.name}" + (f" ({by})" if by else "")
+        self._cancel_all(why, TaskEvent.PREEMPT)
         self._queue.appendleft(task)
         # Land and emergency reach the wire now, not at the next step (DESIGN §5).
         self._start_next(self.clock.now())

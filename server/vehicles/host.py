@@ -195,6 +195,12 @@ class RemoteFleet:
     def stop(self) -> Awaitable[PatrolAnswer]:
         return self._call({"op": "stop"})
 
+    def pause(self) -> Awaitable[PatrolAnswer]:
+        return self._call({"op": "pause"})
+
+    def resume(self) -> Awaitable[PatrolAnswer]:
+        return self._call({"op": "resume"})
+
 
 class VehicleHost:
     """See the module docstring: ``await start()``, ``await run(stop)``, ``await stop()``."""
@@ -577,7 +583,7 @@ class VehicleHost:
         self.loss_actions.append(action.value)
         log.warning("%s: central server silent for %.1f s: %s", self.name, silent_s, action.value)
         if self.stack.tasks is not None:
-            self.stack.tasks.preempt(action.value)
+            self.stack.tasks.preempt(action.value, by="central server silent")
 
     async def run(self, stop: asyncio.Event) -> None:
         async def relay() -> None:

@@ -93,3 +93,60 @@ def test_central_button_and_voice(browser: Any, central_server: ServerProcess) -
         page.wait_for_function("document.querySelector('#central-start').disabled", timeout=5000)
     finally:
         ctx.close()
+
+
+@pytest.fixture
+def paused_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
+    """Two simulated drones of this test's own (127.0.26.10 and .11)."""
+    yield from _server(tmp_path_factory, "uavc-browser-paused", "127.0.26.10", "--fleet", "2")
+
+
+def test_land_pauses_the_patrol_and_the_panel_resumes_and_ends_it(
+    browser: Any, paused_server: ServerProcess
+) -> None:
+    """Issue 26 finding 7: the page's Land on the patrolling drone pauses the mission; the
+    panel says so with the drone's role and offers Resume and End, which work."""
+    ctx, cp = open_console(browser, paused_server.url())
+    try:
+        page = cp.page
+        page.wait_for_function(
+            "document.querySelectorAll('#central-drones li[data-role=\"idle\"]').length === 2",
+            timeout=60_000,
+        )
+        page.click("#central-h")
+        page.click("#central-start")
+        page.wait_for_selector("#central[data-state='running']", timeout=30_000)
+        status = paused_server.api("GET", "/patrol").json()
+        active = status["mission"]["active"]
+        # the page's own Land button, on the patrolling drone
+        page.wait_for_selector("#drone-select-wrap:not([hidden])", timeout=10_000)
+        page.select_option("#drone-select", active)
+        page.wait_for_function(f"window.uavConsole.drone === '{active}'", timeout=5000)
+        page.click("#btn-land")
+        page.wait_for_selector("#central[data-state='paused']", timeout=10_000)
+        line = page.text_content("#central-state") or ""
+        assert "paused by the operator (land)" in line and f"{active} was patrolling" in line
+        assert page.is_visible("#central-resume") and page.is_enabled("#central-resume")
+        assert not page.is_visible("#central-start")
+        assert page.is_enabled("#central-stop")
+        assert page.text_content(f"#central-drones li[data-drone='{active}']").startswith(
+            f"{active}: paused"
+        )
+
+        page.click("#central-resume")
+        page.wait_for_function(
+            "document.querySelector('#central-reply').textContent"
+            ".startsWith('Resuming the patrol')",
+            timeout=5000,
+        )
+        page.wait_for_selector("#central[data-state='running']", timeout=45_000)
+        assert not page.is_visible("#central-resume") and page.is_visible("#central-start")
+
+        page.click("#central-stop")
+        page.wait_for_selector("#central[data-state='none']", timeout=5000)
+        reply = page.text_content("#central-reply")
+        assert reply == "Stopping the patrol; the drones are flying home.", reply
+        assert page.text_content("#central-state") == "not running"
+        assert not cp.errors, cp.errors
+    finally:
+        ctx.close()

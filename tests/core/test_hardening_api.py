@@ -123,7 +123,7 @@ async def test_missions_and_faults_need_the_lease_but_stopping_does_not(
     made = await api.post("/api/v1/missions", json=route, headers={"X-Pilot-Lease": key})
     assert made.status_code == 201
     stopped = await api.delete(f"/api/v1/missions/{made.json()['id']}")
-    assert stopped.status_code == 200 and stopped.json()["state"] == "stopped"
+    assert stopped.status_code == 200 and stopped.json()["state"] == "ended"
     ok = await api.post("/api/v1/sim/uav1/fault", json=fault, headers={"X-Pilot-Lease": key})
     assert ok.status_code == 200
 

@@ -44,7 +44,7 @@ class FakeFlight:
         self.queue.clear()
         self.running = None
 
-    def preempt(self, command: Mapping[str, Any]) -> None:
+    def preempt(self, command: Mapping[str, Any], by: str = "") -> None:
         self.log.append(("preempt", dict(command)))
         self.queue.clear()
         self.running = None

@@ -32,23 +32,23 @@ def test_good_names_and_route_cap() -> None:
         CentralTaskManager().add_mission([ROUTE[0]] * (MAX_ROUTE_POINTS + 1), now=0.0)
 
 
-def test_mission_count_is_capped_and_stopped_missions_expire() -> None:
-    ctm = CentralTaskManager(max_missions=3, stopped_keep_s=60.0)
+def test_mission_count_is_capped_and_ended_missions_expire() -> None:
+    ctm = CentralTaskManager(max_missions=3, ended_keep_s=60.0)
     ids = [ctm.add_mission(ROUTE, now=0.0).id for _ in range(3)]
     with pytest.raises(MissionError, match="at most 3 missions"):
         ctm.add_mission(ROUTE, now=1.0)
-    ctm.stop_mission(ids[0], now=10.0)
-    # stopped but still readable for a while, and still counted
-    assert ctm.mission_info(ids[0])["state"] == "stopped"
+    ctm.end_mission(ids[0], now=10.0)
+    # ended but still readable for a while, and still counted
+    assert ctm.mission_info(ids[0])["state"] == "ended"
     with pytest.raises(MissionError):
         ctm.add_mission(ROUTE, now=20.0)
-    ctm.step(71.0)  # 61 s after it stopped: forgotten
+    ctm.step(71.0)  # 61 s after it ended: forgotten
     with pytest.raises(NotFoundError):
         ctm.mission_info(ids[0])
     new = ctm.add_mission(ROUTE, now=72.0)
     assert new.id not in ids  # generated ids never repeat a live one
-    # stopping again does not restart its clock
-    ctm.stop_mission(ids[1], now=80.0)
-    ctm.stop_mission(ids[1], now=130.0)
+    # ending again does not restart its clock
+    ctm.end_mission(ids[1], now=80.0)
+    ctm.end_mission(ids[1], now=130.0)
     ctm.step(141.0)
     assert ids[1] not in ctm.missions

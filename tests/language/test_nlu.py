@@ -91,6 +91,9 @@ RULE_EXAMPLES = {
     # issue 13 items 6, 7, 9: fleet patrol, objects, answers, tag search
     "patrol_start.fleet": ("start the patrol with all drones", {"action": "patrol_start"}),
     "patrol_stop.fleet": ("stop the patrol", {"action": "patrol_stop"}),
+    # a paused patrol (server/fleet/states.py)
+    "patrol_resume.fleet": ("resume the patrol", {"action": "patrol_resume"}),
+    "patrol_pause.fleet": ("pause the patrol", {"action": "patrol_pause"}),
     "search.markers": ("look for a tag", {"action": "search"}),
     "goto.object": (
         "fly to the red chair",
@@ -470,6 +473,8 @@ def test_word_salad_never_raises(words: list[str]) -> None:
             "help",
             "patrol_start",
             "patrol_stop",
+            "patrol_pause",
+            "patrol_resume",
         }
 
 

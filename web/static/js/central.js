@@ -1,9 +1,11 @@
-// The Central patrol (issue 13 item 9, CTANS): start, watch and stop a persistent patrol of
-// the whole fleet from the console, with live coverage.
+// The Central patrol (CTANS): start, watch, resume and end a persistent patrol of the whole
+// fleet from the console, with live coverage and the mission's state as the server has it
+// (server/fleet/states.py): waiting, running, paused by the operator (Land, Hover, Emergency
+// or a jog on one of its drones; Resume or End then), stalled, ended.
 //
 // Self-contained: it needs only the #central block of the page and the REST API
 // (GET/POST/DELETE /api/v1/patrol, server/fleet/central.py). Voice does the same through the
-// dialog ("start the patrol with all drones", "stop the patrol").
+// dialog ("start the patrol with all drones", "resume the patrol", "end the patrol").
 
 import { Api, ApiError } from "./api.js";
 import { pageToken } from "./session.js";
@@ -30,6 +32,9 @@ export class CentralPanel {
     this.$ = (id) => root.querySelector(`#${id}`);
     this.busy = false;
     this.$("central-start").addEventListener("click", () => this.act("POST", "Starting…"));
+    this.$("central-resume").addEventListener("click", () =>
+      this.act("POST", "Resuming…", { action: "resume" }),
+    );
     this.$("central-stop").addEventListener("click", () => this.act("DELETE", "Stopping…"));
     this.timer = null;
     this.last = null;
@@ -51,7 +56,7 @@ export class CentralPanel {
     el.dataset.level = level;
   }
 
-  async act(method, pending) {
+  async act(method, pending, body = {}) {
     if (this.busy) return;
     this.busy = true;
     this.say(pending);
@@ -60,8 +65,9 @@ export class CentralPanel {
       // it, and REST names the holding's key in X-Pilot-Lease, as app.js's own requests do.
       const key = this.lease();
       const headers = key ? { "X-Pilot-Lease": key } : {};
-      const body = method === "POST" ? {} : undefined;
-      const out = await this.api.request(method, "/patrol", body, { headers });
+      const out = await this.api.request(method, "/patrol", method === "POST" ? body : undefined, {
+        headers,
+      });
       this.say(out.reply);
       this.render(out);
     } catch (err) {
@@ -79,22 +85,32 @@ export class CentralPanel {
     }
   }
 
-  /** GET /patrol: {running, mission: {id, state, active, relief, handoffs, coverage}, drones} */
+  /**
+   * GET /patrol: {running, state, mission: {id, state, detail, drones, active, relief,
+   * handoffs, coverage}, drones}; ``state`` is "none" with no live mission.
+   */
   render(status) {
     this.last = status;
     const m = status.mission;
+    const live = Boolean(m) && status.state !== "none";
     const running = Boolean(status.running && m);
+    const paused = live && status.state === "paused";
     // a patrol started elsewhere (voice, REST, another console) opens the panel once
-    if (running && this.root.dataset.running !== "true") this.root.open = true;
+    if (live && this.root.dataset.live !== "true") this.root.open = true;
     this.root.dataset.running = String(running);
+    this.root.dataset.live = String(live);
+    this.root.dataset.state = live ? status.state : "none";
     // observers watch (app.js marks the page's role on <body>); the server checks anyway
     const observer = document.body.dataset.role === "observer";
-    this.$("central-start").disabled = running || observer;
-    this.$("central-stop").disabled = !running || observer;
-    this.$("central-state").textContent = running
-      ? `${m.id}: ${m.state}, ${m.handoffs} handoff${m.handoffs === 1 ? "" : "s"}`
-      : "not running";
-    const cov = running ? m.coverage : null;
+    const start = this.$("central-start");
+    const resume = this.$("central-resume");
+    start.hidden = paused;
+    resume.hidden = !paused;
+    start.disabled = live || observer;
+    resume.disabled = !paused || observer;
+    this.$("central-stop").disabled = !live || observer;
+    this.$("central-state").textContent = live ? missionLine(m) : "not running";
+    const cov = live ? m.coverage : null;
     this.$("central-gap").textContent = cov ? ago(cov.longest_gap_s) : "–";
     this.$("central-lap").textContent = cov && cov.lap_s !== null ? ago(cov.lap_s) : "–";
     const wps = this.$("central-waypoints");
@@ -121,6 +137,19 @@ export class CentralPanel {
       }),
     );
   }
+}
+
+/**
+ * The mission in one line: "patrol1: paused by the operator (land) · uav1 was patrolling",
+ * "patrol1: running: uav2 patrolling · 2 handoffs".
+ */
+export function missionLine(m) {
+  const who = (m.drones || [])
+    .filter((d) => d.was)
+    .map((d) => `${d.name} was ${d.was}`)
+    .join(", ");
+  const handoffs = `${m.handoffs} handoff${m.handoffs === 1 ? "" : "s"}`;
+  return `${m.id}: ${m.detail || m.state}${who ? ` · ${who}` : ""} · ${handoffs}`;
 }
 
 function boot() {
