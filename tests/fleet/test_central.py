@@ -50,9 +50,12 @@ def test_indoor_route_faces_each_marker() -> None:
 
 @pytest.mark.timeout(90)
 async def test_start_watch_and_stop_by_rest_and_voice(api: httpx.AsyncClient) -> None:
-    # both drones join the fleet (their LTMs report) before anything is started
+    # both drones join the fleet (their LTMs report, their navdata has come: a battery level)
+    # before anything is started
     def ready(b: dict[str, Any]) -> bool:
-        return len(b["drones"]) == 2 and all(d["role"] == "idle" for d in b["drones"])
+        return len(b["drones"]) == 2 and all(
+            d["role"] == "idle" and d["battery"] > 0 for d in b["drones"]
+        )
 
     idle = await _until(api, ready, 20.0)
     assert ready(idle), idle
