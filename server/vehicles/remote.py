@@ -3,8 +3,8 @@
 :class:`RemoteDroneStack` answers everything the REST routes ask of a
 :class:`~server.vehicles.stack.DroneStack` (telemetry, direct actions, the latest JPEG, ground
 truth, faults) from what the vehicle publishes over the link (``/NAME/vehicle/telemetry``, the
-camera topic) and through its control service; :class:`RemoteDialog` answers ``POST /command`` through
-the vehicle's own dialog manager. Stops (land, emergency) are sent and answered at once
+camera topic) and through its control service; :class:`RemoteDialog` answers ``POST /command``
+through the vehicle's own dialog manager. Stops (land, emergency) are sent and answered at once
 ("emergency sent"), as in-process; other direct actions get the vehicle's own verdict (it checks
 them against its drone's state now, not against telemetry 0.1 s old).
 
