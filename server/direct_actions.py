@@ -233,7 +233,7 @@ def perform(
     its fsync never delays the datagram (bench/direct_actions.py measures this).
 
     Args:
-        stack: the drone (``server.runtime.DroneStack``).
+        stack: the drone (``server.vehicles.stack.DroneStack``).
         dialog: its dialog manager (or None), told so its state follows and refusals are said.
         audit: the audit log (``server.store.AuditLog``) or None.
     """

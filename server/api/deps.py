@@ -11,8 +11,9 @@ from fastapi import Depends, HTTPException, Request
 
 from drone.deadline import Expired, expires, label
 from server import deadlines
-from server.runtime import DroneStack, Runtime
+from server.runtime import Runtime
 from server.security import SAFETY_ACTIONS, TOKEN_COOKIE
+from server.vehicles.stack import DroneStack
 
 REST_HOLDER = "rest"  # the lease holder id of REST callers after a take-over
 

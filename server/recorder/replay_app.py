@@ -26,8 +26,8 @@ from server.api.deps import RoleDep
 from server.recorder.index import drones_of, iso
 from server.recorder.mcapfile import Recording
 from server.recorder.replay import Played, Player, Timeline
-from server.runtime import DroneStack
 from server.settings import Settings
+from server.vehicles.stack import DroneStack
 
 IMAGE = "sensor_msgs/CompressedImage"
 NAVDATA = "ardrone_autonomy/Navdata"

@@ -58,6 +58,7 @@ from drone.control.clock import Clock
 from drone.control.pid import Setpoint
 from drone.limits import limits_of
 from drone.vehicle import VehicleSnapshot
+from server.tasks.build import build_task
 from server.tasks.errors import CommandError, IllegalTransition
 from server.tasks.states import TaskEvent, TaskState, transition
 from server.tasks.types import (
@@ -69,7 +70,6 @@ from server.tasks.types import (
     Outcome,
     PlanState,
     Task,
-    build_task,
 )
 
 log = logging.getLogger(__name__)

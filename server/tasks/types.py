@@ -771,39 +771,3 @@ class DescribeTask(Task):
         except Exception as exc:  # the captioner failing must not kill the task manager
             return Outcome(False, f"describing failed: {exc}")
         return Outcome(True, text)
-
-
-TASK_TYPES: dict[str, type[Task]] = {
-    "takeoff": TakeoffTask,
-    "land": LandTask,
-    "emergency": EmergencyTask,
-    "hover": HoverTask,
-    "move": MoveTask,
-    "turn": TurnTask,
-    "goto": GotoMarkerTask,
-    "patrol": PatrolTask,
-    "return_home": ReturnHomeTask,
-    "search": SearchTask,
-    "waypoints": WaypointsTask,
-    "describe": DescribeTask,
-}
-"""Command ``action`` → task class. ``cancel`` and ``query`` are handled by the manager itself."""
-
-
-def build_task(command: Any) -> Task:
-    """The task for one DESIGN §4 command dict.
-
-    Raises:
-        CommandError: not a dict, no/unknown ``action``, or a malformed slot.
-    """
-    if not isinstance(command, Mapping):
-        raise CommandError(f"a command must be an object, got {type(command).__name__}")
-    action = command.get("action")
-    cls = TASK_TYPES.get(action) if isinstance(action, str) else None
-    if cls is None:
-        raise CommandError(f"unknown action {action!r}")
-    if action in ("goto", "turn") and "object" in command and "marker" not in command:
-        from server.tasks.objects import FaceObjectTask, GotoObjectTask  # imports this module
-
-        cls = GotoObjectTask if action == "goto" else FaceObjectTask
-    return cls(command)

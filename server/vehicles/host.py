@@ -237,8 +237,8 @@ class VehicleHost:
         from server.graph import Graph
         from server.language.nlu import default_nlu
         from server.mavlink_stack import is_mavlink
-        from server.runtime import build_drone_stack
         from server.store import AuditLog
+        from server.vehicles.stack import build_drone_stack
 
         s, o = self.settings, self.options
         self.graph = Graph()
@@ -560,7 +560,7 @@ class VehicleHost:
             await asyncio.sleep(WATCH_PERIOD_S)
 
     def telemetry(self) -> dict[str, Any]:
-        from server.runtime import to_json_ready
+        from server.vehicles.stack import to_json_ready
 
         out = self.stack.telemetry()
         out["central_loss"] = {"losses": self.watch.losses, "actions": self.loss_actions[-10:]}

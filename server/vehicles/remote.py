@@ -1,10 +1,10 @@
 """A drone whose stack runs in a vehicle process, as the web process sees it.
 
 :class:`RemoteDroneStack` answers everything the REST routes ask of a
-:class:`~server.runtime.DroneStack` (telemetry, direct actions, the latest JPEG, ground truth,
-faults) from what the vehicle publishes over the link (``/NAME/vehicle/telemetry``, the camera
-topic) and through its control service; :class:`RemoteDialog` answers ``POST /command`` through
-the vehicle's own dialog manager. Stops (land, emergency) are sent and answered at once
+:class:`~server.vehicles.stack.DroneStack` (telemetry, direct actions, the latest JPEG, ground
+truth, faults) from what the vehicle publishes over the link (``/NAME/vehicle/telemetry``, the
+camera topic) and through its control service; :class:`RemoteDialog` answers ``POST /command``
+through the vehicle's own dialog manager. Stops (land, emergency) are sent and answered at once
 ("emergency sent"), as in-process; other direct actions get the vehicle's own verdict (it checks
 them against its drone's state now, not against telemetry 0.1 s old).
 
@@ -35,9 +35,9 @@ from server.dialog.manager import DialogResult
 from server.direct_actions import DirectOutcome
 from server.graph import Graph, GraphError, NotFound, ServiceError
 from server.msgs import header
-from server.runtime import DroneStack
 from server.vehicles import names
 from server.vehicles.errors import RemoteCallError, VehicleUnavailable
+from server.vehicles.stack import DroneStack
 from server.vehicles.stops import StopVerdict
 
 if TYPE_CHECKING:

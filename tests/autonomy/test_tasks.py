@@ -10,9 +10,9 @@ import math
 import pytest
 
 from drone.sim.world import World, load_world
+from server.tasks.build import build_task
 from server.tasks.errors import CommandError, IllegalTransition
 from server.tasks.states import TRANSITIONS, TaskEvent, TaskState, transition
-from server.tasks.types import build_task
 from tests.autonomy.flight import Flight
 
 

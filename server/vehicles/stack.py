@@ -1,0 +1,176 @@
+"""One drone's flight stack, as the server sees it, and the one place that builds it.
+
+:class:`DroneStack` is what the REST routes and the console ask of a drone (telemetry, direct
+actions, the latest JPEG, ground truth); :func:`build_drone_stack` builds one alike for a drone
+in the web process and in a vehicle process (server.vehicles.host);
+:class:`~server.vehicles.remote.RemoteDroneStack` answers the same for a drone in its own
+process.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field, fields, is_dataclass
+from typing import Any
+
+from drone.ardrone.driver import ARDroneDriver, DriverConfig
+from drone.camera import CameraModel
+from drone.sim.server import SimServer, sim_endpoint
+from drone.sim.world import World
+from drone.vehicle import Vehicle
+from server.captioner.grounding import SeenMarker, seen_markers
+from server.graph import Graph
+from server.mavlink_stack import is_mavlink, start_mavlink
+from server.mavros_node import MavrosNode
+from server.settings import Settings
+from server.tasks.manager import TaskManager
+from server.vehicle_node import VehicleNode
+from server.vehicles.stops import StopLedger
+
+
+@dataclass
+class DroneStack:
+    """One drone as the server sees it."""
+
+    name: str
+    prefix: str  # "" for a single drone, "/uav2" in a fleet
+    vehicle: Vehicle
+    driver: ARDroneDriver
+    sim: SimServer | None = None
+    tasks: TaskManager | None = None
+    node: VehicleNode | None = None
+    # stop ids run and superseded: each stop runs once, whichever road brings it first
+    stops: StopLedger = field(default_factory=StopLedger)
+
+    def link_ok(self) -> bool:
+        return bool(self.vehicle.snapshot().link_ok)
+
+    def telemetry(self) -> dict[str, Any]:
+        """JSON-ready telemetry of ``GET /api/v1/drones/{id}``."""
+        out: dict[str, Any] = to_json_ready(self.vehicle.snapshot())
+        out["name"] = self.name
+        out["simulated"] = self.sim is not None
+        if self.tasks is not None:
+            out["task"] = to_json_ready(self.tasks.status)
+        return out
+
+    def direct(self, action: str) -> str:
+        """Direct control from a button or REST; land and emergency bypass every queue."""
+        if action in ("land", "emergency") and self.tasks is not None:
+            self.tasks.preempt(action)
+            return f"{action} sent"
+        if action in ("hover",) and self.tasks is not None:
+            self.tasks.cancel("hover requested")
+        getattr(self.vehicle, action)()
+        return f"{action} sent"
+
+    def seen_markers(self) -> list[SeenMarker]:
+        """The markers the detector sees now (grounding a caption's "marker N on the left")."""
+        return seen_markers(self.vehicle.snapshot())
+
+    def latest_jpeg(self) -> tuple[int, bytes | None]:
+        """(frame counter, JPEG with the tracking overlay): the one the vehicle node encodes
+        for ``/ardrone/image_raw/compressed``, so MJPEG viewers cost no second encode."""
+        return self.node.latest_jpeg if self.node is not None else (-1, None)
+
+    def truth(self) -> dict[str, Any]:
+        assert self.sim is not None
+        out: dict[str, Any] = to_json_ready(self.sim.truth)
+        out["name"] = self.name
+        return out
+
+    def inject_fault(self, body: Any) -> None:
+        assert self.sim is not None
+        params: dict[str, float] = {}
+        if body.duration_s is not None:
+            params["duration_s"] = body.duration_s
+        if body.battery_pct is not None:
+            params["battery_pct"] = body.battery_pct
+        if body.wind_mps is not None:
+            params["wind_x"], params["wind_y"] = body.wind_mps
+        self.sim.inject_fault(body.kind, **params)
+
+
+async def build_drone_stack(
+    name: str,
+    prefix: str,
+    index: int,
+    kind: str,
+    world: World,
+    settings: Settings,
+    graph: Graph,
+    audit: Any,
+    *,
+    own_process: bool = False,
+) -> DroneStack:
+    """One drone's flight stack, built alike in the web process (inline) and in a vehicle
+    process: its simulator for ``sim`` / ``sim-mavlink`` (started) or its link, the driver and
+    vehicle (started), the task manager and its graph node (not yet started). ``kind`` is the
+    drone's ``--drone`` entry; ``audit`` (an AuditLog) gets the node's jog and topic rows;
+    ``own_process``: built by a vehicle process (the AR.Drone's control thread then holds the
+    GIL while it spins and asks for ``control_rt_priority``).
+
+    Raises:
+        SettingsError: ``kind`` looks like a MAVLink connection string but is not one.
+    """
+    s = settings
+    node_class: type[VehicleNode]
+    if is_mavlink(kind):
+        parts = await start_mavlink(name, kind, index, world, s)
+        vehicle: Any = parts.vehicle
+        driver: Any = parts.driver
+        sim: Any = parts.sim
+        node_class, idle_search = MavrosNode, False  # the autopilot flies; no camera to search
+    else:
+        sim = None
+        if kind == "sim":
+            addr, ports = sim_endpoint(index, s.sim_base_addr)
+            sim = SimServer(addr, world, ports=ports, speed=s.sim_speed, seed=s.seed + index)
+            await sim.start()
+            driver = ARDroneDriver(
+                addr,
+                at_port=ports.at,
+                navdata_port=ports.navdata,
+                video_port=ports.video,
+                config=DriverConfig(link_timeout_s=s.link_timeout_s),
+            )
+        else:
+            driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+        await driver.start()
+        vehicle = Vehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
+        await vehicle.start(
+            driver,
+            own_process=own_process,
+            realtime_priority=s.control_rt_priority if own_process else 0,
+        )
+        node_class, idle_search = VehicleNode, True
+    tasks = TaskManager(
+        vehicle, world, vehicle.clock, search_after_s=s.search_after_s, idle_search=idle_search
+    )
+    node = node_class(
+        graph,
+        vehicle,
+        tasks,
+        name,
+        prefix,
+        heartbeat_timeout_s=s.heartbeat_timeout_s,
+        audit=audit,
+        command_deadline_s=s.command_deadline_s,
+    )
+    return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
+
+
+def to_json_ready(value: Any) -> Any:
+    """Dataclasses, enums, tuples and floats as JSON values (enums by name, NaN/inf as null)."""
+    if is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_json_ready(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, dict):
+        return {str(k): to_json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [to_json_ready(v) for v in value]
+    if isinstance(value, enum.Enum):
+        return value.name
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    return value
