@@ -7,7 +7,11 @@ the server, sent by each role.
 |                                                       | nothing inflated                       |
 | the same, pilot (no lease needed to send it)          | status naming the budget, refused at   |
 |                                                       | its header, nothing inflated           |
-| the same, no token                                    | refused at its frame header (1009)     |
+| the same, no token                                    | refused at its frame header (1009);    |
+|                                                       | a 4 KB one: "not authenticated"       |
+| a frame over 64 KB from an observer                   | refused at its frame header (1009);    |
+|                                                       | plain transport: status with its id    |
+| a fragmented message over 64 KB from an observer      | status error, nothing decoded          |
 | a ``png`` within the budget, pilot                    | decoded off the loop, served           |
 | the attack from all three roles at once, under        | ``/api/v1/health`` answers while it    |
 | ``uav-console serve``                                 | runs                                   |
@@ -104,6 +108,40 @@ async def test_observer_png_is_refused_before_anything_is_decoded(
     assert srv.ctx.decoder.stats.submitted == 0
 
 
+async def test_observer_frames_over_64_kb_are_refused_unread(srv: RunningServer) -> None:
+    pad = "y" * 100_000
+    async with await RawClient.open(srv.url("observer")) as c:
+        # the transport refuses it at its frame header (the role's limit, ``ws_guard``)
+        await c.send({"op": "subscribe", "id": "huge", "topic": "/x", "pad": pad})
+        with pytest.raises(ConnectionClosed) as info:
+            await c.expect(lambda m: False, timeout=10)
+        assert info.value.rcvd is not None and info.value.rcvd.code == 1009
+        assert "message over 65536 bytes" in info.value.rcvd.reason
+    async with await RawClient.open(srv.url("observer")) as c:
+        # nor may it be reassembled from fragments
+        text = json.dumps({"op": "subscribe", "id": "frag", "topic": "/x", "pad": pad})
+        for num, start in enumerate(range(0, len(text), 30_000)):
+            part = text[start : start + 30_000]
+            await c.send({"op": "fragment", "id": "f", "data": part, "num": num, "total": 4})
+        s = await c.status("f")
+        assert "fragmented message exceeds the limit of 65536 bytes" in s["msg"]
+        await c.send({"op": "call_service", "id": "t", "service": "/rosapi/topics"})
+        assert (await c.expect_op("service_response", id="t"))["result"] is True
+    assert srv.ctx.decoder.stats.submitted == 0
+
+
+async def test_observer_frames_over_64_kb_under_a_plain_transport(tmp_path: Path) -> None:
+    # without the transport's limit (uvicorn's own protocol) the endpoint answers it
+    with running_server(tmp_path, host=for_worker(HOST), ws="websockets-sansio") as srv:
+        async with await RawClient.open(srv.url("observer")) as c:
+            await c.send({"op": "subscribe", "id": "huge", "topic": "/x", "pad": "y" * 100_000})
+            s = await c.status("huge")
+            assert "an observer may send frames of at most 65536 bytes" in s["msg"]
+            await c.send({"op": "call_service", "id": "t", "service": "/rosapi/topics"})
+            assert (await c.expect_op("service_response", id="t"))["result"] is True
+        assert srv.ctx.decoder.stats.submitted == 0
+
+
 async def test_pilot_png_over_the_budget_is_refused_at_its_header(
     srv: RunningServer, attack_png: bytes
 ) -> None:
@@ -127,7 +165,14 @@ async def test_no_token_png_is_refused_at_its_frame_header(
         with pytest.raises(ConnectionClosed) as info:
             await c.expect(lambda m: False, timeout=10)
         assert info.value.rcvd is not None and info.value.rcvd.code == 1009
+    # one that fits in the 4 KB a connection may send before auth (and unpacks to 2 MB)
+    small = png_op(one_pixel_wide_png(INNER, 2 << 20), "small")
+    assert len(small) < 4096
+    async with await RawClient.open(srv.url(None)) as c:
+        await c.send(small)
+        assert (await c.status("small"))["msg"].startswith("not authenticated: 'png' refused")
     assert srv.ctx.decoder.stats.png_inflated == 0
+    assert srv.ctx.decoder.stats.submitted == 0
 
 
 # -- the whole server under attack ----------------------------------------------------------
