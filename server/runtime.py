@@ -189,6 +189,7 @@ class Runtime:
             self.audit.recording = None
             await asyncio.to_thread(self.recorder.stop)
         self.rosout.detach()
+        self.bridge.close()
         self.audit.close()
         if isinstance(self._captioner, Captioner):
             self._captioner.close()

@@ -11,8 +11,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from server.graph import Graph
+from server.rosbridge.budget import DecodeBudget
+from server.rosbridge.decoder import Backend, InboundDecoder
+from server.rosbridge.protocol import OFFLOAD_BINARY_BYTES, OFFLOAD_TEXT_BYTES
 from server.rosbridge.values import to_json_text
-from server.security import Security
+from server.security import Role, Security
 from server.settings import Settings
 from server.ws_guard import PREAUTH_MAX_BYTES
 
@@ -65,8 +68,15 @@ class BridgeContext:
             auth deadline, one PNG frame froze the loop). Under ``serve`` the transport refuses
             a larger one at its frame header (``server.ws_guard``); the endpoint's own check
             covers servers without that.
-        offload_decode_bytes: frames at least this large are decoded in a worker thread, so
-            parsing them never holds the event loop the drones' safety shares.
+        offload_decode_bytes / offload_binary_bytes: text / binary frames (and reassembled
+            fragment texts) larger than this are decoded by the worker pool ``decoder``, as is
+            every png, so decoding them never holds the event loop the drones' safety shares.
+        decode_budget: what decoding one frame may cost (pixels, bytes, values, work).
+        decode_backend / decode_workers / decode_queue: the pool: ``process`` (measured: a
+            thread holds the GIL through ``json.loads``) or ``thread``, its size, and how
+            many frames it holds at once (more are refused with a status error).
+        observer_max_frame_bytes: the largest frame an observer may send (it subscribes and
+            calls read-only services: small frames); larger ones are refused unread.
         max_calls_in_flight: concurrent ``call_service`` per connection (an observer flooding
             ``/console/describe`` caused controller overruns); more get a failed response.
         byte_rate_per_s / byte_burst: a token bucket of received bytes per connection, besides
@@ -85,7 +95,13 @@ class BridgeContext:
     stall_close_s: float = 10.0
     auth_timeout_s: float = 5.0
     preauth_max_bytes: int = PREAUTH_MAX_BYTES
-    offload_decode_bytes: int = 64 * 1024
+    offload_decode_bytes: int = OFFLOAD_TEXT_BYTES
+    offload_binary_bytes: int = OFFLOAD_BINARY_BYTES
+    decode_budget: DecodeBudget = field(default_factory=DecodeBudget)
+    decode_backend: Backend = "process"
+    decode_workers: int = 2
+    decode_queue: int = 4
+    observer_max_frame_bytes: int = 64 * 1024
     max_calls_in_flight: int = 8
     byte_rate_per_s: float = 16 * 1024 * 1024
     byte_burst: float = 64 * 1024 * 1024
@@ -100,6 +116,32 @@ class BridgeContext:
     # intent/outcome rows for /ardrone/* commands (server.audit_trail.AuditTrail), if any
     audit: Any = None
     _conn_ids: itertools.count[int] = field(default_factory=lambda: itertools.count(1))
+    _decoder: InboundDecoder | None = field(default=None, repr=False)
+
+    @property
+    def decoder(self) -> InboundDecoder:
+        """The worker pool for expensive frames, made on first use from the fields above (its
+        workers start with the first frame it is given)."""
+        if self._decoder is None:
+            self._decoder = InboundDecoder(
+                self.decode_budget,
+                self.settings.max_frame_bytes,
+                workers=self.decode_workers,
+                max_pending=self.decode_queue,
+                backend=self.decode_backend,
+            )
+        return self._decoder
+
+    def frame_limit(self, role: Role) -> int | None:
+        """The transport's frame limit for a connection of ``role`` once authenticated: an
+        observer's, or None (the transport's own, 4 × ``max_frame_bytes`` so that the
+        endpoint can answer a frame over its limit with a status)."""
+        return self.observer_max_frame_bytes if role is Role.OBSERVER else None
+
+    def close(self) -> None:
+        """Stop what the connections share (the decoder's workers)."""
+        if self._decoder is not None:
+            self._decoder.close()
 
     def new_owner(self, peer: str) -> str:
         """A graph owner name for a new connection (shown by rosapi/nodes)."""

@@ -16,7 +16,10 @@ import math
 import struct
 import zlib
 
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+from server.rosbridge.budget import PNG_SIGNATURE, DecodeBudget, png_text
+from server.rosbridge.errors import BudgetExceeded
+
+__all__ = ["PNG_SIGNATURE", "fragments", "png_decode", "png_encode", "png_frame"]
 
 
 def fragments(text: str, fragment_size: int, frag_id: str) -> list[str]:
@@ -53,63 +56,18 @@ def _chunk(kind: bytes, body: bytes) -> bytes:
     return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
 
 
-# A PNG of ours has one IDAT chunk; libpng-made ones a few per megabyte. More than this many
-# chunks is not an image anyone means to send (issue 14: ~900 000 one-byte IDAT chunks froze the
-# loop for 12 s when they were joined one by one).
-MAX_PNG_CHUNKS = 4096
-
-
 def png_decode(png: bytes, limit: int = 64 * 1024 * 1024) -> str:
-    """Inverse of :func:`png_encode`: the (newline-padded) text inside.
-
-    Linear in the input: IDAT bodies are fed to one incremental inflater as they are met (no
-    repeated joining), the number of chunks is capped at :data:`MAX_PNG_CHUNKS`, and inflation
-    stops as soon as the pixels exceed ``limit`` bytes (a zlib bomb costs at most ``limit``).
+    """Inverse of :func:`png_encode`: the (newline-padded) text inside, for a PNG whose pixel
+    rows unpack to at most ``limit`` bytes (linear: ``server.rosbridge.budget.png_text``).
 
     Raises:
-        ValueError: not a PNG of this shape, truncated, too many chunks, or its pixels exceed
-            ``limit`` bytes.
+        ValueError: not a PNG of this shape, truncated, too many chunks, or over ``limit``.
     """
-    if not png.startswith(PNG_SIGNATURE):
-        raise ValueError("not a PNG file")
-    view = memoryview(png)
-    pos, width, chunks = len(PNG_SIGNATURE), 0, 0
-    inflater = zlib.decompressobj()
-    out = bytearray()
-    while pos < len(png):
-        if pos + 12 > len(png):
-            raise ValueError("truncated PNG chunk header")
-        (length,) = struct.unpack_from(">I", png, pos)
-        kind = bytes(view[pos + 4 : pos + 8])
-        end = pos + 8 + length
-        if end + 4 > len(png):
-            raise ValueError(f"truncated PNG chunk {kind!r}")
-        chunks += 1
-        if chunks > MAX_PNG_CHUNKS:
-            raise ValueError(f"PNG has more than {MAX_PNG_CHUNKS} chunks")
-        if kind == b"IHDR":
-            if length < 4:
-                raise ValueError("PNG IHDR chunk is too short")
-            width = struct.unpack_from(">I", png, pos + 8)[0]
-        elif kind == b"IDAT":
-            try:
-                out += inflater.decompress(view[pos + 8 : end], limit + 1 - len(out))
-            except zlib.error as exc:
-                raise ValueError(f"PNG pixels are not valid zlib data: {exc}") from exc
-            if len(out) > limit:
-                raise ValueError(f"PNG pixels exceed {limit} bytes")
-        elif kind == b"IEND":
-            break
-        pos = end + 4
-    if width <= 0:
-        raise ValueError("PNG without an IHDR chunk")
-    stride = width * 3 + 1
-    raw = bytes(out)
-    rows = [raw[i + 1 : i + stride] for i in range(0, len(raw), stride)]
+    budget = DecodeBudget(max_png_pixels=limit, max_png_bytes=limit, max_work_s=math.inf)
     try:
-        return b"".join(rows).decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"PNG pixels are not UTF-8 text: {exc}") from exc
+        return png_text(png, budget)
+    except BudgetExceeded as err:
+        raise ValueError(err.msg) from err
 
 
 def png_frame(text: str) -> str:

@@ -1,11 +1,13 @@
 """The rosbridge v2 WebSocket endpoint: a thin asyncio driver around protocol + session.
 
 Per connection: Origin and token checks before accepting (refused: HTTP 403), then a reader
-that feeds frames to :class:`BridgeProtocol` and ops to :class:`BridgeSession`, and a writer
-that drains a bounded :class:`OutQueue` (oldest dropped) so a client that never reads stalls
-nobody; a writer stuck for ``stall_close_s`` closes the connection (1008). Limits answered with
-a status error first, then a close code if abused: frames over ``max_frame_bytes`` (1009 on the
-second), more frames than the token bucket allows (1008 after ``rate_burst`` refused frames
+that feeds frames to :class:`BridgeProtocol` (what could be expensive to decode goes to the
+context's worker pool, ``server.rosbridge.decoder``) and ops to :class:`BridgeSession`, and a
+writer that drains a bounded :class:`OutQueue` (oldest dropped) so a client that never reads
+stalls nobody; a writer stuck for ``stall_close_s`` closes the connection (1008). Limits
+answered with a status error first, then a close code if abused: frames over
+``max_frame_bytes`` (1009 on the second; for an observer over ``observer_max_frame_bytes``),
+more frames than the token bucket allows (1008 after ``rate_burst`` refused frames
 with no pause of a second between them). On close everything the connection put on the graph
 is removed.
 """
@@ -21,10 +23,12 @@ from typing import Any
 from fastapi import APIRouter, WebSocket
 from starlette.websockets import WebSocketDisconnect, WebSocketState
 
+from server.rosbridge.budget import peek_id
 from server.rosbridge.context import BridgeContext
-from server.rosbridge.errors import BridgeError, FrameError
+from server.rosbridge.errors import FrameTooLarge
+from server.rosbridge.inbound import DecodeRequest
 from server.rosbridge.limits import OutQueue, TokenBucket
-from server.rosbridge.protocol import PROTOCOL_VERSION, BridgeProtocol, decode_payload
+from server.rosbridge.protocol import PROTOCOL_VERSION, BridgeProtocol
 from server.rosbridge.rosapi import register_rosapi
 from server.rosbridge.session import BridgeSession
 from server.security import LEASE_SERVICE, Role, token_from
@@ -58,8 +62,12 @@ class _Connection:
         self.ctx = ctx
         s = ctx.settings
         self.loop = asyncio.get_running_loop()
-        self.protocol = BridgeProtocol(max_frame_bytes=s.max_frame_bytes)
-        self.protocol.authenticated = role is not None
+        self.protocol = BridgeProtocol(
+            max_frame_bytes=s.max_frame_bytes,
+            budget=ctx.decode_budget,
+            offload_text_bytes=ctx.offload_decode_bytes,
+            offload_binary_bytes=ctx.offload_binary_bytes,
+        )
         client = ws.client
         peer = f"{client.host}:{client.port}" if client else "?"
         self.out = OutQueue(ctx.out_queue_frames, ctx.out_queue_bytes)
@@ -132,8 +140,8 @@ class _Connection:
         capped = self.session.role is None
         while self.close_code is None:
             if capped and self.session.role is not None:
-                # authenticated by ``auth``: the transport's full frame limit from now on
-                lift_frame_cap(self.ws.scope)
+                # authenticated by ``auth``: the role's frame limit from now on
+                lift_frame_cap(self.ws.scope, ctx.frame_limit(self.session.role))
                 capped = False
             message = await self.ws.receive()
             if message["type"] == "websocket.disconnect":
@@ -181,17 +189,32 @@ class _Connection:
                     self._close(CLOSE_POLICY, "rate limit abused")
                 continue
             payload: str | bytes = text if text is not None else (data or b"")
-            if size >= ctx.offload_decode_bytes:
-                # Parse big frames in a worker thread: json/cbor/zlib release the loop (and,
-                # between bytecodes, the GIL) so the drones' I/O and timers keep their pace.
-                decoded = await asyncio.to_thread(
-                    _decode_or_error, payload, ctx.settings.max_frame_bytes, self.protocol
+            if self.session.role is Role.OBSERVER and size > ctx.observer_max_frame_bytes:
+                # An observer only watches: subscribe, call a read-only service, all small.
+                self.oversized += 1
+                self.protocol.reject(
+                    FrameTooLarge(
+                        f"frame of {size} bytes refused unread: an observer may send frames of "
+                        f"at most {ctx.observer_max_frame_bytes} bytes",
+                        id=peek_id(payload),
+                    )
                 )
-                ops = self.protocol.receive_decoded(decoded, ctx.clock())
-            else:
-                ops = self.protocol.receive_frame(payload, now)
-            for op in ops:
-                self.session.handle(op, now)
+                self._pump()
+                if self.oversized >= 2:
+                    self._close(CLOSE_TOO_BIG, "frames over the observer's size limit")
+                continue
+            # Small frames are decoded here; anything expensive (large frames, fragment
+            # messages, every png) comes back as a DecodeRequest for the worker pool, so the
+            # loop the drones' safety shares never runs it.
+            items = self.protocol.feed(payload, now)
+            while items:
+                item = items.pop(0)
+                if isinstance(item, DecodeRequest):
+                    decoded = await ctx.decoder.decode(item)
+                    now = ctx.clock()
+                    items[0:0] = self.protocol.receive_decoded(decoded, now, item)
+                else:
+                    self.session.handle(item, now)
             self._pump()
 
     async def _writer(self) -> None:
@@ -229,16 +252,6 @@ class _Connection:
         return self._started + self.ctx.auth_timeout_s
 
 
-def _decode_or_error(payload: str | bytes, max_bytes: int, protocol: BridgeProtocol) -> Any:
-    """:func:`decode_payload`, with its error returned instead of raised (worker threads)."""
-    try:
-        return decode_payload(payload, max_bytes, expand_png=protocol.authenticated)
-    except BridgeError as err:
-        return err
-    except Exception as exc:  # defensive: a bug must cost one frame, not the connection
-        return FrameError(f"frame could not be handled: {type(exc).__name__}: {exc}")
-
-
 async def serve_rosbridge(websocket: WebSocket, ctx: BridgeContext) -> None:
     """Serve one rosbridge v2 connection until either side closes it."""
     loop = asyncio.get_running_loop()
@@ -274,7 +287,8 @@ async def serve_rosbridge(websocket: WebSocket, ctx: BridgeContext) -> None:
     for k in keys:
         ctx.connections[k] += 1
     if role is not None:
-        lift_frame_cap(websocket.scope)  # before the client can send its first frame
+        # before the client can send its first frame
+        lift_frame_cap(websocket.scope, ctx.frame_limit(role))
     try:
         await websocket.accept()
         conn = _Connection(websocket, ctx, role, who)

@@ -10,6 +10,8 @@ BridgeError                 base; ``.msg`` is what the client reads, ``.id`` the
 ├── RefusedError            security: the connection's role may not do this
 │   └── NotAuthenticated    no valid token yet
 └── LimitError              the per-connection rate limit was exceeded
+    ├── BudgetExceeded      decoding the frame would cost more than its budget (budget.py)
+    └── DecoderBusy         the decoding workers' queue is full; the frame was not decoded
 """
 
 from __future__ import annotations
@@ -58,4 +60,12 @@ class NotAuthenticated(RefusedError):
 
 
 class LimitError(BridgeError):
+    pass
+
+
+class BudgetExceeded(LimitError):
+    pass
+
+
+class DecoderBusy(LimitError):
     pass

@@ -9,12 +9,18 @@ frame). It owns no socket, clock or graph, so every rule here is testable withou
 Unlike rosbridge_suite (which logs and drops bad frames), every rejected frame produces a
 ``status`` message with level ``error``, the request's ``id`` and a ``msg`` saying what was wrong;
 ``receive_*`` never raise. Field names and defaults follow ROSBRIDGE_PROTOCOL.md §3.4.
+
+Decoding that can be expensive is never done by :meth:`~BridgeProtocol.feed`: a large frame, the
+text of a large reassembled ``fragment`` message and every ``png`` image come out as a
+:class:`~server.rosbridge.inbound.DecodeRequest` for the driver to run in a worker
+(``server.rosbridge.decoder``) and hand back to :meth:`~BridgeProtocol.receive_decoded`. A
+``png`` is judged first, at once: refused for a role that may not send one (observers), and
+refused when the budget its header announces is over ``server.rosbridge.budget.DecodeBudget``.
+:meth:`~BridgeProtocol.receive_frame` runs such requests inline (for tests and tools).
 """
 
 from __future__ import annotations
 
-import base64
-import binascii
 import itertools
 import json
 import math
@@ -26,15 +32,25 @@ import cbor2
 
 from drone.deadline import BadIssued, parse_issued
 from server.rosbridge import cborraw, ops
-from server.rosbridge.encode import fragments, png_decode, png_frame
+from server.rosbridge.budget import (
+    DecodeBudget,
+    PngError,
+    check_png_budget,
+    peek_id,
+    png_header_of_base64,
+)
+from server.rosbridge.encode import fragments, png_frame
 from server.rosbridge.errors import (
     BridgeError,
+    BudgetExceeded,
     FrameError,
     FrameTooLarge,
     NotAuthenticated,
     OpError,
+    RefusedError,
     UnknownOp,
 )
+from server.rosbridge.inbound import DecodeRequest, decode_frame, frame_id, parse_json, run_decode
 from server.rosbridge.values import normalise_type, to_cbor_value
 
 PROTOCOL_VERSION = (2, 0)
@@ -54,6 +70,13 @@ MAX_THROTTLE_RATE_MS = 3_600_000  # one hour
 MAX_SERVICE_TIMEOUT_S = 3600.0
 # Before ``auth`` a connection may send only these ops (and only small frames: the endpoint).
 PREAUTH_OPS = frozenset({"auth", "status", "set_level"})
+# Frames (and reassembled fragment texts) up to these sizes are decoded by ``feed`` itself: a
+# JSON text of 64 KiB holds at most ~32 000 values, a CBOR one of 16 KiB ~16 000 (one byte
+# each), and parsing either costs the loop about a millisecond (bench/attacks.py).
+OFFLOAD_TEXT_BYTES = 64 * 1024
+OFFLOAD_BINARY_BYTES = 16 * 1024
+
+Inbound = ops.Op | DecodeRequest
 
 
 @dataclass
@@ -64,18 +87,6 @@ class _FragmentBuffer:
     size: int = 0
 
 
-def _frame_id(obj: dict[str, Any]) -> str | None:
-    raw = obj.get("id")
-    if raw is None:
-        return None
-    if isinstance(raw, str):
-        return raw
-    try:
-        return json.dumps(raw)
-    except (TypeError, ValueError):  # CBOR bytes, simple values, tags (found by bench/fuzz.py)
-        return repr(raw)[:200]
-
-
 class BridgeProtocol:
     """Protocol state of one rosbridge connection (status level, fragment buffers, output)."""
 
@@ -84,9 +95,18 @@ class BridgeProtocol:
         *,
         max_frame_bytes: int = 16 * 1024 * 1024,
         fragment_timeout_s: float = DEFAULT_FRAGMENT_TIMEOUT_S,
+        budget: DecodeBudget | None = None,
+        offload_text_bytes: int = OFFLOAD_TEXT_BYTES,
+        offload_binary_bytes: int = OFFLOAD_BINARY_BYTES,
     ) -> None:
         self.max_frame_bytes = max_frame_bytes
         self.fragment_timeout_s = fragment_timeout_s
+        self.budget = budget if budget is not None else DecodeBudget()
+        self.offload_text_bytes = offload_text_bytes
+        self.offload_binary_bytes = offload_binary_bytes
+        # Set (by the session, from the role) to refuse every ``png`` with this message before
+        # its data is read; None: the connection may send png-compressed frames.
+        self.png_refusal: str | None = None
         self.level = "error"
         self._out: list[str | bytes] = []
         self._fragments: dict[str, _FragmentBuffer] = {}
@@ -107,9 +127,41 @@ class BridgeProtocol:
         return self.receive_frame(data, now)
 
     def receive_frame(self, payload: str | bytes, now: float) -> list[ops.Op]:
-        """Decode one frame (text: JSON, binary: CBOR) and apply it; never raises."""
+        """Decode one frame (text: JSON, binary: CBOR) and apply it, running any expensive
+        decoding inline (:func:`~server.rosbridge.inbound.run_decode`, with the budget); never
+        raises. The endpoint uses :meth:`feed` instead, to run that decoding in a worker."""
+        out: list[ops.Op] = []
+        todo = self.feed(payload, now)
+        while todo:
+            item = todo.pop(0)
+            if isinstance(item, DecodeRequest):
+                try:
+                    obj: Any = run_decode(item, self.budget, self.max_frame_bytes)
+                except BridgeError as err:
+                    obj = err
+                todo[0:0] = self.receive_decoded(obj, now, item)
+            else:
+                out.append(item)
+        return out
+
+    def feed(self, payload: str | bytes, now: float) -> list[Inbound]:
+        """One frame in: the ops it holds, or a :class:`DecodeRequest` where decoding it could
+        be expensive (large, or a ``png``). Cheap in every case; never raises."""
         try:
-            obj = decode_payload(payload, self.max_frame_bytes, expand_png=self.authenticated)
+            if len(payload) > self.max_frame_bytes:
+                raise FrameTooLarge(
+                    f"frame of {len(payload)} bytes exceeds the limit of "
+                    f"{self.max_frame_bytes} bytes"
+                )
+            if self.authenticated and len(payload) > (
+                self.offload_text_bytes if isinstance(payload, str) else self.offload_binary_bytes
+            ):
+                return [
+                    DecodeRequest(
+                        "frame", payload, peek_id(payload), allow_png=self.png_refusal is None
+                    )
+                ]
+            obj = decode_frame(payload, self.max_frame_bytes)
         except BridgeError as err:
             self.reject(err)
             return []
@@ -118,14 +170,19 @@ class BridgeProtocol:
             return []
         return self.receive_decoded(obj, now)
 
-    def receive_decoded(self, obj: Any, now: float) -> list[ops.Op]:
-        """Apply a frame already decoded by :func:`decode_payload` (maybe in a worker thread,
-        so a large frame never holds the event loop); a :class:`BridgeError` in its place (the
-        decoding failed) is answered like any rejected frame. Never raises."""
+    def receive_decoded(
+        self, obj: Any, now: float, request: DecodeRequest | None = None
+    ) -> list[Inbound]:
+        """Apply what a :class:`DecodeRequest` (or :meth:`feed`) decoded: the frame's object,
+        or a :class:`BridgeError` in its place (decoding refused it), answered like any
+        rejected frame (with the request's id where the error has none). Never raises."""
+        depth = 0 if request is None or request.kind == "frame" else request.depth + 1
         try:
             if isinstance(obj, BridgeError):
+                if obj.id is None and request is not None:
+                    obj.id = request.id
                 raise obj
-            return self._receive_obj(obj, now, depth=0)
+            return self._receive_obj(obj, now, depth=depth)
         except BridgeError as err:
             self.reject(err)
             return []
@@ -133,11 +190,11 @@ class BridgeProtocol:
             self.reject(FrameError(f"frame could not be handled: {type(exc).__name__}: {exc}"))
             return []
 
-    def _receive_obj(self, obj: Any, now: float, depth: int) -> list[ops.Op]:
+    def _receive_obj(self, obj: Any, now: float, depth: int) -> list[Inbound]:
         if not isinstance(obj, dict):
             raise FrameError(f"a frame must be a JSON object, not {type(obj).__name__}")
         op = obj.get("op")
-        fid = _frame_id(obj)
+        fid = frame_id(obj)
         if op is None:
             raise FrameError("frame has no 'op' field", id=fid)
         if not isinstance(op, str):
@@ -154,14 +211,9 @@ class BridgeProtocol:
             text = self._defragment(obj, fid, now)
             if text is None:
                 return []
-            return self._nested(text, now, depth)
+            return self._nested(text, now, depth, fid)
         if op == "png":
-            data = _field(obj, op, fid, "data", str, required=True)
-            try:
-                text = png_decode(base64.b64decode(data, validate=True), self.max_frame_bytes)
-            except (ValueError, binascii.Error) as exc:
-                raise OpError(f"png: cannot decode data: {exc}", id=fid, op=op) from exc
-            return self._nested(text.rstrip("\n"), now, depth)
+            return [self._png_request(obj, fid, depth)]
         parser = _PARSERS.get(op)
         if parser is None:
             raise UnknownOp(f"unknown op {op!r}", id=fid, op=op)
@@ -172,14 +224,30 @@ class BridgeProtocol:
         self._fragments.clear()
         self._out.clear()
 
-    def _nested(self, text: str, now: float, depth: int) -> list[ops.Op]:
+    def _nested(self, text: str, now: float, depth: int, fid: str | None) -> list[Inbound]:
         if depth > 2:
-            raise FrameError("fragments/png nested too deeply")
-        try:
-            inner = json.loads(text)
-        except (ValueError, RecursionError) as exc:
-            raise FrameError(f"reassembled frame is not valid JSON: {exc}") from exc
+            raise FrameError("fragments/png nested too deeply", id=fid)
+        if len(text) > self.offload_text_bytes:
+            return [DecodeRequest("text", text, fid, depth)]
+        inner = parse_json(text, "reassembled frame is not valid JSON", None)
         return self._receive_obj(inner, now, depth + 1)
+
+    def _png_request(self, obj: dict[str, Any], fid: str | None, depth: int) -> DecodeRequest:
+        """A ``png`` op judged at once (role, then the budget its header announces, from the
+        first 44 characters of its data) and, if it passes, handed to a worker to inflate."""
+        if self.png_refusal is not None:
+            raise RefusedError(self.png_refusal, id=fid, op="png")
+        if depth > 2:
+            raise FrameError("fragments/png nested too deeply", id=fid)
+        data = _field(obj, "png", fid, "data", str, required=True)
+        try:
+            check_png_budget(png_header_of_base64(data), self.budget)
+        except PngError as exc:
+            raise OpError(f"png: cannot decode data: {exc}", id=fid, op="png") from exc
+        except BudgetExceeded as err:
+            err.id, err.op = fid, "png"
+            raise
+        return DecodeRequest("png", data, fid, depth)
 
     def _defragment(self, obj: dict[str, Any], fid: str | None, now: float) -> str | None:
         """Collect a fragment (§3.3.1); return the whole text once every piece arrived."""
@@ -314,47 +382,6 @@ class BridgeProtocol:
     def frames_to_send(self) -> list[str | bytes]:
         out, self._out = self._out, []
         return out
-
-
-# -- decoding (pure; safe to run in a worker thread) --------------------------------------
-def decode_payload(payload: str | bytes, max_frame_bytes: int, *, expand_png: bool = True) -> Any:
-    """The object one frame holds: JSON for text, CBOR for binary; a top-level ``png`` op is
-    inflated and parsed too (when ``expand_png``), so all the heavy work of a frame happens
-    here. Pure and thread-safe: the endpoint runs it off the event loop for large frames.
-
-    Raises:
-        FrameTooLarge: over ``max_frame_bytes``.
-        FrameError: not JSON / CBOR.
-        OpError: a ``png`` whose data cannot be decoded.
-    """
-    if len(payload) > max_frame_bytes:
-        raise FrameTooLarge(
-            f"frame of {len(payload)} bytes exceeds the limit of {max_frame_bytes} bytes"
-        )
-    if isinstance(payload, str):
-        try:
-            obj = json.loads(payload)
-        except (ValueError, RecursionError) as exc:
-            raise FrameError(f"invalid JSON: {exc}") from exc
-    else:
-        try:
-            obj = cbor2.loads(payload)
-        except Exception as exc:
-            raise FrameError(f"binary frames must hold one CBOR object: {exc}") from exc
-    if expand_png and isinstance(obj, dict) and obj.get("op") == "png":
-        fid = _frame_id(obj)
-        data = _field(obj, "png", fid, "data", str, required=True)
-        try:
-            text = png_decode(base64.b64decode(data, validate=True), max_frame_bytes)
-        except (ValueError, binascii.Error) as exc:
-            raise OpError(f"png: cannot decode data: {exc}", id=fid, op="png") from exc
-        try:
-            obj = json.loads(text.rstrip("\n"))
-        except (ValueError, RecursionError) as exc:
-            raise FrameError(f"reassembled frame is not valid JSON: {exc}", id=fid) from exc
-        if isinstance(obj, dict) and obj.get("op") in ("png", "fragment"):
-            raise FrameError("png frames may not hold another png or fragment", id=fid)
-    return obj
 
 
 # -- field parsing ------------------------------------------------------------------------

@@ -90,7 +90,8 @@ class BridgeSession:
         self.security = ctx.security
         self.protocol = protocol
         self.owner = owner
-        self.role = role
+        self.role: Role | None = None
+        self._set_role(role)
         self.who = who  # beyond the role, who authenticated (a vehicle's name), if known
         self._notify = notify
         self._schedule = schedule
@@ -135,10 +136,28 @@ class BridgeSession:
         if role is None:
             self.close_request = (1008, "invalid token")
             raise RefusedError("auth: invalid token", id=op.id)
-        self.role = role
+        self._set_role(role)
         self.who = self.security.identify(op.token)
-        self.protocol.authenticated = True
         self.protocol.send_status("info", f"authenticated as {role.value}", id=op.id)
+
+    def _set_role(self, role: Role | None) -> None:
+        """The connection's role, and what its protocol may decode for it: nothing past
+        ``auth`` without one, and png-compressed frames only from a pilot (an observer only
+        watches; a png is the one frame whose decoding can cost far more than its size)."""
+        self.role = role
+        self.protocol.authenticated = role is not None
+        # an observer's messages are small, reassembled from fragments or not
+        self.protocol.max_frame_bytes = (
+            self.ctx.observer_max_frame_bytes
+            if role is Role.OBSERVER
+            else self.ctx.settings.max_frame_bytes
+        )
+        self.protocol.png_refusal = (
+            None
+            if role is Role.PILOT
+            else f"{role.value if role else 'an unauthenticated client'} may not send "
+            "png-compressed frames; refused before decoding"
+        )
 
     def _set_level(self, op: ops.SetLevel, now: float) -> None:
         self.protocol.set_level(op.level)

@@ -106,3 +106,4 @@ def running_server(
     finally:
         server.should_exit = True
         thread.join(10)
+        ctx.close()

@@ -82,8 +82,18 @@ async def test_failed_service_call_has_values_and_id(srv: RunningServer) -> None
 
 
 async def test_oversized_frame_then_close_1009(srv: RunningServer) -> None:
-    async with await RawClient.open(srv.url()) as c, await RawClient.open(srv.url()) as other:
-        big = json.dumps({"op": "publish", "topic": "/big", "msg": {"data": "x" * (20 << 20)}})
+    big = json.dumps({"op": "publish", "topic": "/big", "msg": {"data": "x" * (20 << 20)}})
+    # compressed (permessage-deflate), the transport stops inflating it at the frame limit
+    async with await RawClient.open(srv.url(), compression="deflate") as c:
+        await c.send(big)
+        with pytest.raises(ConnectionClosed) as info:
+            await c.expect(lambda m: False, timeout=20)
+        assert info.value.rcvd is not None and info.value.rcvd.code == 1009
+        assert "send it uncompressed" in info.value.rcvd.reason
+    async with (
+        await RawClient.open(srv.url(), compression=None) as c,
+        await RawClient.open(srv.url()) as other,
+    ):
         await c.send(big)
         s = await c.status(timeout=20)
         assert "exceeds the limit of 16777216 bytes" in s["msg"]
