@@ -232,6 +232,7 @@ class Runtime:
                 queue=s.asr_queue,
                 window_s=s.asr_window_s,
                 beams=s.asr_beams,
+                threshold=s.confidence_threshold,
             ),
             self.nlu,
         )

@@ -51,6 +51,10 @@ CONSTRAINED_CONFIDENCE_SCALE = 0.83
 # 108-clip subset, 15 s window: greedy 61 / 50 / 36 % exact (clean / 20 / 10 dB) at 179 ms p50,
 # 4 beams 67 / 58 / 47 % at 217 ms, 8 beams the same at 251 ms.
 BEAMS = 4
+# A doubtful reading (server.speech.snap: a direction the snap supplied) is capped just under
+# the dialog's threshold, so it is read back ("Did you say …?") and never flown as heard.
+DOUBT_MARGIN = 0.01
+THRESHOLD = 0.5  # Settings.confidence_threshold's default
 MAX_NEW_TOKENS = 64  # a spoken command is far shorter; a hallucination loop stops there
 VAD_PAD_S = 0.3  # speech kept either side of what the VAD marks (its own default is 0.4 s)
 _SENTENCE_END = re.compile(r"(?<=[.?!])\s+")
@@ -118,10 +122,13 @@ class Recognizer:
         reuse: bool = True,
         window_s: float | None = MIN_S,
         beams: int = BEAMS,
+        threshold: float = THRESHOLD,
     ) -> None:
         """``window_s``: the shortest encoder window (:mod:`server.speech.window`); None gives
         Whisper's own 30 s windows and greedy decoding (the earlier way, bench/speech.py's
-        reference row). ``beams``: beam width and transcripts tried against the grammars."""
+        reference row). ``beams``: beam width and transcripts tried against the grammars.
+        ``threshold``: the dialog's confidence threshold (Settings.confidence_threshold); a
+        doubtful reading is kept under it (:data:`DOUBT_MARGIN`)."""
         from faster_whisper.tokenizer import Tokenizer
         from faster_whisper.transcribe import get_suppressed_tokens
 
@@ -131,6 +138,7 @@ class Recognizer:
         self.snapper = Snapper(nlu, self.vocab)
         self.window_s = window_s
         self.beams = beams
+        self.cap = max(0.0, threshold - DOUBT_MARGIN)
         self._vad_lock = threading.Lock()  # Silero's ONNX session is shared; keep calls serial
         self._tokenizer = Tokenizer(
             model.hf_tokenizer, model.model.is_multilingual, task="transcribe", language="en"
@@ -260,7 +268,7 @@ class Recognizer:
         """Decode, snap and interpret speech already trimmed by the VAD."""
         hypotheses = self.hypotheses(samples, guided=guided)
         if guided:
-            return choose(hypotheses, self.snapper, state)
+            return choose(hypotheses, self.snapper, state, cap=self.cap)
         heard, asr = hypotheses[0]
         if not heard:
             return Recognition("", 0.0)
@@ -284,7 +292,10 @@ def unrepeated(text: str) -> str:
 
 
 def choose(
-    hypotheses: list[tuple[str, float]], snapper: Snapper, state: str | None = None
+    hypotheses: list[tuple[str, float]],
+    snapper: Snapper,
+    state: str | None = None,
+    cap: float = 1.0,
 ) -> Recognition:
     """The reading of the decoder's n best transcripts that the grammars support best.
 
@@ -297,6 +308,9 @@ def choose(
     the first transcript only 46.6 %, the most confident of 4 50.9 %, the most confident
     understood whole 51.2 %, wrong commands executed 1.2 % each (the same rules on 324 other
     clips: 46.3 / 49.7 / 50.0 %, wrong 3.4 / 3.7 / 3.1 %).
+
+    A doubtful snap (a direction the snap supplied, :class:`server.speech.snap.Snapped`) keeps
+    at most ``cap``: the recogniser passes just under the dialog's threshold.
     """
     best: Recognition | None = None
     best_whole: Recognition | None = None
@@ -315,6 +329,8 @@ def choose(
         else:
             snapped = snapper.snap(heard, state)
             confidence = asr * CONSTRAINED_CONFIDENCE_SCALE * snapped.factor
+            if snapped.doubtful:
+                confidence = min(confidence, cap)
             rec = Recognition(
                 snapped.text.strip(" ,"), confidence, snapped.commands, heard, asr, snapped.distance
             )

@@ -14,7 +14,7 @@ from server.speech import window
 from server.speech.audio import Samples, read_wav
 from server.speech.errors import ModelError, SpeechError
 from server.speech.pool import DecoderPool
-from server.speech.recognizer import BEAMS, Recognition, Recognizer
+from server.speech.recognizer import BEAMS, THRESHOLD, Recognition, Recognizer
 
 log = logging.getLogger("uav_console.speech")
 
@@ -31,6 +31,7 @@ class SpeechConfig:
     max_streams: int = 8  # browser streams open at once
     window_s: float = 0.0  # shortest encoder window; 0: the recogniser's (server.speech.window)
     beams: int = 0  # 0: the recogniser's (server.speech.recognizer.BEAMS)
+    threshold: float = THRESHOLD  # the dialog's confidence threshold: doubtful readings under it
 
 
 class SpeechService:
@@ -63,6 +64,7 @@ class SpeechService:
             self.nlu,
             window_s=self.config.window_s or window.MIN_S,
             beams=self.config.beams or BEAMS,
+            threshold=self.config.threshold,
         )
         return self.recognizer
 

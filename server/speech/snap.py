@@ -15,6 +15,17 @@ first, until the NLU understands the whole sentence:
 The total cost is the snap distance; the recogniser's confidence is multiplied by
 ``exp(-distance)``, so a transcript that had to be bent far enough falls under the dialog
 manager's threshold and the operator is asked to repeat (Settings.confidence_threshold).
+
+A snap is a guess, so three things are never guessed:
+
+* an emergency (motors cut): a sentence with more emergencies than the transcript as heard is
+  no candidate ("Y'all left by 30 degrees" is not "kill left by 30 degrees");
+* the opposite direction: an edit that turns a heard direction word into its opposite
+  ("ascend" into "descend"), or bends away a heard direction word in a sentence that then flies
+  the opposite way ("climb down" into "climb 10"), makes no candidate;
+* any other direction: a sentence whose direction came from an edit ("sealing" into "ceiling",
+  "light" into "right") or lost a heard one is ``doubtful``: the recogniser caps its confidence
+  under the dialog's threshold, so it is read back ("Did you say …?"), never flown as heard.
 """
 
 from __future__ import annotations
@@ -36,6 +47,21 @@ from server.speech.vocabulary import Vocabulary
 from server.tasks.objects import KNOWN_KINDS
 
 Command = dict[str, Any]
+# The word sets of mappings.xml whose labels are directions (a move's, a turn's or a climb's).
+DIRECTION_SETS = (
+    "DIRECTION", "SIDE", "ROTATION", "UP_VERB", "DOWN_VERB", "FORWARD_VERB", "BACK_VERB",
+)  # fmt: skip
+_OPPOSITE = {
+    "up": "down",
+    "down": "up",
+    "left": "right",
+    "right": "left",
+    "forward": "backward",
+    "backward": "forward",
+}
+# Words of actions that move the drone one way without a direction slot.
+_ACTION_SENSES = {"land": "down", "landing": "down"}
+_ACTION_DIRECTION = {"land": "down", "takeoff": "up"}
 # Margin (in snap-cost units, one unit ~ one word replaced by an unrelated one) at which a
 # runner-up reading leaves a snap 1 - 1/e of its confidence: a runner-up 0.02 further (a
 # letter) leaves 0.33, 0.1 further 0.86, 0.2 further 0.98. Chosen on bench/speech.py's 72-clip
@@ -56,6 +82,9 @@ class Snapped:
     # How much further the nearest sentence meaning something else is (runner-up cost minus
     # ``distance``); inf when none was found within the budget, or when nothing was bent.
     margin: float = math.inf
+    # A direction of the commands came from an edit, or a heard direction word was bent away:
+    # a guess to read back, never to fly as heard (the recogniser caps the confidence).
+    doubtful: bool = False
 
     @property
     def factor(self) -> float:
@@ -95,6 +124,7 @@ class Snapper:
         self._words = sorted(w for w in vocab.words if len(w) > 1)
         self._keys = [_key(w) for w in self._words]
         self._near = functools.lru_cache(maxsize=4096)(self._nearest)
+        self._senses = _senses(nlu)
 
     def nearest(self, word: str) -> tuple[tuple[str, float], ...]:
         """Up to ``neighbours`` vocabulary words near ``word`` (nearest first), with cost."""
@@ -124,6 +154,7 @@ class Snapper:
         heard = Snapped(text, first.normalised, 0.0, (), first.commands, _complete(first))
         if heard.complete or not first.normalised:
             return heard
+        emergencies = _emergencies(first.commands)
         tokens = first.normalised.split()
         positions = _positions(tokens, first.unparsed + _unknown_objects(first))
         options: list[list[tuple[str, float]]] = []
@@ -153,9 +184,18 @@ class Snapper:
             interp = self.nlu.parse(sentence, state)
             if not _complete(interp):
                 continue
+            verdict = self._judge(edits, interp.commands, emergencies)
+            if verdict is None:  # an emergency or the opposite way: never a reading
+                continue
             if best is None:
                 best = Snapped(
-                    text, interp.normalised, cost, tuple(edits), interp.commands, complete=True
+                    text,
+                    interp.normalised,
+                    cost,
+                    tuple(edits),
+                    interp.commands,
+                    complete=True,
+                    doubtful=verdict,
                 )
                 budget = min(budget, 0)  # from here on, runner_up_attempts more parses at most
             elif _same(interp.commands, best.commands):
@@ -164,7 +204,56 @@ class Snapper:
                 return replace(best, margin=cost - best.distance)
         return best if best is not None else heard
 
-        return heard
+    def sense(self, word: str) -> frozenset[str]:
+        """The directions ``word`` means in the grammars (empty for most words)."""
+        return self._senses.get(word, frozenset())
+
+    def _judge(
+        self, edits: list[tuple[str, str]], commands: list[Command], emergencies: int
+    ) -> bool | None:
+        """None when the edits make a sentence a snap may never make (more emergencies than
+        heard, a direction turned into its opposite), else whether it is ``doubtful``."""
+        if _emergencies(commands) > emergencies:
+            return None
+        flown = {d for c in commands if (d := _direction(c)) is not None}
+        doubtful = False
+        for heard, used in edits:
+            was, now = self.sense(heard), self.sense(used)
+            if was == now:
+                continue
+            lost = {o for d in was if (o := _OPPOSITE.get(d)) is not None}
+            if lost & (now | flown):  # "ascend" -> "descend"; "climb down" -> "climb 10"
+                return None
+            doubtful = True  # a direction supplied ("sealing" -> "ceiling") or bent away
+        return doubtful
+
+
+def opposite(direction: str) -> str | None:
+    """The opposite of a direction label (up/down, left/right, forward/backward), else None."""
+    return _OPPOSITE.get(direction)
+
+
+def _senses(nlu: NLU) -> dict[str, frozenset[str]]:
+    """Each single word of the direction sets (and "land") -> the directions it means."""
+    out: dict[str, set[str]] = {w: {d} for w, d in _ACTION_SENSES.items()}
+    for name in DIRECTION_SETS:
+        ws = nlu.grammar.sets.get(name)
+        for word, label in ws.labels.items() if ws else ():
+            if " " not in word and label in _OPPOSITE:
+                out.setdefault(word, set()).add(label)
+    return {w: frozenset(d) for w, d in out.items()}
+
+
+def _direction(command: Command) -> str | None:
+    """Which way a command flies the drone, when it has one way."""
+    direction = command.get("direction")
+    if isinstance(direction, str):
+        return direction
+    return _ACTION_DIRECTION.get(str(command.get("action")))
+
+
+def _emergencies(commands: list[Command]) -> int:
+    return sum(1 for c in commands if c.get("action") == "emergency")
 
 
 def _key(word: str) -> str:

@@ -527,3 +527,27 @@ def test_hyphens_that_are_not_signs_still_work(
     text: str, expected: list[dict[str, object]]
 ) -> None:
     assert _NLU.interpret(text) == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        # Transcripts tiny.en wrote, word for word, for speech the grammars could not read.
+        (
+            "Hover for now and tell me your battery level.",
+            [{"action": "hover"}, {"action": "query", "item": "battery"}],
+        ),
+        ("Hover for now.", [{"action": "hover"}]),
+        ("Stay there for the moment.", [{"action": "hover"}]),
+        ("Hold on for a second.", [{"action": "hover"}]),
+        ("Hover for a bit.", [{"action": "hover"}]),
+        ("Y'all left by thirty degrees.", [{"action": "turn", "direction": "left", "angle": 30}]),
+        ("Yall right by 45 degrees.", [{"action": "turn", "direction": "right", "angle": 45}]),
+        ("You all left by 30 degrees.", [{"action": "turn", "direction": "left", "angle": 30}]),
+        ("Yaw left by 30 degrees.", [{"action": "turn", "direction": "left", "angle": 30}]),
+        ("Yaw right.", [{"action": "turn", "direction": "right"}]),
+    ],
+)
+def test_grammar_gaps_heard_in_speech(nlu: NLU, text: str, expected: list[dict]) -> None:
+    parsed = nlu.parse(text)
+    assert parsed.commands == expected and parsed.unparsed == (), parsed
