@@ -55,6 +55,11 @@ BEAMS = 4
 # the dialog's threshold, so it is read back ("Did you say …?") and never flown as heard.
 DOUBT_MARGIN = 0.01
 THRESHOLD = 0.5  # Settings.confidence_threshold's default
+# A transcript heard at least this surely (the decoder's own confidence) that the grammars
+# cannot read whole is a grammar gap, not a mishearing: hibari-tts's voice is heard at
+# 0.87-0.97 when Whisper gets every word ("Hover for now and tell me your battery level." 0.96),
+# espeak-ng's garbled readings mostly under 0.8 (bench/speech.py's clips).
+GAP_CONFIDENCE = 0.85
 MAX_NEW_TOKENS = 64  # a spoken command is far shorter; a hallucination loop stops there
 VAD_PAD_S = 0.3  # speech kept either side of what the VAD marks (its own default is 0.4 s)
 _SENTENCE_END = re.compile(r"(?<=[.?!])\s+")
@@ -75,6 +80,9 @@ class Recognition:
     decode_ms: float = 0.0
     speech: bool = True  # False: the VAD found no speech, nothing was decoded
     reused: bool = False  # the same speech was decoded (or was being decoded) already
+    # A grammar gap: the decoder's most confident transcript, heard plainly (at least
+    # GAP_CONFIDENCE) and not read whole by the grammars as heard; "" when none.
+    gap: str = ""
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -309,12 +317,16 @@ def choose(
     understood whole 51.2 %, wrong commands executed 1.2 % each (the same rules on 324 other
     clips: 46.3 / 49.7 / 50.0 %, wrong 3.4 / 3.7 / 3.1 %).
 
-    A doubtful snap (a direction the snap supplied, :class:`server.speech.snap.Snapped`) keeps
-    at most ``cap``: the recogniser passes just under the dialog's threshold.
+    A doubtful snap (a direction the snap supplied, :class:`server.speech.snap.Snapped`), and a
+    snap of a transcript heard plainly (a grammar gap: the words were heard right, so bending
+    them guesses at what was meant), keep at most ``cap``: the recogniser passes just under the
+    dialog's threshold, so they are read back, not flown.
     """
     best: Recognition | None = None
     best_whole: Recognition | None = None
     seen: set[str] = set()
+    plain = max(hypotheses, key=lambda h: h[1], default=("", 0.0))
+    gap = ""
     for transcript, asr in hypotheses:
         heard = unrepeated(transcript)
         if not heard or heard in seen:  # beams often differ only after the words end
@@ -329,14 +341,19 @@ def choose(
         else:
             snapped = snapper.snap(heard, state)
             confidence = asr * CONSTRAINED_CONFIDENCE_SCALE * snapped.factor
-            if snapped.doubtful:
+            if snapped.doubtful or (asr >= GAP_CONFIDENCE and snapped.distance > 0):
+                # A direction the snap supplied, or words heard plainly and bent anyway
+                # ("Slow down a little." read as "down"): a guess at the meaning, read back.
                 confidence = min(confidence, cap)
             rec = Recognition(
                 snapped.text.strip(" ,"), confidence, snapped.commands, heard, asr, snapped.distance
             )
             whole = snapped.complete and bool(snapped.commands)
+            if transcript == plain[0] and asr >= GAP_CONFIDENCE and not snapped.whole_as_heard:
+                gap = heard  # Whisper heard it plainly; the grammars could not read it whole
         if best is None or confidence > best.confidence:
             best = rec
         if whole and (best_whole is None or confidence > best_whole.confidence):
             best_whole = rec
-    return best_whole or best or Recognition("", 0.0)
+    chosen = best_whole or best or Recognition("", 0.0)
+    return replace(chosen, gap=gap) if gap else chosen

@@ -87,6 +87,11 @@ class Snapped:
     doubtful: bool = False
 
     @property
+    def whole_as_heard(self) -> bool:
+        """The grammars read the transcript whole without a single edit."""
+        return self.complete and self.distance == 0.0 and bool(self.commands)
+
+    @property
     def factor(self) -> float:
         """What the recogniser's confidence is multiplied by: exp(-distance), times
         1 - exp(-margin / MARGIN_SCALE) when a different command was nearly as near.

@@ -551,3 +551,9 @@ def test_hyphens_that_are_not_signs_still_work(
 def test_grammar_gaps_heard_in_speech(nlu: NLU, text: str, expected: list[dict]) -> None:
     parsed = nlu.parse(text)
     assert parsed.commands == expected and parsed.unparsed == (), parsed
+
+
+@pytest.mark.parametrize("text", ["Slow down.", "slow down a little", "Slow down, please."])
+def test_slow_down_is_not_a_descent(nlu: NLU, text: str) -> None:
+    # "slow" is a filler word ("fly forward slowly"): "slow down" read "down", a move down.
+    assert nlu.interpret(text) == []
