@@ -146,8 +146,6 @@ def test_a_direction_the_snap_supplied_is_read_back_not_flown(
 def test_a_direction_heard_as_said_is_not_doubtful() -> None:
     for heard in ("Fly right two meters.", "Go to marker tree.", "Climb one meter, uh."):
         assert not _SNAPPER.snap(heard).doubtful, heard
-    rec = choose([("Go to marker tree.", 0.8)], _SNAPPER, cap=THRESHOLD - 0.01)
-    assert rec.confidence >= THRESHOLD  # a misheard number, snapped: flown
     # Heard plainly, the same words are a sentence the grammars do not know (a grammar gap,
     # tests/speech/test_gaps.py): the snap is a guess at the meaning, read back.
     rec = choose([("Go to marker tree.", 0.99)], _SNAPPER, cap=THRESHOLD - 0.01)
