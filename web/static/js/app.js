@@ -278,7 +278,8 @@ class Console {
     // the drone (the server decides); observers cannot command at all.
     $("btn-emergency").disabled = observer;
     this.controls.setEnabled(can);
-    this.speech?.setAllowed(can); // hands-free too: the server refuses an observer's speech
+    const why = observer ? "observers watch only" : lostLease ? "another pilot holds the controls" : "";
+    this.speech?.setAllowed(can, why); // hands-free too: the server refuses an observer's speech
     $("takeover").hidden = !lostLease;
     document.body.dataset.role = this.role || "";
     document.body.dataset.connected = String(connected);
