@@ -16,16 +16,15 @@ The total cost is the snap distance; the recogniser's confidence is multiplied b
 ``exp(-distance)``, so a transcript that had to be bent far enough falls under the dialog
 manager's threshold and the operator is asked to repeat (Settings.confidence_threshold).
 
-A snap is a guess, so three things are never guessed:
+A snap is a guess: the recogniser reads it back ("Did you say …?"), never flies it as heard
+(server.speech.recognizer.doubt). Two guesses are not even offered, since one "yes" would fly
+them:
 
 * an emergency (motors cut): a sentence with more emergencies than the transcript as heard is
   no candidate ("Y'all left by 30 degrees" is not "kill left by 30 degrees");
 * the opposite direction: an edit that turns a heard direction word into its opposite
   ("ascend" into "descend"), or bends away a heard direction word in a sentence that then flies
-  the opposite way ("climb down" into "climb 10"), makes no candidate;
-* any other direction: a sentence whose direction came from an edit ("sealing" into "ceiling",
-  "light" into "right") or lost a heard one is ``doubtful``: the recogniser caps its confidence
-  under the dialog's threshold, so it is read back ("Did you say …?"), never flown as heard.
+  the opposite way ("climb down" into "climb 10"), makes no candidate.
 """
 
 from __future__ import annotations
@@ -82,9 +81,6 @@ class Snapped:
     # How much further the nearest sentence meaning something else is (runner-up cost minus
     # ``distance``); inf when none was found within the budget, or when nothing was bent.
     margin: float = math.inf
-    # A direction of the commands came from an edit, or a heard direction word was bent away:
-    # a guess to read back, never to fly as heard (the recogniser caps the confidence).
-    doubtful: bool = False
 
     @property
     def whole_as_heard(self) -> bool:
@@ -189,9 +185,8 @@ class Snapper:
             interp = self.nlu.parse(sentence, state)
             if not _complete(interp):
                 continue
-            verdict = self._judge(edits, interp.commands, emergencies)
-            if verdict is None:  # an emergency or the opposite way: never a reading
-                continue
+            if not self._allowed(edits, interp.commands, emergencies):
+                continue  # an emergency or the opposite way: never a reading
             if best is None:
                 best = Snapped(
                     text,
@@ -200,10 +195,9 @@ class Snapper:
                     tuple(edits),
                     interp.commands,
                     complete=True,
-                    doubtful=verdict,
                 )
                 budget = min(budget, 0)  # from here on, runner_up_attempts more parses at most
-            elif _same(interp.commands, best.commands):
+            elif same_commands(interp.commands, best.commands):
                 continue
             else:
                 return replace(best, margin=cost - best.distance)
@@ -213,24 +207,20 @@ class Snapper:
         """The directions ``word`` means in the grammars (empty for most words)."""
         return self._senses.get(word, frozenset())
 
-    def _judge(
+    def _allowed(
         self, edits: list[tuple[str, str]], commands: list[Command], emergencies: int
-    ) -> bool | None:
-        """None when the edits make a sentence a snap may never make (more emergencies than
-        heard, a direction turned into its opposite), else whether it is ``doubtful``."""
+    ) -> bool:
+        """False when the edits make a sentence a snap may never make: more emergencies than
+        heard, or a heard direction turned into its opposite."""
         if _emergencies(commands) > emergencies:
-            return None
-        flown = {d for c in commands if (d := _direction(c)) is not None}
-        doubtful = False
+            return False
+        flown = {d for c in commands if (d := direction(c)) is not None}
         for heard, used in edits:
-            was, now = self.sense(heard), self.sense(used)
-            if was == now:
-                continue
-            lost = {o for d in was if (o := _OPPOSITE.get(d)) is not None}
-            if lost & (now | flown):  # "ascend" -> "descend"; "climb down" -> "climb 10"
-                return None
-            doubtful = True  # a direction supplied ("sealing" -> "ceiling") or bent away
-        return doubtful
+            # "ascend" -> "descend"; "climb down" -> "climb 10" (the heard "down" bent away)
+            lost = {o for d in self.sense(heard) if (o := _OPPOSITE.get(d)) is not None}
+            if lost & (self.sense(used) | flown):
+                return False
+        return True
 
 
 def opposite(direction: str) -> str | None:
@@ -249,7 +239,7 @@ def _senses(nlu: NLU) -> dict[str, frozenset[str]]:
     return {w: frozenset(d) for w, d in out.items()}
 
 
-def _direction(command: Command) -> str | None:
+def direction(command: Command) -> str | None:
     """Which way a command flies the drone, when it has one way."""
     direction = command.get("direction")
     if isinstance(direction, str):
@@ -267,7 +257,7 @@ def _key(word: str) -> str:
     return (jellyfish.metaphone(word) or word).replace("0", "F")
 
 
-def _same(a: list[Command], b: list[Command]) -> bool:
+def same_commands(a: list[Command], b: list[Command]) -> bool:
     """Whether two command lists would fly the same (key order aside)."""
     return json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
 
