@@ -63,9 +63,8 @@ GAP_CONFIDENCE = 0.85
 # A doubtful reading (:func:`doubt`) is read back: another beam at this share of its decoder
 # confidence reads whole as other commands, or heard other words where the reading moves the
 # drone, or reads the opposite direction. Chosen on bench/speech.py's three clip sets (hibari,
-# espeak-ng, flite; 972 clips): rival 0.5 / 0.7 gave hibari 91.7 / 93.5 % exact; contested
-# 0.9 / 0.85 / 0.8 left 2 / 0 / 0 wrong commands flown on espeak-ng's set at 89.2 / 87.3 /
-# 85.5 % exact on hibari's.
+# espeak-ng, flite; 972 clips): rival 0.5 / 0.7 cost hibari's set 1.8 / 0 points of exact
+# match; contested 0.9 / 0.85 / 0.8 left 2 / 0 / 0 wrong commands flown on espeak-ng's set.
 RIVAL_RATIO = 0.7
 CONTESTED_RATIO = 0.85
 OPPOSITE_RATIO = 0.3
@@ -377,10 +376,13 @@ class _Reading:
     asr: float
     snapped: Snapped | None  # None: an answer ("Yes.")
 
-    def same(self, commands: list[Command]) -> bool:
-        """Read whole as heard, as exactly ``commands``."""
+    def agrees(self, commands: list[Command]) -> bool:
+        """Read whole as heard, as ``commands`` or the first of them: a beam that ended
+        early ("Take off and go to marker two." beside "… two then land.") agrees."""
         s = self.snapped
-        return s is not None and s.whole_as_heard and same_commands(s.commands, commands)
+        if s is None or not s.whole_as_heard or len(s.commands) > len(commands):
+            return False
+        return same_commands(s.commands, commands[: len(s.commands)])
 
 
 def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
@@ -392,9 +394,10 @@ def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
     * ``rival``: another beam, at :data:`RIVAL_RATIO` of its confidence or more, reads whole
       as other commands ("Can you travel to waypoint seven now?" beside "… a point seven");
     * ``contested``: it moves the drone and another beam nearly as confident
-      (:data:`CONTESTED_RATIO`) heard other words ("Please turn right." beside "Please don't
-      right.", "Head to marker eight" beside "Head to marker, I"): the words that fly were in
-      doubt;
+      (:data:`CONTESTED_RATIO`) heard words that do not read as the same commands, even
+      snapped ("Please turn right." beside "Please don't right.", "Head to marker eight"
+      beside "Head to marker, I"): the words that fly were in doubt ("Fly to marker at
+      eleven." beside "Fly to marker 11." is no doubt: both read marker 11);
     * ``opposite``: a beam, even a weak one (:data:`OPPOSITE_RATIO`), reads the opposite
       direction ("Climb immediately." beside "Landing immediately.").
     """
@@ -407,13 +410,17 @@ def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
     floor = chosen.asr_confidence
     why = ""
     for r in readings:
-        if r.heard == chosen.heard or r.same(chosen.commands):
+        if r.heard == chosen.heard or r.agrees(chosen.commands):
             continue
         s = r.snapped
         theirs = s.commands if s is not None and s.complete else []
         if theirs and s is not None and s.distance == 0 and r.asr >= RIVAL_RATIO * floor:
             return "rival"
-        if moves and r.asr >= CONTESTED_RATIO * floor:
+        if (
+            moves
+            and r.asr >= CONTESTED_RATIO * floor
+            and not (s is not None and s.complete and same_commands(s.commands, chosen.commands))
+        ):
             why = why or "contested"
         if r.asr >= OPPOSITE_RATIO * floor and any(
             opposite(d) in mine for c in theirs if (d := direction(c)) is not None

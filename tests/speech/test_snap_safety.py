@@ -204,3 +204,27 @@ def test_beams_that_agree_or_say_nothing_else_leave_the_reading_flown() -> None:
     beams = [("Altitude.", 0.73), ("All the toad.", 0.56), ("All the toot.", 0.44)]
     rec = choose(beams, _SNAPPER, cap=THRESHOLD - 0.01)
     assert rec.commands == [{"action": "query", "item": "altitude"}] and rec.doubt == ""
+
+
+@pytest.mark.parametrize(
+    "beams",
+    [
+        [  # hibari-tts, 190 words per minute, 10 dB: the fourth beam ended early
+            ("Take off and go to marker two then land.", 0.92),
+            ("Take off and go to marker two, then land.", 0.82),
+            ("Take off and go to marker two. Then land.", 0.75),
+            ("Take off and go to marker two.", 0.72),
+        ],
+        [  # hibari-tts: "fly to marker eleven"; every beam reads the same goto, snapped
+            ("Fly to marker 11.", 0.79),
+            ("Fly to marker it 11.", 0.74),
+            ("Fly to marker at eleven.", 0.7),
+            ("Fly to marker eleven.", 0.68),
+        ],
+    ],
+)
+def test_beams_that_end_early_or_snap_to_the_same_commands_agree(
+    beams: list[tuple[str, float]],
+) -> None:
+    rec = choose(beams, _SNAPPER, cap=THRESHOLD - 0.01)
+    assert rec.doubt == "" and rec.confidence >= THRESHOLD, rec
