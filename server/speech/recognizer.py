@@ -407,22 +407,22 @@ def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
         return "snap"
     mine = {d for c in chosen.commands if (d := direction(c)) is not None}
     moves = any(c.get("action") in MOTION for c in chosen.commands)
-    floor = chosen.asr_confidence
+    asr = chosen.asr_confidence  # the other beams are measured against it
     why = ""
     for r in readings:
         if r.heard == chosen.heard or r.agrees(chosen.commands):
             continue
         s = r.snapped
         theirs = s.commands if s is not None and s.complete else []
-        if theirs and s is not None and s.distance == 0 and r.asr >= RIVAL_RATIO * floor:
+        if theirs and s is not None and s.distance == 0 and r.asr >= RIVAL_RATIO * asr:
             return "rival"
         if (
             moves
-            and r.asr >= CONTESTED_RATIO * floor
+            and r.asr >= CONTESTED_RATIO * asr
             and not (s is not None and s.complete and same_commands(s.commands, chosen.commands))
         ):
             why = why or "contested"
-        if r.asr >= OPPOSITE_RATIO * floor and any(
+        if r.asr >= OPPOSITE_RATIO * asr and any(
             opposite(d) in mine for c in theirs if (d := direction(c)) is not None
         ):
             return "opposite"

@@ -189,12 +189,7 @@ class Snapper:
                 continue  # an emergency or the opposite way: never a reading
             if best is None:
                 best = Snapped(
-                    text,
-                    interp.normalised,
-                    cost,
-                    tuple(edits),
-                    interp.commands,
-                    complete=True,
+                    text, interp.normalised, cost, tuple(edits), interp.commands, complete=True
                 )
                 budget = min(budget, 0)  # from here on, runner_up_attempts more parses at most
             elif same_commands(interp.commands, best.commands):
@@ -241,9 +236,9 @@ def _senses(nlu: NLU) -> dict[str, frozenset[str]]:
 
 def direction(command: Command) -> str | None:
     """Which way a command flies the drone, when it has one way."""
-    direction = command.get("direction")
-    if isinstance(direction, str):
-        return direction
+    way = command.get("direction")
+    if isinstance(way, str):
+        return way
     return _ACTION_DIRECTION.get(str(command.get("action")))
 
 
