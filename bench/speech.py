@@ -11,8 +11,11 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    transcript to the NLU: the baseline), and guided as it was before the window and the beams
    (Whisper's 30 s window, greedy: the reference for what those two bring).
    * exact = the commands that would be executed (confidence >= 0.5, else "please repeat")
-     equal the labelled ones; for a labelled non-command, nothing executed;
-   * wrong = something executed that differs from the label (the dangerous outcome);
+     equal the labelled ones; for a labelled non-command, nothing executed; the drone is taken
+     to be flying, so a spoken emergency under its bar (server.dialog.confirm) hovers and asks
+     instead of cutting the motors;
+   * wrong = something executed that differs from the label; wrong flown = such a thing that
+     moves the drone (not a question or a description): the dangerous outcome;
    * latency = end of speech (the whole clip handed over) -> commands: VAD + decode + snap + NLU;
    * RTF = that time / clip duration.
    Targets (issue 15): >= 90 % exact clean, >= 80 % at 10 dB, p50 <= 400 ms.
@@ -21,6 +24,8 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    push-to-talk released 0.5 s after the speech ends, and hands-free (0.7 s of silence ends the
    utterance); with the speculative decode at the first 0.4 s of silence and the reuse of its
    result (the product) vs without either (the baseline), same clips, same run.
+4. Spoken replies: synthesis time of typical replies with hibari-tts's neural voice (the
+   server's first choice, server/speech/synth.py) and with espeak-ng, one after another.
 3. The 100 Hz control loop (drone/control/loop.py, sleep+spin as flown) alone, then while 3
    streams keep decoding through the server's bounded pool (one decoder per core less one),
    then through an unbounded one (3 decoders at once): period error p99, overruns; in this
@@ -28,7 +33,12 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    thread where permitted, GIL held through the spin, 0.1 ms switch interval).
 
     .venv/bin/python bench/speech.py [--quick] [--json out.json] [--skip-loop] [--skip-stream]
-        [--asr-model DIR] [--window-s 15] [--beams 4] [--tts espeak-ng|flite|hibari]
+        [--skip-voice] [--asr-model DIR] [--window-s 15] [--beams 4]
+        [--tts espeak-ng|flite|hibari] [--rows all|guided] [--seed 15] [--progress FILE]
+
+``--rows guided`` runs section 1 with the product's recogniser only (a third of the time);
+``--seed`` draws another set of utterances (15: the set the recogniser was tuned on; any other:
+utterances it was not).
 
 ``--tts flite`` synthesises section 1's clips with Debian's flite voices instead (slt, rms, awb,
 kal16; same utterances, speeds and noise), ``--tts hibari`` with hibari-tts's neural voice
@@ -57,7 +67,7 @@ import numpy as np  # noqa: E402
 
 from drone.control.loop import ControlLoop, LoopStats  # noqa: E402
 from drone.control.pid import PaperPID, Setpoint  # noqa: E402
-from server.dialog.confirm import to_read_back  # noqa: E402
+from server.dialog.confirm import EMERGENCY_CONFIDENCE, to_read_back  # noqa: E402
 from server.language.nlu import default_nlu  # noqa: E402
 from server.settings import Settings  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
@@ -79,9 +89,20 @@ NOISE: list[float | None] = [None, 20.0, 10.0]
 THRESHOLD = Settings().confidence_threshold
 CONFIRM_FLOOR = Settings().confirm_floor  # from here to THRESHOLD: "Did you say …?"
 BEFORE = "guided, 30 s window, greedy (before)"
+NOT_FLOWN = frozenset({"query", "describe", "help", "cancel"})  # answered or stopped, not flown
+REPLIES = [  # typical spoken replies (server/dialog/replies.py, confirm.py)
+    "Taking off.",
+    "Taking off, then flying to marker 2.",
+    "Battery low: 18 percent. Returning home.",
+    "Reached marker 3.",
+    'Did you say "fly to marker 7"? That is: flying to marker 7. Say yes to do it, or say the '
+    "command again.",
+    "I see a brown door far ahead and an orange person close on the right.",
+]
 
 
 def pick_utterances(n: int, seed: int = 15) -> list[dict[str, Any]]:
+    """``n`` labelled utterances, round-robin over actions (seed 15: the tuning set)."""
     rows = [json.loads(line) for line in (ROOT / "tests/data/nlu_labelled.jsonl").open()]
     by_action: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for row in rows:
@@ -114,15 +135,15 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     print("\n## Spoken commands: exact match (executed commands == label)")
     print(
         "| recogniser | clean | 20 dB | 10 dB | all | understood (any conf.) | wrong executed "
-        "| latency p50 ms | p95 ms | RTF p50 |"
+        "| wrong flown | latency p50 ms | p95 ms | RTF p50 |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     summary: dict[str, Any] = {}
     for name, rows in results.items():
 
         def rate(key: str, pred: Any = lambda r: True, rows: list[dict[str, Any]] = rows) -> float:
             sel = [r for r in rows if pred(r)]
-            return 100.0 * sum(r[key] for r in sel) / max(1, len(sel))
+            return 100.0 * sum(r.get(key, False) for r in sel) / max(1, len(sel))
 
         s = {
             "clean": rate("exact", lambda r: r["snr"] is None),
@@ -131,6 +152,7 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
             "all": rate("exact"),
             "understood": rate("understood"),
             "wrong": rate("wrong"),
+            "wrong_flown": rate("wrong_flown"),
             "p50_ms": pct([r["ms"] for r in rows], 0.5),
             "p95_ms": pct([r["ms"] for r in rows], 0.95),
             "rtf_p50": pct([r["rtf"] for r in rows], 0.5),
@@ -139,7 +161,8 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
         print(
             f"| {name} | {s['clean']:.1f} % | {s['20dB']:.1f} % | {s['10dB']:.1f} % | "
             f"{s['all']:.1f} % | {s['understood']:.1f} % | {s['wrong']:.1f} % | "
-            f"{s['p50_ms']:.0f} | {s['p95_ms']:.0f} | {s['rtf_p50']:.2f} |"
+            f"{s['wrong_flown']:.1f} % | {s['p50_ms']:.0f} | {s['p95_ms']:.0f} | "
+            f"{s['rtf_p50']:.2f} |"
         )
     print(
         f'\n## Read back ("Did you say …?", confidence {CONFIRM_FLOOR:g} to {THRESHOLD:g}) and '
@@ -172,12 +195,24 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
             f"| {name} | {right:.1f} % | {other:.1f} % | {yes['clean']:.1f} % | "
             f"{yes['20dB']:.1f} % | {yes['10dB']:.1f} % | {yes['all']:.1f} % |"
         )
-    g, b = summary["guided"], summary["unguided (baseline)"]
-    ratio = f"{g['all'] / b['all']:.2f}x" if b["all"] else "n/a (baseline 0 %)"
+    g = summary["guided"]
+    guided = results["guided"]
+    why: dict[str, int] = defaultdict(int)
+    for r in guided:
+        why[r.get("doubt") or "-"] += 1
+    hovered = sum(r.get("hover_ask", False) for r in guided)
     print(
-        f"\nguided / baseline exact: {ratio}; wrong executed {g['wrong']:.1f} % vs "
-        f"{b['wrong']:.1f} %; latency p50 ratio {g['p50_ms'] / b['p50_ms']:.2f}"
+        "\nguided: read back as doubtful (server.speech.recognizer.doubt): "
+        + ", ".join(f"{k} {v}" for k, v in sorted(why.items()) if k != "-")
+        + f"; spoken emergencies under their bar, hovered and asked: {hovered}"
     )
+    b = summary.get("unguided (baseline)")
+    if b is not None:
+        ratio = f"{g['all'] / b['all']:.2f}x" if b["all"] else "n/a (baseline 0 %)"
+        print(
+            f"guided / baseline exact: {ratio}; wrong executed {g['wrong']:.1f} % vs "
+            f"{b['wrong']:.1f} %; latency p50 ratio {g['p50_ms'] / b['p50_ms']:.2f}"
+        )
     if BEFORE in summary:
         o = summary[BEFORE]
         print(
@@ -191,6 +226,8 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
         by[f"voice {r['voice']}"].append(r["exact"])
         by[f"speed {r['speed']} wpm"].append(r["exact"])
     print(" · ".join(f"{k}: {100 * sum(v) / len(v):.0f}" for k, v in sorted(by.items())))
+    for r in (r for r in results["guided"] if r["wrong"]):
+        print(f"- wrong: {r['text']!r} -> {r['heard']!r} ({r['confidence']:.2f})")
     misses = [r for r in results["guided"] if not r["exact"]][:12]
     if misses:
         print("\n### some guided misses (label -> heard, confidence)")
@@ -203,8 +240,15 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     return summary
 
 
-def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") -> dict[str, Any]:
-    utterances = pick_utterances(12 if quick else 36)
+def bench_accuracy(
+    recognizer: Recognizer,
+    quick: bool,
+    tts: str = "espeak-ng",
+    rows: str = "all",
+    seed: int = 15,
+    progress: Path | None = None,
+) -> dict[str, Any]:
+    utterances = pick_utterances(12 if quick else 36, seed)
     voices = TTS_VOICES[tts]
     conditions = [(s, n) for n in NOISE for s in SPEEDS]
     work = Path(tempfile.mkdtemp(prefix="uavc-speech-bench-"))
@@ -224,17 +268,19 @@ def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") 
         f"synthesised in {time.perf_counter() - t0:.0f} s"
     )
     before = Recognizer(recognizer.model, recognizer.nlu, reuse=False, window_s=None, beams=1)
-    runs = (
+    runs: tuple[tuple[str, Recognizer, bool], ...] = (
         ("guided", recognizer, True),
         ("unguided (baseline)", recognizer, False),
         (BEFORE, before, True),
     )
+    if rows == "guided":
+        runs = runs[:1]
     results: dict[str, list[dict[str, Any]]] = {name: [] for name, _, _ in runs}
     # Seeded shuffle: any prefix of the run (an interrupted one too) is a fair sample of all
     # utterances, voices, speeds and noise levels.
     random.Random(1).shuffle(clips)
     recognizer.recognize(read_wav(clips[0][0].read_bytes()))  # warm-up, not counted
-    progress = Path(tempfile.gettempdir()) / "uavc-speech-bench-progress.jsonl"
+    progress = progress or Path(tempfile.gettempdir()) / "uavc-speech-bench-progress.jsonl"
     progress.write_text("")
     for k, (path, row, voice, speed, snr) in enumerate(clips):
         if k and k % 20 == 0:
@@ -246,6 +292,12 @@ def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") 
             rec = rec_by.recognize(samples, guided=guided)
             ms = (time.perf_counter() - t) * 1000
             executed = rec.commands if rec.confidence >= THRESHOLD else []
+            # In flight, an emergency under its bar hovers and asks (server.dialog.confirm).
+            hover_ask = any(c["action"] == "emergency" for c in executed) and (
+                rec.confidence < max(THRESHOLD, EMERGENCY_CONFIDENCE)
+            )
+            if hover_ask:
+                executed = []
             want = canon(row["commands"])
             # What the dialog reads back ("Did you say …?", server/dialog/confirm.py): speech
             # between the floor and the threshold that the grammars understand whole.
@@ -261,6 +313,10 @@ def bench_accuracy(recognizer: Recognizer, quick: bool, tts: str = "espeak-ng") 
                     "exact": canon(executed) == want,
                     "understood": canon(rec.commands) == want,
                     "wrong": bool(executed) and canon(executed) != want,
+                    "wrong_flown": canon(executed) != want
+                    and any(c["action"] not in NOT_FLOWN for c in executed),
+                    "doubt": rec.doubt,
+                    "hover_ask": hover_ask,
                     "read_back": bool(read_back),
                     "read_back_right": bool(read_back) and canon(read_back) == want,
                     "ms": ms,
@@ -342,6 +398,54 @@ def bench_stream(recognizer: Recognizer, quick: bool) -> dict[str, Any]:
         print(f"| {name} | {len(xs)} | {pct(xs, 0.5):.0f} | {pct(xs, 0.95):.0f} |")
     print(f"finals that reused a speculative decode: {reused}")
     out["reused"] = reused
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+def bench_voice(repeats: int) -> dict[str, Any]:
+    """Synthesis time of typical replies, per voice (the same sentences, one after another)."""
+    import io
+    import wave
+
+    from server.speech.errors import SynthesisError
+    from server.speech.synth import NeuralVoice, Voice, espeak
+
+    voices: list[tuple[Voice, float]] = []
+    t0 = time.perf_counter()
+    try:
+        voices.append((NeuralVoice.load(), time.perf_counter() - t0))
+    except SynthesisError as exc:
+        print(f"(hibari-tts not measured: {exc})")
+    fallback = espeak()
+    if fallback is not None:
+        voices.append((fallback, 0.0))
+    print("\n## Spoken replies: synthesis time per reply (one after another)")
+    print("| voice | load s | replies | p50 ms | p95 ms | audio p50 s | x real time p50 |")
+    print("|---|---|---|---|---|---|---|")
+    out: dict[str, Any] = {}
+    for voice, load_s in voices:
+        ms: list[float] = []
+        audio: list[float] = []
+        for _ in range(repeats):
+            for text in REPLIES:
+                t = time.perf_counter()
+                data = voice.wav(text)
+                ms.append((time.perf_counter() - t) * 1000)
+                with wave.open(io.BytesIO(data)) as w:  # espeak-ng's header has no length
+                    frames = len(w.readframes(w.getnframes())) // w.getsampwidth()
+                    audio.append(frames / w.getframerate())
+        xrt = [a / (m / 1000) for a, m in zip(audio, ms, strict=True)]
+        out[voice.name] = {
+            "load_s": load_s,
+            "p50_ms": pct(ms, 0.5),
+            "p95_ms": pct(ms, 0.95),
+            "audio_p50_s": pct(audio, 0.5),
+            "xrt_p50": pct(xrt, 0.5),
+        }
+        print(
+            f"| {voice.name} | {load_s:.1f} | {len(ms)} | {pct(ms, 0.5):.0f} | "
+            f"{pct(ms, 0.95):.0f} | {pct(audio, 0.5):.1f} | {pct(xrt, 0.5):.0f} |"
+        )
     return out
 
 
@@ -483,6 +587,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--skip-loop", action="store_true")
     ap.add_argument("--skip-stream", action="store_true")
     ap.add_argument("--skip-accuracy", action="store_true")
+    ap.add_argument("--skip-voice", action="store_true")
+    ap.add_argument(
+        "--rows", choices=["all", "guided"], default="all", help="section 1's recognisers"
+    )
+    ap.add_argument("--seed", type=int, default=15, help="which utterances (15: the tuning set)")
+    ap.add_argument("--progress", type=Path, help="section 1's per-clip results (JSONL)")
     ap.add_argument(
         "--report", type=Path, help="only print the tables of a (partial) progress file"
     )
@@ -514,9 +624,13 @@ def main(argv: list[str] | None = None) -> int:
     rec = Recognizer(whisper, default_nlu(), reuse=False, window_s=args.window_s, beams=args.beams)
     out: dict[str, Any] = {}
     if not args.skip_accuracy:
-        out["accuracy"] = bench_accuracy(rec, args.quick, args.tts)
+        out["accuracy"] = bench_accuracy(
+            rec, args.quick, args.tts, args.rows, args.seed, args.progress
+        )
     if not args.skip_stream:
         out["stream"] = bench_stream(rec, args.quick)
+    if not args.skip_voice:
+        out["voice"] = bench_voice(2 if args.quick else 5)
     if not args.skip_loop:
         out["loop"] = bench_loop(rec, args.asr_model, 5.0 if args.quick else 20.0)
     load = os.getloadavg()

@@ -36,6 +36,7 @@ from server.rosbridge.endpoint import make_router, serve_rosbridge_port
 from server.rosout import Rosout
 from server.security import Security, TokenStore
 from server.settings import Settings
+from server.speech.gaps import FILE_NAME as GAP_FILE
 from server.speech.service import SpeechConfig, SpeechService
 from server.store import AuditLog
 from server.tasks.manager import TaskManager
@@ -82,6 +83,8 @@ class Runtime:
                 queue=s.asr_queue,
                 window_s=s.asr_window_s,
                 beams=s.asr_beams,
+                threshold=s.confidence_threshold,
+                gap_log=s.data_dir / GAP_FILE,
             ),
             self.nlu,
         )

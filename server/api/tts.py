@@ -1,33 +1,50 @@
-"""``GET /api/v1/tts?text=…``: a reply spoken by the server, as WAV (espeak-ng).
+"""``GET /api/v1/tts?text=…``: a reply spoken by the server, as WAV.
 
 Browsers without voices (Chromium on Linux without speech-dispatcher: an empty
-``speechSynthesis.getVoices()``) cannot speak replies; the console then plays this instead.
-espeak-ng (Debian package ``espeak-ng``) writes a WAV to stdout with ``--stdout``; it is
-offline and fast (a sentence in tens of milliseconds). Without it the endpoint answers 503 and
-says so, and the page tells the operator that replies are shown but not spoken.
+``speechSynthesis.getVoices()``) cannot speak replies; the console then plays this instead. The
+voice is hibari-tts's neural voice where the ``speech`` extra is installed, else espeak-ng
+(:mod:`server.speech.synth`); the ``X-Voice`` header names it. The voice is loaded on the first
+request (the page's probe), in a thread, and every synthesis runs in a thread too: the event
+loop never waits on it. Without any voice the endpoint answers 503 and says so, and the page
+tells the operator that replies are shown but not spoken.
 """
 
 from __future__ import annotations
 
 import asyncio
-import shutil
 
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import Response
+from starlette.datastructures import State
 
 from server.api.deps import RoleDep
+from server.speech.errors import SynthesisError
+from server.speech.synth import Voice, best_voice, espeak
 
 router = APIRouter(tags=["speech output"])
 
 MAX_CHARS = 400  # a reply is one or two sentences; longer text is not a reply
-TIMEOUT_S = 10.0
-WORDS_PER_MINUTE = 165  # espeak-ng's default is 175; a touch slower is clearer over a fan's noise
-MAX_CONCURRENT = 2  # each request is a process; more than this at once is a flood, not replies
+MAX_CONCURRENT = 2  # syntheses at once (threads or processes); more at once is a flood
+NO_VOICE = "the server has no speech engine (install hibari-tts or espeak-ng)"
 
 
 def espeak_path() -> str | None:
     """The espeak-ng executable, or None when it is not installed."""
-    return shutil.which("espeak-ng")
+    voice = espeak()
+    return voice.exe if voice else None
+
+
+async def server_voice(state: State) -> Voice | None:
+    """The app's voice, loaded once (per app: no module-level mutable state)."""
+    lock = getattr(state, "tts_lock", None)
+    if lock is None:
+        lock = state.tts_lock = asyncio.Lock()
+    async with lock:
+        if not getattr(state, "tts_loaded", False):
+            state.tts_voice = await asyncio.to_thread(best_voice)
+            state.tts_loaded = True
+    voice: Voice | None = state.tts_voice
+    return voice
 
 
 @router.get("/tts", response_class=Response, responses={200: {"content": {"audio/wav": {}}}})
@@ -35,12 +52,7 @@ async def tts(
     request: Request, _role: RoleDep, text: str = Query(min_length=1, max_length=MAX_CHARS)
 ) -> Response:
     """``text`` spoken in English as a WAV file (503 when the server has no speech engine)."""
-    exe = espeak_path()
-    if exe is None:
-        raise HTTPException(
-            status_code=503, detail="the server has no speech engine (install espeak-ng)"
-        )
-    state = request.app.state  # per app, not per process: no module-level mutable state
+    state = request.app.state
     running = int(getattr(state, "tts_running", 0))
     if running >= MAX_CONCURRENT:
         raise HTTPException(
@@ -50,32 +62,14 @@ async def tts(
         )
     state.tts_running = running + 1  # one event loop: nothing runs between check and increment
     try:
-        return await _synthesise(exe, text)
+        voice = await server_voice(state)
+        if voice is None:
+            raise HTTPException(status_code=503, detail=NO_VOICE)
+        try:
+            wav = await asyncio.to_thread(voice.wav, text)
+        except SynthesisError as exc:
+            raise HTTPException(status_code=503, detail=str(exc)) from exc
     finally:
         state.tts_running -= 1
-
-
-async def _synthesise(exe: str, text: str) -> Response:
-    # "--" ends the options: text starting with "-" is spoken, never read as a flag.
-    proc = await asyncio.create_subprocess_exec(
-        exe,
-        "--stdout",
-        "-v",
-        "en-us",
-        "-s",
-        str(WORDS_PER_MINUTE),
-        "--",
-        text,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
-    )
-    try:
-        wav, err = await asyncio.wait_for(proc.communicate(), timeout=TIMEOUT_S)
-    except TimeoutError as exc:
-        proc.kill()
-        await proc.wait()
-        raise HTTPException(status_code=503, detail="speech synthesis timed out") from exc
-    if proc.returncode != 0 or not wav.startswith(b"RIFF"):
-        why = err.decode(errors="replace").strip()[:200] or f"exit status {proc.returncode}"
-        raise HTTPException(status_code=503, detail=f"speech synthesis failed: {why}")
-    return Response(content=wav, media_type="audio/wav", headers={"Cache-Control": "no-store"})
+    headers = {"Cache-Control": "no-store", "X-Voice": voice.name}
+    return Response(content=wav, media_type="audio/wav", headers=headers)

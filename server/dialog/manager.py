@@ -373,6 +373,10 @@ class DialogManager:
         elif heard and said is not None:  # a yes or no, and nothing asked
             why = confirm.EXPIRED if pending is not None else confirm.NOTHING_ASKED
             return DialogResult(why, [], False), "not_understood"
+        if source == "speech" and self.vehicle.snapshot().flying:
+            spoken = self.nlu.parse(sentence)
+            if confirm.doubtful_emergency(spoken, confidence, self.params.confidence_threshold):
+                return await self._hover_and_ask(text, spoken)
         if not heard:
             return self._low_confidence(text, sentence, confidence)
         interp: Interpretation = self.nlu.parse(sentence)
@@ -424,6 +428,13 @@ class DialogManager:
         kinds = [str(c.get("action", "")) for c in commands]
         verdict = self.deadline.judge_all(kinds, issued, self.wall_clock())
         return verdict if isinstance(verdict, Expired) else None
+
+    async def _hover_and_ask(self, text: str, spoken: Interpretation) -> tuple[DialogResult, str]:
+        """A spoken emergency heard doubtfully in flight: hover now, ask before cutting."""
+        await self._execute([{"action": "hover"}])
+        self._confirm = confirm.Pending(text, self.clock())
+        ask = confirm.emergency_question(spoken.normalised)
+        return DialogResult(ask, spoken.commands, False), "hovered_asked"
 
     def _low_confidence(
         self, text: str, sentence: str, confidence: float

@@ -10,7 +10,8 @@ Tree::
     │   ├── NotWav               not a RIFF/WAVE file, or a WAV that is not 16-bit PCM
     │   ├── EmptyAudio           zero samples
     │   └── AudioTooLong         over the limit (30 s for one request)
-    └── Busy                     every decoder is busy and the queue is full (HTTP 503)
+    ├── Busy                     every decoder is busy and the queue is full (HTTP 503)
+    └── SynthesisError           a reply cannot be spoken (no voice, the voice failed)
 """
 
 from __future__ import annotations
@@ -50,3 +51,7 @@ class AudioTooLong(AudioError):
 
 class Busy(SpeechError):
     """Every decoder is busy and the waiting line is full; try again shortly."""
+
+
+class SynthesisError(SpeechError):
+    """A reply cannot be spoken: no voice is installed, or the voice failed on this text."""

@@ -35,7 +35,7 @@ from server.language.nlu import NLU
 from server.speech.audio import SAMPLE_RATE, Samples
 from server.speech.constraint import suppressed_tokens
 from server.speech.memo import SharedResults, digest
-from server.speech.snap import Snapper
+from server.speech.snap import Snapped, Snapper, direction, opposite, same_commands
 from server.speech.vocabulary import Vocabulary, vocabulary
 from server.speech.window import MIN_S, fits, window_frames
 
@@ -51,6 +51,24 @@ CONSTRAINED_CONFIDENCE_SCALE = 0.83
 # 108-clip subset, 15 s window: greedy 61 / 50 / 36 % exact (clean / 20 / 10 dB) at 179 ms p50,
 # 4 beams 67 / 58 / 47 % at 217 ms, 8 beams the same at 251 ms.
 BEAMS = 4
+# A doubtful reading (:func:`doubt`) is capped just under the dialog's threshold, so it is read
+# back ("Did you say …?") and never flown as heard.
+DOUBT_MARGIN = 0.01
+THRESHOLD = 0.5  # Settings.confidence_threshold's default
+# A transcript heard at least this surely (the decoder's own confidence) that the grammars
+# cannot read whole is a grammar gap, not a mishearing: hibari-tts's voice is heard at
+# 0.87-0.97 when Whisper gets every word ("Hover for now and tell me your battery level." 0.96),
+# espeak-ng's garbled readings mostly under 0.8 (bench/speech.py's clips).
+GAP_CONFIDENCE = 0.85
+# A doubtful reading (:func:`doubt`) is read back: another beam at this share of its decoder
+# confidence reads whole as other commands, or heard other words where the reading moves the
+# drone, or reads the opposite direction. Chosen on bench/speech.py's three clip sets (hibari,
+# espeak-ng, flite; 972 clips): rival 0.5 / 0.7 cost hibari's set 1.8 / 0 points of exact
+# match; contested 0.9 / 0.85 / 0.8 left 2 / 0 / 0 wrong commands flown on espeak-ng's set.
+RIVAL_RATIO = 0.7
+CONTESTED_RATIO = 0.85
+OPPOSITE_RATIO = 0.3
+MOTION = frozenset({"move", "turn", "goto", "patrol"})  # commands that fly the drone somewhere
 MAX_NEW_TOKENS = 64  # a spoken command is far shorter; a hallucination loop stops there
 VAD_PAD_S = 0.3  # speech kept either side of what the VAD marks (its own default is 0.4 s)
 _SENTENCE_END = re.compile(r"(?<=[.?!])\s+")
@@ -71,6 +89,10 @@ class Recognition:
     decode_ms: float = 0.0
     speech: bool = True  # False: the VAD found no speech, nothing was decoded
     reused: bool = False  # the same speech was decoded (or was being decoded) already
+    # A grammar gap: the decoder's most confident transcript, heard plainly (at least
+    # GAP_CONFIDENCE) and not read whole by the grammars as heard; "" when none.
+    gap: str = ""
+    doubt: str = ""  # why the reading is read back, not flown (:func:`doubt`); "" when not
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -118,10 +140,13 @@ class Recognizer:
         reuse: bool = True,
         window_s: float | None = MIN_S,
         beams: int = BEAMS,
+        threshold: float = THRESHOLD,
     ) -> None:
         """``window_s``: the shortest encoder window (:mod:`server.speech.window`); None gives
         Whisper's own 30 s windows and greedy decoding (the earlier way, bench/speech.py's
-        reference row). ``beams``: beam width and transcripts tried against the grammars."""
+        reference row). ``beams``: beam width and transcripts tried against the grammars.
+        ``threshold``: the dialog's confidence threshold (Settings.confidence_threshold); a
+        doubtful reading is kept under it (:data:`DOUBT_MARGIN`)."""
         from faster_whisper.tokenizer import Tokenizer
         from faster_whisper.transcribe import get_suppressed_tokens
 
@@ -131,6 +156,7 @@ class Recognizer:
         self.snapper = Snapper(nlu, self.vocab)
         self.window_s = window_s
         self.beams = beams
+        self.cap = max(0.0, threshold - DOUBT_MARGIN)
         self._vad_lock = threading.Lock()  # Silero's ONNX session is shared; keep calls serial
         self._tokenizer = Tokenizer(
             model.hf_tokenizer, model.model.is_multilingual, task="transcribe", language="en"
@@ -260,7 +286,7 @@ class Recognizer:
         """Decode, snap and interpret speech already trimmed by the VAD."""
         hypotheses = self.hypotheses(samples, guided=guided)
         if guided:
-            return choose(hypotheses, self.snapper, state)
+            return choose(hypotheses, self.snapper, state, cap=self.cap)
         heard, asr = hypotheses[0]
         if not heard:
             return Recognition("", 0.0)
@@ -284,7 +310,10 @@ def unrepeated(text: str) -> str:
 
 
 def choose(
-    hypotheses: list[tuple[str, float]], snapper: Snapper, state: str | None = None
+    hypotheses: list[tuple[str, float]],
+    snapper: Snapper,
+    state: str | None = None,
+    cap: float = 1.0,
 ) -> Recognition:
     """The reading of the decoder's n best transcripts that the grammars support best.
 
@@ -293,14 +322,17 @@ def choose(
     the grammars understand whole wins; when none is understood whole, the most confident
     reading (the dialog then asks to repeat). A beam's second transcript that the grammars accept
     as heard ("Take off.") thus beats a likelier first one they cannot read ("Take off in the
-    hand man."), which greedy decoding could not offer. bench/speech.py's 324 clips, exact match:
-    the first transcript only 46.6 %, the most confident of 4 50.9 %, the most confident
-    understood whole 51.2 %, wrong commands executed 1.2 % each (the same rules on 324 other
-    clips: 46.3 / 49.7 / 50.0 %, wrong 3.4 / 3.7 / 3.1 %).
+    hand man."), which greedy decoding could not offer.
+
+    A doubtful reading (:func:`doubt`) keeps at most ``cap``: the recogniser passes just under
+    the dialog's threshold, so it is read back ("Did you say …?"), never flown as heard.
     """
+    readings: list[_Reading] = []
     best: Recognition | None = None
     best_whole: Recognition | None = None
     seen: set[str] = set()
+    plain = max(hypotheses, key=lambda h: h[1], default=("", 0.0))
+    gap = ""
     for transcript, asr in hypotheses:
         heard = unrepeated(transcript)
         if not heard or heard in seen:  # beams often differ only after the words end
@@ -311,16 +343,87 @@ def choose(
             # "yes" as a filler, and a snap would bend it into a command).
             confidence = asr * CONSTRAINED_CONFIDENCE_SCALE
             rec = Recognition(heard, confidence, [], heard, asr, 0.0)
+            readings.append(_Reading(heard, asr, None))
             whole = True
         else:
             snapped = snapper.snap(heard, state)
             confidence = asr * CONSTRAINED_CONFIDENCE_SCALE * snapped.factor
+            if snapped.distance > 0:  # bent: a guess (see doubt), never more than read back
+                confidence = min(confidence, cap)
             rec = Recognition(
                 snapped.text.strip(" ,"), confidence, snapped.commands, heard, asr, snapped.distance
             )
+            readings.append(_Reading(heard, asr, snapped))
             whole = snapped.complete and bool(snapped.commands)
+            if transcript == plain[0] and asr >= GAP_CONFIDENCE and not snapped.whole_as_heard:
+                gap = heard  # Whisper heard it plainly; the grammars could not read it whole
         if best is None or confidence > best.confidence:
             best = rec
         if whole and (best_whole is None or confidence > best_whole.confidence):
             best_whole = rec
-    return best_whole or best or Recognition("", 0.0)
+    chosen = best_whole or best or Recognition("", 0.0)
+    why = doubt(chosen, readings)
+    if why:
+        chosen = replace(chosen, confidence=min(chosen.confidence, cap), doubt=why)
+    return replace(chosen, gap=gap) if gap else chosen
+
+
+@dataclass(frozen=True)
+class _Reading:
+    """One distinct transcript of the beam and what the grammars made of it."""
+
+    heard: str
+    asr: float
+    snapped: Snapped | None  # None: an answer ("Yes.")
+
+    def agrees(self, commands: list[Command]) -> bool:
+        """Read whole as heard, as ``commands`` or the first of them: a beam that ended
+        early ("Take off and go to marker two." beside "… two then land.") agrees."""
+        s = self.snapped
+        if s is None or not s.whole_as_heard or len(s.commands) > len(commands):
+            return False
+        return same_commands(s.commands, commands[: len(s.commands)])
+
+
+def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
+    """Why ``chosen`` must be read back rather than flown, or "" (bench/speech.py's three clip
+    sets, 972 clips: these rules take the wrong commands flown from 8 to none):
+
+    * ``snap``: it was bent to fit the grammars (a snap is a guess: of the 972 clips' flown
+      readings only 4 were snapped, one of them wrong: "Go still." flown to a chair);
+    * ``rival``: another beam, at :data:`RIVAL_RATIO` of its confidence or more, reads whole
+      as other commands ("Can you travel to waypoint seven now?" beside "… a point seven");
+    * ``contested``: it moves the drone and another beam nearly as confident
+      (:data:`CONTESTED_RATIO`) heard words that do not read as the same commands, even
+      snapped ("Please turn right." beside "Please don't right.", "Head to marker eight"
+      beside "Head to marker, I"): the words that fly were in doubt ("Fly to marker at
+      eleven." beside "Fly to marker 11." is no doubt: both read marker 11);
+    * ``opposite``: a beam, even a weak one (:data:`OPPOSITE_RATIO`), reads the opposite
+      direction ("Climb immediately." beside "Landing immediately.").
+    """
+    if not chosen.commands:
+        return ""
+    if chosen.snap_distance > 0:
+        return "snap"
+    mine = {d for c in chosen.commands if (d := direction(c)) is not None}
+    moves = any(c.get("action") in MOTION for c in chosen.commands)
+    asr = chosen.asr_confidence  # the other beams are measured against it
+    why = ""
+    for r in readings:
+        if r.heard == chosen.heard or r.agrees(chosen.commands):
+            continue
+        s = r.snapped
+        theirs = s.commands if s is not None and s.complete else []
+        if theirs and s is not None and s.distance == 0 and r.asr >= RIVAL_RATIO * asr:
+            return "rival"
+        if (
+            moves
+            and r.asr >= CONTESTED_RATIO * asr
+            and not (s is not None and s.complete and same_commands(s.commands, chosen.commands))
+        ):
+            why = why or "contested"
+        if r.asr >= OPPOSITE_RATIO * asr and any(
+            opposite(d) in mine for c in theirs if (d := direction(c)) is not None
+        ):
+            return "opposite"
+    return why

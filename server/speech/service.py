@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,8 +15,9 @@ from server.speech import model as model_mod
 from server.speech import window
 from server.speech.audio import Samples, read_wav
 from server.speech.errors import ModelError, SpeechError
+from server.speech.gaps import GapLog
 from server.speech.pool import DecoderPool
-from server.speech.recognizer import BEAMS, Recognition, Recognizer
+from server.speech.recognizer import BEAMS, THRESHOLD, Recognition, Recognizer
 
 log = logging.getLogger("uav_console.speech")
 
@@ -31,14 +34,20 @@ class SpeechConfig:
     max_streams: int = 8  # browser streams open at once
     window_s: float = 0.0  # shortest encoder window; 0: the recogniser's (server.speech.window)
     beams: int = 0  # 0: the recogniser's (server.speech.recognizer.BEAMS)
+    threshold: float = THRESHOLD  # the dialog's confidence threshold: doubtful readings under it
+    gap_log: Path | None = None  # grammar gaps (server.speech.gaps); None: not logged
 
 
 class SpeechService:
     """Loads the recogniser once and runs recognitions on a bounded pool."""
 
-    def __init__(self, config: SpeechConfig, nlu: NLU) -> None:
+    def __init__(
+        self, config: SpeechConfig, nlu: NLU, clock: Callable[[], float] = time.time
+    ) -> None:
         self.config = config
         self.nlu = nlu
+        self.clock = clock
+        self.gaps = GapLog(config.gap_log) if config.gap_log is not None else None
         self.workers = config.workers or model_mod.default_workers()
         self.pool: DecoderPool | None = None
         self.recognizer: Recognizer | None = None
@@ -63,6 +72,7 @@ class SpeechService:
             self.nlu,
             window_s=self.config.window_s or window.MIN_S,
             beams=self.config.beams or BEAMS,
+            threshold=self.config.threshold,
         )
         return self.recognizer
 
@@ -113,14 +123,18 @@ class SpeechService:
     async def recognize(
         self, samples: Samples, *, guided: bool = True, state: str | None = None
     ) -> Recognition:
-        """Recognise 16 kHz samples on the pool.
+        """Recognise 16 kHz samples on the pool (a whole utterance: its grammar gap, if any, is
+        logged; the stream's speculative decodes are not).
 
         Raises:
             ModelError: no model; Busy: the pool is full.
         """
         recognizer = await self.ready()
         assert self.pool is not None
-        return await self.pool.run(recognizer.recognize, samples, guided=guided, state=state)
+        rec = await self.pool.run(recognizer.recognize, samples, guided=guided, state=state)
+        if rec.gap and self.gaps is not None:
+            await asyncio.to_thread(self.gaps.record, rec, self.clock())
+        return rec
 
     async def recognize_wav(self, data: bytes, *, state: str | None = None) -> Recognition:
         """Decode a WAV file (raises AudioError subclasses) and recognise it."""

@@ -15,6 +15,16 @@ first, until the NLU understands the whole sentence:
 The total cost is the snap distance; the recogniser's confidence is multiplied by
 ``exp(-distance)``, so a transcript that had to be bent far enough falls under the dialog
 manager's threshold and the operator is asked to repeat (Settings.confidence_threshold).
+
+A snap is a guess: the recogniser reads it back ("Did you say …?"), never flies it as heard
+(server.speech.recognizer.doubt). Two guesses are not even offered, since one "yes" would fly
+them:
+
+* an emergency (motors cut): a sentence with more emergencies than the transcript as heard is
+  no candidate ("Y'all left by 30 degrees" is not "kill left by 30 degrees");
+* the opposite direction: an edit that turns a heard direction word into its opposite
+  ("ascend" into "descend"), or bends away a heard direction word in a sentence that then flies
+  the opposite way ("climb down" into "climb 10"), makes no candidate.
 """
 
 from __future__ import annotations
@@ -36,6 +46,21 @@ from server.speech.vocabulary import Vocabulary
 from server.tasks.objects import KNOWN_KINDS
 
 Command = dict[str, Any]
+# The word sets of mappings.xml whose labels are directions (a move's, a turn's or a climb's).
+DIRECTION_SETS = (
+    "DIRECTION", "SIDE", "ROTATION", "UP_VERB", "DOWN_VERB", "FORWARD_VERB", "BACK_VERB",
+)  # fmt: skip
+_OPPOSITE = {
+    "up": "down",
+    "down": "up",
+    "left": "right",
+    "right": "left",
+    "forward": "backward",
+    "backward": "forward",
+}
+# Words of actions that move the drone one way without a direction slot.
+_ACTION_SENSES = {"land": "down", "landing": "down"}
+_ACTION_DIRECTION = {"land": "down", "takeoff": "up"}
 # Margin (in snap-cost units, one unit ~ one word replaced by an unrelated one) at which a
 # runner-up reading leaves a snap 1 - 1/e of its confidence: a runner-up 0.02 further (a
 # letter) leaves 0.33, 0.1 further 0.86, 0.2 further 0.98. Chosen on bench/speech.py's 72-clip
@@ -56,6 +81,11 @@ class Snapped:
     # How much further the nearest sentence meaning something else is (runner-up cost minus
     # ``distance``); inf when none was found within the budget, or when nothing was bent.
     margin: float = math.inf
+
+    @property
+    def whole_as_heard(self) -> bool:
+        """The grammars read the transcript whole without a single edit."""
+        return self.complete and self.distance == 0.0 and bool(self.commands)
 
     @property
     def factor(self) -> float:
@@ -95,6 +125,7 @@ class Snapper:
         self._words = sorted(w for w in vocab.words if len(w) > 1)
         self._keys = [_key(w) for w in self._words]
         self._near = functools.lru_cache(maxsize=4096)(self._nearest)
+        self._senses = _senses(nlu)
 
     def nearest(self, word: str) -> tuple[tuple[str, float], ...]:
         """Up to ``neighbours`` vocabulary words near ``word`` (nearest first), with cost."""
@@ -124,6 +155,7 @@ class Snapper:
         heard = Snapped(text, first.normalised, 0.0, (), first.commands, _complete(first))
         if heard.complete or not first.normalised:
             return heard
+        emergencies = _emergencies(first.commands)
         tokens = first.normalised.split()
         positions = _positions(tokens, first.unparsed + _unknown_objects(first))
         options: list[list[tuple[str, float]]] = []
@@ -153,18 +185,65 @@ class Snapper:
             interp = self.nlu.parse(sentence, state)
             if not _complete(interp):
                 continue
+            if not self._allowed(edits, interp.commands, emergencies):
+                continue  # an emergency or the opposite way: never a reading
             if best is None:
                 best = Snapped(
                     text, interp.normalised, cost, tuple(edits), interp.commands, complete=True
                 )
                 budget = min(budget, 0)  # from here on, runner_up_attempts more parses at most
-            elif _same(interp.commands, best.commands):
+            elif same_commands(interp.commands, best.commands):
                 continue
             else:
                 return replace(best, margin=cost - best.distance)
         return best if best is not None else heard
 
-        return heard
+    def sense(self, word: str) -> frozenset[str]:
+        """The directions ``word`` means in the grammars (empty for most words)."""
+        return self._senses.get(word, frozenset())
+
+    def _allowed(
+        self, edits: list[tuple[str, str]], commands: list[Command], emergencies: int
+    ) -> bool:
+        """False when the edits make a sentence a snap may never make: more emergencies than
+        heard, or a heard direction turned into its opposite."""
+        if _emergencies(commands) > emergencies:
+            return False
+        flown = {d for c in commands if (d := direction(c)) is not None}
+        for heard, used in edits:
+            # "ascend" -> "descend"; "climb down" -> "climb 10" (the heard "down" bent away)
+            lost = {o for d in self.sense(heard) if (o := _OPPOSITE.get(d)) is not None}
+            if lost & (self.sense(used) | flown):
+                return False
+        return True
+
+
+def opposite(direction: str) -> str | None:
+    """The opposite of a direction label (up/down, left/right, forward/backward), else None."""
+    return _OPPOSITE.get(direction)
+
+
+def _senses(nlu: NLU) -> dict[str, frozenset[str]]:
+    """Each single word of the direction sets (and "land") -> the directions it means."""
+    out: dict[str, set[str]] = {w: {d} for w, d in _ACTION_SENSES.items()}
+    for name in DIRECTION_SETS:
+        ws = nlu.grammar.sets.get(name)
+        for word, label in ws.labels.items() if ws else ():
+            if " " not in word and label in _OPPOSITE:
+                out.setdefault(word, set()).add(label)
+    return {w: frozenset(d) for w, d in out.items()}
+
+
+def direction(command: Command) -> str | None:
+    """Which way a command flies the drone, when it has one way."""
+    way = command.get("direction")
+    if isinstance(way, str):
+        return way
+    return _ACTION_DIRECTION.get(str(command.get("action")))
+
+
+def _emergencies(commands: list[Command]) -> int:
+    return sum(1 for c in commands if c.get("action") == "emergency")
 
 
 def _key(word: str) -> str:
@@ -173,7 +252,7 @@ def _key(word: str) -> str:
     return (jellyfish.metaphone(word) or word).replace("0", "F")
 
 
-def _same(a: list[Command], b: list[Command]) -> bool:
+def same_commands(a: list[Command], b: list[Command]) -> bool:
     """Whether two command lists would fly the same (key order aside)."""
     return json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
 

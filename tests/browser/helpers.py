@@ -51,6 +51,8 @@ SPEECH_STANDIN = """
   }
   window.SpeechRecognition = StandInRecognition;
   window.webkitSpeechRecognition = StandInRecognition;
+  // A browser recogniser that works on this device: the Recogniser setting's "auto" uses it.
+  try { localStorage.setItem("uavc.browserSpeech", "works"); } catch (e) { /* opaque origin */ }
   const synth = {
     speaking: false, pending: false, paused: false,
     speak(u) { state.spoken.push(u.text); },

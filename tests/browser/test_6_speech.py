@@ -150,7 +150,12 @@ def open_page(chromium: Any, srv: TlsServer, wav: Path, viewport: dict[str, int]
 
 def hold_mic_and_fly(chromium: Any, srv: TlsServer, wav: Path, viewport: dict[str, int]) -> Any:
     browser, page, errors = open_page(chromium, srv, wav, viewport)
-    # Push-to-talk: hold the microphone while the fake device plays the command.
+    hold_mic(page)
+    return browser, page, errors
+
+
+def hold_mic(page: Any) -> None:
+    """Push-to-talk: hold the microphone while the fake device plays the command."""
     mic = page.locator("#mic")
     mic.scroll_into_view_if_needed()
     box = mic.bounding_box()
@@ -160,7 +165,6 @@ def hold_mic_and_fly(chromium: Any, srv: TlsServer, wav: Path, viewport: dict[st
     page.wait_for_function("document.body.dataset.listening === 'server'")  # the mic is live
     page.wait_for_timeout(3200)
     page.mouse.up()
-    return browser, page, errors
 
 
 def test_phone_over_https_holds_the_microphone_and_the_drone_takes_off(
@@ -235,6 +239,78 @@ def test_phone_over_https_holds_the_microphone_and_the_drone_takes_off(
         assert page.evaluate("document.body.dataset.listening") == "server"
         page.uncheck("#handsfree")
         page.wait_for_function("document.body.dataset.listening === ''")
+        assert errors == []
+    finally:
+        own.close()
+        tls_server.http.post("/api/v1/drones/uav1/land")
+
+
+FALLBACK = "this console's offline recogniser listens instead"
+
+
+def test_auto_listens_offline_and_leaves_a_failing_browser_recogniser_saying_so_once(
+    browser: Any, tls_server: TlsServer, tmp_path: Path
+) -> None:
+    """`auto` (the Recogniser setting's default) listens with this console's recogniser unless
+    the browser's is known to work on this device; Chromium here has the Web Speech API and no
+    service behind it (it fails with "audio-capture" or "network"): the page switches to the
+    offline recogniser, says so once, and the next press flies."""
+    wav = synthesise(tmp_path / "takeoff.wav", "take off", voice="en-us", speed=150, pad_s=1.0)
+    subprocess.run(["sox", str(wav), str(tmp_path / "fake.wav"), "pad", "0", "4"], check=True)
+    ok, last, _ = wait_until(tls_server.truth, lambda t: not t["flying"], 30.0)
+    assert ok, last  # an earlier test's landing is over
+    own = launch(browser.browser_type, tls_server, tmp_path / "fake.wav")
+    try:
+        ctx = own.new_context(
+            viewport={"width": 1280, "height": 800}, service_workers="block", bypass_csp=True
+        )
+        page = ctx.new_page()
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(tls_server.url())
+        page.wait_for_selector("#conn[data-state='open']", timeout=20_000)
+        page.select_option("#recognizer", "auto")
+        assert page.evaluate("document.body.dataset.recognizer") == "server"
+        assert "offline" in page.inner_text("#recognizer-label")
+        # A pilot with the lease, over HTTPS, with a microphone: hands-free is there.
+        page.wait_for_function("!document.getElementById('handsfree').disabled")
+        assert page.inner_text("#handsfree-why") == ""
+        # The browser's recogniser once returned text on this device: auto picks it.
+        page.evaluate("localStorage.setItem('uavc.browserSpeech', 'works')")
+        page.reload()
+        page.wait_for_selector("#conn[data-state='open']", timeout=20_000)
+        page.wait_for_function("document.body.dataset.recognizer === 'browser'")
+        assert "browser" in page.inner_text("#recognizer-label")
+        # Hands-free says why it is off with the browser's recogniser.
+        assert page.is_disabled("#handsfree")
+        assert "this console's recogniser" in page.inner_text("#handsfree-why")
+        page.click("#mic")  # a tap: the browser's recogniser starts here and fails
+        page.wait_for_function("document.body.dataset.recognizer === 'server'", timeout=20_000)
+        assert page.evaluate("localStorage.getItem('uavc.browserSpeech')") == "failed"
+        dialog = "document.getElementById('dialog').textContent"
+        page.wait_for_function(f"{dialog}.includes({FALLBACK!r})")
+        assert page.evaluate("document.body.dataset.listening") == ""
+        assert not page.is_disabled("#handsfree")
+        # Hold the microphone: the offline recogniser hears the command and the drone flies.
+        hold_mic(page)
+        try:
+            page.wait_for_function(
+                "[...document.querySelectorAll('#dialog .msg-user')]"
+                ".some(e => /spoken/.test(e.textContent) && /takeoff/.test(e.textContent))",
+                timeout=60_000,
+            )
+        except Exception as exc:
+            raise AssertionError(tls_server.why(page)) from exc
+        ok, last, _ = wait_until(tls_server.truth, lambda t: t["flying"] and t["z"] > 0.5, 30.0)
+        assert ok, (last, errors, tls_server.why(page))
+        assert page.evaluate(f"{dialog}.split({FALLBACK!r}).length - 1") == 1  # said once
+        # An observer is told why hands-free is off.
+        watcher = ctx.new_page()
+        watcher.goto(tls_server.url(OBSERVER))
+        watcher.wait_for_selector("#conn[data-state='open']", timeout=20_000)
+        watcher.wait_for_function("document.getElementById('handsfree-why').textContent !== ''")
+        assert "observers" in watcher.inner_text("#handsfree-why")
+        assert watcher.is_disabled("#handsfree")
         assert errors == []
     finally:
         own.close()

@@ -382,3 +382,58 @@ async def test_no_alarms_before_the_drone_first_answers() -> None:
     rig.flight.snap = replace(rig.flight.snap, link_ok=False)
     rig.run(1.0)
     assert [r["level"] for r in rig.replies] == ["alert"]
+
+
+async def test_a_spoken_emergency_heard_doubtfully_in_flight_hovers_and_asks() -> None:
+    """An emergency cuts the motors: in flight a spoken one is honoured only when heard as one;
+    heard doubtfully the drone hovers at once and the operator is asked."""
+    rig = Rig()
+    await rig.dm.handle_utterance("take off")
+    rig.run(2.1)
+    await rig.dm.handle_utterance("go to marker 1 then marker 2")
+    res = await rig.dm.handle_utterance("Cut the motors.", confidence=0.4, source="speech")
+    assert not res.accepted
+    assert rig.flight.log[-1] == ("preempt", {"action": "hover"})
+    assert ("preempt", {"action": "emergency"}) not in rig.flight.log
+    assert res.reply.startswith('Hovering. Did you say "cut motors"?'), res.reply
+    assert "cuts the motors" in res.reply
+    assert res.commands == [{"action": "emergency"}]
+    assert res.expects == "confirm" and rig.store.rows[-1]["action"] == "hovered_asked"
+    res = await rig.dm.handle_utterance("Yes.", confidence=0.9, source="speech")
+    assert ("preempt", {"action": "emergency"}) in rig.flight.log
+    assert rig.dm.state is State.EMERGENCY
+
+
+@pytest.mark.parametrize("confidence", [0.05, 0.35, 0.55])
+async def test_an_emergency_under_its_bar_in_flight_hovers_whatever_the_confidence(
+    confidence: float,
+) -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off")
+    rig.run(2.1)
+    res = await rig.dm.handle_utterance("emergency", confidence=confidence, source="speech")
+    assert rig.flight.log[-1] == ("preempt", {"action": "hover"})
+    assert not res.accepted and "Did you say" in res.reply
+    res = await rig.dm.handle_utterance("no", source="speech", confidence=0.9)
+    assert ("preempt", {"action": "emergency"}) not in rig.flight.log
+
+
+async def test_an_emergency_heard_as_one_cuts_the_motors_at_once() -> None:
+    rig = Rig()
+    await rig.dm.handle_utterance("take off")
+    rig.run(2.1)
+    res = await rig.dm.handle_utterance("Kill the motors!", confidence=0.78, source="speech")
+    assert res.accepted and rig.flight.log[-1] == ("preempt", {"action": "emergency"})
+    # Typed, or from a button, an emergency is never questioned.
+    rig2 = Rig()
+    await rig2.dm.handle_utterance("take off")
+    rig2.run(2.1)
+    res = await rig2.dm.handle_utterance("emergency", confidence=0.1, source="text")
+    assert res.accepted and rig2.flight.log[-1] == ("preempt", {"action": "emergency"})
+
+
+async def test_a_doubtful_emergency_on_the_ground_does_not_hover() -> None:
+    rig = Rig()
+    res = await rig.dm.handle_utterance("emergency", confidence=0.4, source="speech")
+    assert not res.accepted and res.reply.startswith('Did you say "emergency"?')
+    assert rig.flight.log == []

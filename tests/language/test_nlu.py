@@ -567,3 +567,33 @@ def test_a_drone_named_before_a_waypoint_is_an_address() -> None:
         address = parse_address(said)
         assert address.names == ("uav2",), said
         assert _NLU.interpret(address.text) == [{"action": "goto", "waypoint": 3}], said
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        # Transcripts tiny.en wrote, word for word, for speech the grammars could not read.
+        (
+            "Hover for now and tell me your battery level.",
+            [{"action": "hover"}, {"action": "query", "item": "battery"}],
+        ),
+        ("Hover for now.", [{"action": "hover"}]),
+        ("Stay there for the moment.", [{"action": "hover"}]),
+        ("Hold on for a second.", [{"action": "hover"}]),
+        ("Hover for a bit.", [{"action": "hover"}]),
+        ("Y'all left by thirty degrees.", [{"action": "turn", "direction": "left", "angle": 30}]),
+        ("Yall right by 45 degrees.", [{"action": "turn", "direction": "right", "angle": 45}]),
+        ("You all left by 30 degrees.", [{"action": "turn", "direction": "left", "angle": 30}]),
+        ("Yaw left by 30 degrees.", [{"action": "turn", "direction": "left", "angle": 30}]),
+        ("Yaw right.", [{"action": "turn", "direction": "right"}]),
+    ],
+)
+def test_grammar_gaps_heard_in_speech(nlu: NLU, text: str, expected: list[dict]) -> None:
+    parsed = nlu.parse(text)
+    assert parsed.commands == expected and parsed.unparsed == (), parsed
+
+
+@pytest.mark.parametrize("text", ["Slow down.", "slow down a little", "Slow down, please."])
+def test_slow_down_is_not_a_descent(nlu: NLU, text: str) -> None:
+    # "slow" is a filler word ("fly forward slowly"): "slow down" read "down", a move down.
+    assert nlu.interpret(text) == []

@@ -307,7 +307,8 @@ class Console {
     // drone; observers cannot command at all.
     for (const id of ["btn-emergency", "btn-land", "btn-hover"]) $(id).disabled = observer;
     this.controls.setEnabled(can, !observer);
-    this.speech?.setAllowed(can); // hands-free too: the server refuses an observer's speech
+    const why = observer ? "observers watch only" : lostLease ? "another pilot holds the controls" : "";
+    this.speech?.setAllowed(can, why); // hands-free too: the server refuses an observer's speech
     $("takeover").hidden = !lostLease;
     document.body.dataset.role = this.role || "";
     document.body.dataset.connected = String(connected);

@@ -10,11 +10,15 @@ export class SpeechInput {
    * @param {{button: HTMLButtonElement, interim: HTMLElement}} els
    * @param {(text: string, confidence: number) => void} onFinal
    * @param {(text: string) => void} onNotice message for the operator (unsupported, errors)
+   * @param {(code: string) => boolean} [onError] told every engine error first (its
+   *   SpeechRecognitionErrorEvent code, or "start-failed"); true when it handled the error
+   *   (voice.js falls back to the offline recogniser), and no notice is shown
    */
-  constructor(els, onFinal, onNotice, win = window) {
+  constructor(els, onFinal, onNotice, win = window, onError = null) {
     this.els = els;
     this.onFinal = onFinal;
     this.onNotice = onNotice;
+    this.onError = onError;
     this.Recognition = recognitionClass(win);
     this.rec = null;
     this.listening = false;
@@ -50,6 +54,7 @@ export class SpeechInput {
     rec.onresult = (ev) => this.onResult(ev);
     rec.onerror = (ev) => {
       const why = ev.error || "error";
+      if (this.onError?.(why)) return;
       if (why === "no-speech") this.onNotice("I heard nothing. Press the microphone and speak.");
       else if (why === "not-allowed" || why === "service-not-allowed")
         this.onNotice("Microphone permission was refused. Allow it in the browser, or type instead.");
@@ -62,8 +67,10 @@ export class SpeechInput {
       this.setListening(true);
       this.els.interim.textContent = "Listening…";
     } catch (err) {
-      this.onNotice(`Speech recognition could not start: ${err.message || err}`);
       this.setListening(false);
+      if (!this.onError?.("start-failed")) {
+        this.onNotice(`Speech recognition could not start: ${err.message || err}`);
+      }
     }
   }
 

@@ -5,14 +5,21 @@
 // authenticated WebSocket to /api/v1/speech/stream, recognised offline on the console's machine
 // (faster-whisper); interim text while speaking; the final text goes down the same dialog path
 // as typed text (onFinal -> /console/utterance with source "speech" and its confidence).
-// `browser`: the Web Speech API (speech.js). `auto`: the browser's recogniser where it exists
-// and the browser is online (it is a cloud service), else the server's.
+// `browser`: the Web Speech API (speech.js). `auto`: the server's, unless the browser's is known
+// to work on this device (it has returned text here before; it is a cloud service, so also
+// online): Chromium offers the API everywhere and fails where it has no service ("network",
+// "audio-capture"). Any error of the browser's recogniser in `auto` switches to the server's
+// for good, and the page says so once.
 
 import { SpeechInput, recognitionClass } from "./speech.js";
 
 export const ENGINES = ["auto", "server", "browser"];
 const HOLD_MS = 350; // a press held longer than this is push-to-talk; shorter toggles
 const STORE_KEY = "uavc.recognizer";
+// "works" once the browser's recogniser returned text on this device, "failed" after an error.
+export const BROWSER_KEY = "uavc.browserSpeech";
+// Errors that say nothing against the engine: the operator stopped it, or said nothing.
+const NOT_FAILURES = new Set(["aborted", "no-speech"]);
 // After "end" the server answers within its decode time (~1 s here, seconds on a busy
 // laptop); past this the operator is told to repeat instead of waiting on silence.
 const ANSWER_TIMEOUT_MS = 20000;
@@ -23,7 +30,24 @@ const PAUSED = "Paused while the console speaks: press the microphone (M) to int
 
 export function chooseEngine(setting, win = window) {
   if (setting === "server" || setting === "browser") return setting;
-  return recognitionClass(win) && win.navigator.onLine !== false ? "browser" : "server";
+  const known = win.localStorage?.getItem(BROWSER_KEY) === "works";
+  return known && recognitionClass(win) && win.navigator.onLine !== false ? "browser" : "server";
+}
+
+/** The operator's words for a microphone that would not start (never the raw DOM message). */
+export function micProblem(err) {
+  switch (err?.name) {
+    case "NotAllowedError":
+    case "SecurityError":
+      return "permission was refused";
+    case "NotFoundError":
+    case "OverconstrainedError":
+      return "no microphone was found";
+    case "NotReadableError":
+      return "the microphone is in use by another program, or the system refused it";
+    default:
+      return "the browser's audio system failed";
+  }
 }
 
 export function streamUrl(loc, token, mode, lease) {
@@ -97,12 +121,7 @@ class ServerRecognizer {
       });
       // One AudioContext with the worklet loaded, kept (suspended) between utterances, so a
       // second press is live at once and its first syllable is not lost.
-      if (!this.ctx || this.ctx.state === "closed") {
-        this.ctx = new AudioContext();
-        await this.ctx.audioWorklet.addModule("/static/js/pcm-worklet.js");
-      }
-      await this.ctx.resume();
-      this.src = this.ctx.createMediaStreamSource(this.stream);
+      this.src = await this.connectSource(this.stream);
       if (!this.active) throw new DOMException("stopped before the microphone was live", "AbortError");
       this.node = new AudioWorkletNode(this.ctx, "pcm-downsampler");
       this.src.connect(this.node);
@@ -110,8 +129,8 @@ class ServerRecognizer {
       this.release();
       this.active = false;
       if (err && err.name === "AbortError") return false;
-      const why = err && err.name === "NotAllowedError" ? "permission was refused" : err.message || err;
-      this.opts.onNotice(`The microphone could not start (${why}). Type your command instead.`);
+      console.warn("microphone start failed", err);
+      this.opts.onNotice(`The microphone could not start (${micProblem(err)}). Type your command instead.`);
       return false;
     }
     this.awaiting = this.endOnOpen = false;
@@ -145,6 +164,25 @@ class ServerRecognizer {
     };
     this.opts.onState(true);
     return true;
+  }
+
+  /** The microphone as a source in the kept AudioContext; a context that cannot take it (a
+   *  closed or broken one, another sample rate) is replaced once. */
+  async connectSource(stream) {
+    for (let attempt = 0; ; attempt += 1) {
+      try {
+        if (!this.ctx || this.ctx.state === "closed") {
+          this.ctx = new AudioContext();
+          await this.ctx.audioWorklet.addModule("/static/js/pcm-worklet.js");
+        }
+        await this.ctx.resume();
+        return this.ctx.createMediaStreamSource(stream);
+      } catch (err) {
+        if (attempt > 0 || err?.name === "NotAllowedError") throw err;
+        this.ctx?.close().catch(() => {});
+        this.ctx = null;
+      }
+    }
   }
 
   onMessage(data) {
@@ -217,25 +255,22 @@ export class VoiceInput {
     const stored = win.localStorage?.getItem(STORE_KEY);
     const served = document.querySelector('meta[name="uavc-recognizer"]')?.content;
     this.setting = ENGINES.includes(stored) ? stored : ENGINES.includes(served) ? served : "auto";
-    this.browserFailed = false;
+    this.browserFailed = false; // auto: the browser's recogniser failed on this page
+    this.toldFallback = false;
+    this.deniedWhy = ""; // why this console may not speak commands now (setAllowed)
+    this.micWhy = ""; // why the microphone cannot be used here (checkMicrophone)
     this.pressedAt = 0;
     this.listening = false;
     this.allowed = true; // false for observers and pilots without the lease (setAllowed)
     this.browser = new SpeechInput(
       { button: document.createElement("button"), interim: els.interim },
-      opts.onFinal,
-      (notice) => {
-        // Chromium builds without Google's service (Debian's) have the API but no backend:
-        // in auto mode, fall back to the server for good.
-        if (this.setting === "auto" && /\(network\)|\(service-not-allowed\)/.test(notice)) {
-          this.browserFailed = true;
-          this.showEngine();
-          opts.onNotice("The browser's speech service is unreachable; using this console's offline recogniser.");
-          return;
-        }
-        opts.onNotice(notice);
+      (text, confidence) => {
+        win.localStorage?.setItem(BROWSER_KEY, "works");
+        opts.onFinal(text, confidence);
       },
+      opts.onNotice,
       win,
+      (code) => this.browserError(code),
     );
     const browserState = this.browser.setListening.bind(this.browser);
     this.browser.setListening = (on) => {
@@ -287,7 +322,57 @@ export class VoiceInput {
     if (els.handsfree) els.handsfree.addEventListener("change", () => this.onHandsfree());
     win.addEventListener("online", () => this.showEngine());
     win.addEventListener("offline", () => this.showEngine());
+    win.navigator.mediaDevices?.addEventListener?.("devicechange", () => this.checkMicrophone());
     this.showEngine();
+    this.checkMicrophone();
+  }
+
+  /**
+   * An error of the browser's recogniser (speech.js): in `auto`, switch to this console's
+   * offline recogniser for good and say so once; true when handled so.
+   */
+  browserError(code) {
+    if (NOT_FAILURES.has(code)) return false;
+    this.win.localStorage?.setItem(BROWSER_KEY, "failed");
+    if (this.setting !== "auto") return false; // the operator chose it: the error is shown
+    this.browserFailed = true;
+    this.setListening(false, "browser");
+    this.showEngine();
+    if (!this.toldFallback) {
+      this.toldFallback = true;
+      this.opts.onNotice(
+        `The browser's speech recognition failed (${code}); this console's offline recogniser listens instead. Press the microphone and speak again.`,
+      );
+    }
+    return true;
+  }
+
+  /** Whether this device has a microphone the page may use; the reason when not. */
+  async checkMicrophone() {
+    const win = this.win;
+    let why = "";
+    if (!win.isSecureContext) {
+      why = "the microphone needs a secure page: open the console's https:// address";
+    } else if (!win.navigator.mediaDevices?.getUserMedia) {
+      why = "this browser gives the page no microphone";
+    } else if (win.navigator.mediaDevices.enumerateDevices) {
+      try {
+        const devices = await win.navigator.mediaDevices.enumerateDevices();
+        if (!devices.some((d) => d.kind === "audioinput")) why = "no microphone is connected";
+      } catch {
+        /* unknown: getUserMedia will say */
+      }
+    }
+    this.micWhy = why;
+    this.showEngine();
+  }
+
+  /** Why hands-free cannot be switched on now, or "" when it can. */
+  handsfreeWhy() {
+    if (!this.allowed) return this.deniedWhy || "only the pilot holding the controls may speak commands";
+    if (this.micWhy) return this.micWhy;
+    if (this.engine !== "server") return "hands-free listens with this console's recogniser (Recogniser: server or auto)";
+    return "";
   }
 
   get engine() {
@@ -311,15 +396,23 @@ export class VoiceInput {
       this.els.label.textContent =
         engine === "server" ? "Speech: this console (offline)" : "Speech: the browser's (online)";
     }
-    if (this.els.handsfree) this.els.handsfree.disabled = engine !== "server" || !this.allowed;
+    if (this.els.handsfree) {
+      const why = this.handsfreeWhy();
+      this.els.handsfree.disabled = Boolean(why);
+      this.els.handsfree.title = why ? `Hands-free is unavailable: ${why}.` : "Listen continuously";
+      const note = document.getElementById("handsfree-why");
+      if (note) note.textContent = why ? `Hands-free unavailable: ${why}.` : "";
+    }
     // Over HTTPS with the console's own CA, offer its certificate so a phone can trust it once.
     const ca = document.getElementById("ca-download");
     if (ca) ca.hidden = this.win.location.protocol !== "https:";
   }
 
-  /** Whether this console may speak commands now; hands-free stops when it may not. */
-  setAllowed(allowed) {
+  /** Whether this console may speak commands now (``why``: the reason when not); hands-free
+   *  stops when it may not. */
+  setAllowed(allowed, why = "") {
     this.allowed = allowed;
+    this.deniedWhy = why;
     if (!allowed && this.listening) this.stop();
     this.showEngine();
   }
@@ -356,7 +449,7 @@ export class VoiceInput {
   start(mode) {
     if (this.engine === "browser") {
       this.browser.start();
-      this.setListening(true, "browser");
+      if (this.browser.listening) this.setListening(true, "browser");
       return;
     }
     this.server.mode = mode;
