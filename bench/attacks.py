@@ -28,9 +28,11 @@ Roles: no token (the transport caps frames before auth at 4 KB), observer (no pn
 frames and messages of at most 64 KB), pilot without the lease.
 
 Then: the attacks that reach a worker, with the pool's processes against threads (the GIL:
-``json.loads`` holds it for a whole call); the 16 MB pre-auth floods of issue 14 against the
-capped and the plain transport; and, outside the server, the per-row PNG decoder of before
-(rows sliced one by one in Python) against the linear one, at width 1 and 1000.
+``json.loads`` holds it for a whole call); the permessage-deflate attacks with the transport's
+inflation metered and not (``server.ws_guard.InflateLimits``); the 16 MB pre-auth floods of
+issue 14 against the capped and the plain transport; and, outside the server, the per-row PNG
+decoder of before (rows sliced one by one in Python) against the linear one, at width 1 and
+1000.
 
 Usage: ``python bench/attacks.py [--quick] [--rounds N] [--window S]``. Figures depend on the
 machine's load: compare rows of one run, not runs.
@@ -74,11 +76,15 @@ from server.rosbridge.encode import PNG_SIGNATURE, fragments, png_encode  # noqa
 from server.rosbridge.endpoint import make_router  # noqa: E402
 from server.security import Security, TokenStore  # noqa: E402
 from server.settings import Settings  # noqa: E402
-from server.ws_guard import preauth_capped_ws  # noqa: E402
+from server.ws_guard import InflateLimits, preauth_capped_ws  # noqa: E402
 
 HOST = "127.0.14.20"
 TICK_S = 0.005
 HEALTH_PERIOD_S = 0.01
+# permessage-deflate as websockets does it alone: no cap but the transport's, no pacing
+UNMETERED = InflateLimits(
+    max_message_bytes=1 << 40, per_turn_bytes=1 << 40, rate_bytes_per_s=1e15, burst_bytes=1e15
+)
 
 
 # -- frames --------------------------------------------------------------------------------------
@@ -192,7 +198,7 @@ def bomb_png() -> bytes:
 
 
 # -- the server under attack ----------------------------------------------------------------------
-def _serve(host: str, port: int, tmp: str, capped: bool, backend: str) -> None:
+def _serve(host: str, port: int, tmp: str, capped: bool, backend: str, metered: bool) -> None:
     """The server under attack, in its own process; see the module docstring."""
     settings = Settings(host=host, port=port, data_dir=Path(tmp))
     graph = Graph()
@@ -249,7 +255,9 @@ def _serve(host: str, port: int, tmp: str, capped: bool, backend: str) -> None:
         port=port,
         log_level="error",
         ws_max_size=64 << 20,  # as serve: 4 × the 16 MB frame limit
-        ws=preauth_capped_ws() if capped else "websockets-sansio",
+        ws=preauth_capped_ws(inflate=None if metered else UNMETERED)
+        if capped
+        else "websockets-sansio",
         ws_ping_interval=None,
     )
     uvicorn.Server(config).run()
@@ -275,13 +283,15 @@ class Target:
 
 
 @contextlib.contextmanager
-def server(tmp: Path, *, capped: bool = True, backend: str = "process") -> Iterator[Target]:
+def server(
+    tmp: Path, *, capped: bool = True, backend: str = "process", metered: bool = True
+) -> Iterator[Target]:
     with socket.socket() as s:
         s.bind((HOST, 0))
         port = int(s.getsockname()[1])
     tokens = TokenStore(tmp)  # the child loads the same token file
     proc = multiprocessing.get_context("spawn").Process(
-        target=_serve, args=(HOST, port, str(tmp), capped, backend), daemon=False
+        target=_serve, args=(HOST, port, str(tmp), capped, backend, metered), daemon=False
     )
     proc.start()
     assert proc.pid is not None
@@ -529,6 +539,12 @@ def main() -> int:
             t_idle, t_rows = asyncio.run(backend_rows(target, worker_cases, rounds, window_s))
         with server(Path(tmp)) as target:
             p_idle, p_rows = asyncio.run(backend_rows(target, worker_cases, rounds, window_s))
+        deflate_cases = [a for a in cases if a.compression == "deflate"]
+        metering = []
+        for metered in (True, False):
+            with server(Path(tmp), metered=metered) as target:
+                m_idle, m = asyncio.run(role_matrix(target, deflate_cases, rounds, window_s))
+                metering.append((metered, m_idle, m))
         flood_rows = []
         for capped in (True, False):
             with server(Path(tmp), capped=capped) as target:
@@ -560,6 +576,16 @@ def main() -> int:
         print(f"{'idle (baseline)':<36} {label:<8} {fmt(base, base)}")
         for row in rows:
             print(f"{row.name:<36} {label:<8} {fmt(row, base)}")
+    print(
+        "\npermessage-deflate: the transport's metered inflation (16 MiB a message, 1 MiB a turn "
+        "of the loop, 16 MiB/s) against websockets' own (each against its idle baseline)."
+    )
+    print(f"{'attack':<36} {'role':<16} {'inflation':<10} {HEAD}")
+    for metered, base, rows in metering:
+        label = "metered" if metered else "unmetered"
+        print(f"{'idle (baseline)':<36} {'':<16} {label:<10} {fmt(base, base)}")
+        for attack, role, row in rows:
+            print(f"{attack.name:<36} {role:<16} {label:<10} {fmt(row, base)}")
     print("\n16 MB frames before auth (issue 14): the transport's cap against uvicorn's plain one.")
     print(f"{'flood':<36} {'transport':<10} {HEAD}")
     for capped, base, row in flood_rows:
