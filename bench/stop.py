@@ -13,6 +13,13 @@ Rows (the idle row is the baseline of the ratios):
   web server SIGSTOPped   ``kill -STOP`` on ``serve`` just before the press (resumed after)
   door flood (no token)   attacker processes holding 16 connections each without a token on
                           the vehicle's door, refreshed every 1.5 s, from the page's address
+  attack mix              the door flood, plus observers sending the 1-pixel-wide 16 MB png
+                          frame (``bench/attacks.py``) to ``/rosbridge``, each the next as
+                          soon as the last is answered, plus
+                          no-token WebSocket connections to ``/rosbridge`` refreshed every 1.5 s
+
+Every row also polls ``GET /api/v1/health`` every 100 ms during its presses: its p95 is the
+web server's own answer time under that row's load.
 
 The press is ``page.mouse.down()`` on the button (the stop fires on pointerdown), so the time
 includes the DevTools round trip that delivers the press. Between presses the drone is reset
@@ -49,6 +56,9 @@ from drone.sim.probe import SimThread  # noqa: E402
 HOST = "127.0.26.1"
 SIM_ADDR = "127.0.26.31"
 TOKEN = "bench-stop-token"
+OBSERVER = "bench-stop-observer-token"
+PNG_ATTACKERS = 2
+NO_TOKEN_WS = 16
 CHROMIUM = os.environ.get("UAVC_CHROMIUM", "/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"]
 FLOOD_PROCS = 4
@@ -79,6 +89,7 @@ def serve(tmp: Path) -> Iterator[tuple[subprocess.Popen[bytes], int, httpx.Clien
     env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "PYTHONPATH": str(ROOT)}
     argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
     argv += ["--drone", SIM_ADDR, "--token", TOKEN, "--vehicles", "process"]
+    argv += ["--observer-token", OBSERVER]
     log = open(tmp / "serve.log", "wb")  # noqa: SIM115
     proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
     http = httpx.Client(
@@ -138,6 +149,104 @@ def flood(door_url: str) -> Iterator[None]:
             p.join(5)
 
 
+def _png_observer(host: str, port: int) -> None:
+    """One observer sending the frame of issue 26 finding 2 again and again, reading answers."""
+    import asyncio
+
+    import websockets
+
+    from bench.attacks import png_of_rows, png_op
+
+    frame = png_op(
+        png_of_rows(1, b'{"op": "call_service", "service": "/rosapi/topics"}', 16 << 20), "x"
+    )
+
+    async def attack() -> None:
+        url = f"ws://{host}:{port}/rosbridge?token={OBSERVER}"
+        while True:
+            try:
+                async with websockets.connect(url, max_size=None) as ws:
+                    while True:  # the next frame as soon as the last is answered
+                        await ws.send(frame)
+                        await ws.recv()
+            except Exception:  # refused or closed: connect again
+                await asyncio.sleep(0.1)
+
+    asyncio.run(attack())
+
+
+def _no_token_ws(host: str, port: int) -> None:
+    """WebSocket upgrades to /rosbridge without a token, held and refreshed every 1.5 s."""
+    request = (
+        f"GET /rosbridge HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
+        "Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+        "Sec-WebSocket-Version: 13\r\n\r\n"
+    ).encode()
+    while True:
+        held = []
+        for _ in range(NO_TOKEN_WS):
+            with contextlib.suppress(OSError):
+                s = socket.create_connection((host, port), timeout=1)
+                s.sendall(request)
+                held.append(s)
+        time.sleep(FLOOD_REFRESH_S)
+        for s in held:
+            with contextlib.suppress(OSError):
+                s.close()
+
+
+@contextlib.contextmanager
+def attack_mix(door_url: str, port: int) -> Iterator[None]:
+    procs = [
+        *(
+            mp.Process(target=_png_observer, args=(HOST, port), daemon=True)
+            for _ in range(PNG_ATTACKERS)
+        ),
+        mp.Process(target=_no_token_ws, args=(HOST, port), daemon=True),
+    ]
+    for p in procs:
+        p.start()
+    try:
+        with flood(door_url):
+            yield
+    finally:
+        for p in procs:
+            p.terminate()
+            p.join(5)
+
+
+class HealthPoller:
+    """``GET /api/v1/health`` every 100 ms on its own connection; answer times in seconds."""
+
+    def __init__(self, port: int) -> None:
+        import threading
+
+        self.port = port
+        self.times: list[float] = []
+        self.failed = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        with httpx.Client(base_url=f"http://{HOST}:{self.port}", timeout=30) as client:
+            while not self._stop.is_set():
+                t0 = time.monotonic()
+                try:
+                    client.get("/api/v1/health").raise_for_status()
+                    self.times.append(time.monotonic() - t0)
+                except httpx.HTTPError:
+                    self.failed += 1
+                self._stop.wait(max(0.0, 0.1 - (time.monotonic() - t0)))
+
+    def __enter__(self) -> HealthPoller:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self._stop.set()
+        self._thread.join(35)
+
+
 def reset(sim: SimThread, http: httpx.Client, lease: str) -> None:
     """Out of the emergency state (``reset`` needs the pilot lease: the page's, named)."""
     wait_for(lambda: sim.truth.emergency, "the emergency state", 30)
@@ -182,6 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load before: {os.getloadavg()} on {os.cpu_count()} cores (shared machine)")
     results: dict[str, list[float]] = {}
     roads: dict[str, dict[str, int]] = {}
+    health: dict[str, tuple[float, int]] = {}
     with (
         tempfile.TemporaryDirectory() as td,
         SimThread(SIM_ADDR) as sim,
@@ -202,6 +312,7 @@ def main(argv: list[str] | None = None) -> int:
         def run(label: str, before: Callable[[], None], after: Callable[[], None]) -> None:
             xs: list[float] = []
             by: dict[str, int] = {}
+            poller = HealthPoller(port).__enter__()
             for _ in range(trials):
                 page.evaluate("document.body.dataset.stop = ''")
                 before()
@@ -218,7 +329,9 @@ def main(argv: list[str] | None = None) -> int:
                 finally:
                     after()
                 reset(sim, http, lease)
+            poller.__exit__()
             results[label], roads[label] = xs, by
+            health[label] = (pct(poller.times, 95) if poller.times else float("nan"), poller.failed)
 
         nothing = lambda: None  # noqa: E731
         run("idle", nothing, nothing)
@@ -229,16 +342,18 @@ def main(argv: list[str] | None = None) -> int:
         )
         with flood(door_url):
             run(f"door flood ({FLOOD_PROCS}x{FLOOD_CONNS} no-token conns)", nothing, nothing)
+        with attack_mix(door_url, port):
+            run("attack mix (png + door + no-token floods)", nothing, nothing)
         browser.close()
     print(f"load after: {os.getloadavg()}")
     base = results["idle"]
     print(
         "| press -> AT*REF emergency bit            |   n |  p50 ms |  p99 ms |  max ms "
-        "| p50 / idle | p99 / idle | acked by"
+        "| p50 / idle | p99 / idle | acked by | /health p95 ms (failed)"
     )
     print(
         "|-----------------------------------------|-----|---------|---------|---------|"
-        "------------|------------|---------"
+        "------------|------------|----------|------------------------"
     )
     for label, xs in results.items():
         ms = [x * 1000 for x in xs]
@@ -248,7 +363,8 @@ def main(argv: list[str] | None = None) -> int:
         acked = ", ".join(f"{k} {v}" for k, v in sorted(roads[label].items()))
         print(
             f"| {label:<39} | {len(ms):>3} | {p50:7.1f} | {p99:7.1f} | {max(ms):7.1f} "
-            f"| {r50:10.2f} | {r99:10.2f} | {acked}"
+            f"| {r50:10.2f} | {r99:10.2f} | {acked} "
+            f"| {health[label][0] * 1000:.0f} ({health[label][1]})"
         )
     return 0
 
