@@ -687,7 +687,7 @@ class CentralTaskManager:
         for r in self._candidates():
             assert r.status is not None
             lead = self._lead(r, ms.mission.route)
-            if r.status.battery_pct < self._need_pct(ms, lead):
+            if not r.status.battery_known or r.status.battery_pct < self._need_pct(ms, lead):
                 continue
             key = (lead, -r.status.battery_pct)
             if best is None or key < (best[0], best[1]):
@@ -830,6 +830,11 @@ class CentralTaskManager:
         first charging drone will be ready; ``_run_mission`` resumes it when one is."""
         if not self.drones:
             return  # no drone has joined yet: still waiting
+        if any(
+            r.status is not None and not r.status.battery_known and r.role is not Role.LOST
+            for r in self.drones.values()
+        ):
+            return  # a drone's first battery reading is still to come: still waiting
         soonest = self._soonest_ready(ms, now)
         lost = [r.name for r in self.drones.values() if r.role is Role.LOST]
         if soonest is None and len(lost) == len(self.drones):

@@ -341,4 +341,5 @@ class LocalTaskManager:
             autonomous=self.autonomous,
             operator=self.operator,
             held=self.held,
+            battery_known=bool(getattr(s, "battery_known", True)),
         )

@@ -139,6 +139,7 @@ class LtmStatus:
     # what the drone's own safety holds it for, asking the operator ("navdata monitor (hover)":
     # a safety monitor's hover that waits for the operator to say), until the next plan
     held: str = ""
+    battery_known: bool = True  # navdata has carried a battery reading (else battery_pct is 0)
 
     @property
     def position(self) -> Enu:
@@ -182,6 +183,7 @@ class LtmStatus:
             autonomous=_str(d, "autonomous", ""),
             operator=_word(d, "operator"),
             held=_word(d, "held"),
+            battery_known=_bool(d, "battery_known", True),
         )
 
 

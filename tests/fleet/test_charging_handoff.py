@@ -204,3 +204,24 @@ def test_a_mission_whose_drones_are_all_lost_says_so() -> None:
     ctm.on_status(st, 10.5)  # heard again: back, and sent at once
     (sent,) = ctm.step(11.0)
     assert sent.drone == "uav1" and ctm.mission_info(mid)["state"] == "waiting"
+
+
+def test_a_drone_whose_battery_is_not_known_yet_is_waited_for() -> None:
+    """Before navdata has carried a battery reading the vehicle reports 0 %: the mission waits
+    for the reading, it does not stall on it, and flies once it comes."""
+    from server.fleet.geo import Enu
+    from server.fleet.messages import LtmStatus
+
+    ctm = CentralTaskManager()
+    mid = ctm.add_mission([Enu(10.0, 0.0, 5.0), Enu(10.0, 10.0, 5.0)], now=0.0).id
+    st = LtmStatus(
+        "uav1", 0.0, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, "DEFAULT", True, False,
+        Enu(0.0, 0.0, 0.0), battery_known=False,
+    )  # fmt: skip
+    ctm.on_status(st, 0.0)
+    assert ctm.step(0.5) == [] and ctm.mission_info(mid)["state"] == "waiting"
+    ctm.on_status(
+        LtmStatus.from_dict(st.to_dict() | {"battery_known": True, "battery_pct": 100.0}), 1.0
+    )
+    (sent,) = ctm.step(1.5)
+    assert sent.drone == "uav1"

@@ -292,17 +292,16 @@ def test_the_drones_own_safety_is_not_the_operator() -> None:
 
 
 def test_a_safety_monitors_landing_hands_the_post_to_another_drone() -> None:
-    """The battery monitor lands a patrolling drone whose battery fell off a cliff: the
-    mission is not paused by anyone; the other drone takes the route over."""
-    # the paper's 12-minute battery: its LTM's own reserve (a few percent) stays below the
-    # monitor's critical level (12 %), so the monitor acts first
-    exp = PatrolExperiment(PatrolConfig(drones=2, duration_s=75.0, swap_s=20.0))
+    """The battery monitor lands a patrolling drone at its critical level (12 %): the mission
+    is not paused by anyone; the other drone takes the route over. Both start at 22 % (the
+    paper's 12-minute battery, a 5 % threshold: each is above the mission's reserve), so the
+    first reaches 12 % on patrol a minute later; its LTM's own reserve (a few percent) lies
+    below the monitor's level, so the monitor acts first."""
+    exp = PatrolExperiment(PatrolConfig(drones=2, duration_s=120.0, threshold=0.05, swap_s=20.0))
+    for sim in exp.rig.sims:
+        sim.physics.battery.drain_to(22.0)
     _dialogs(exp)  # each drone's safety monitors, as the console runs them
-
-    def cliff(name: str, now: float) -> None:
-        exp.rig.sims[_index(name)].physics.battery.drain_to(10.0)
-
-    pilot = Pilot(exp, cliff)
+    pilot = Pilot(exp, lambda name, now: None)  # the operator does nothing
     exp.run()
     states = [s for _, s, _ in pilot.states]
     assert "paused" not in states, pilot.states
