@@ -436,6 +436,7 @@ class MavlinkVehicle:
             flying=t.armed and ctrl not in ("LANDED", "DEFAULT"),
             emergency=emergency,
             battery_pct=t.battery_pct if math.isfinite(t.battery_pct) else 0.0,
+            battery_known=math.isfinite(t.battery_pct),  # BATTERY_STATUS / SYS_STATUS came
             altitude_m=t.rel_alt_m if math.isfinite(t.rel_alt_m) else 0.0,
             x=pos[0],
             y=pos[1],

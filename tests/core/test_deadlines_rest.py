@@ -5,6 +5,7 @@ tests/isolation/test_deadlines.py.)"""
 
 from __future__ import annotations
 
+import re
 import time
 
 import httpx
@@ -21,7 +22,12 @@ async def test_late_rest_commands_are_not_flown_and_a_stop_is_never_held_back(
     late = f"{time.time() - 5.0:.3f}"
     r = await api.post("/api/v1/drones/uav1/takeoff", headers={"X-Command-Issued": late})
     assert r.status_code == 200 and r.json()["accepted"] is False, r.text
-    assert r.json()["detail"].startswith("Not flown: 'take off' reached the drone 5.")
+    # at least 5 s late; how much more depends on the machine's load, not on the rule
+    said = re.fullmatch(
+        r"Not flown: 'take off' reached the drone (\d+\.\d) s after you gave it \(deadline 2 s\)\.",
+        r.json()["detail"],
+    )
+    assert said is not None and float(said.group(1)) >= 5.0, r.json()["detail"]
     r = await api.post("/api/v1/command", json={"text": "take off", "issued": time.time() - 5})
     assert r.json()["accepted"] is False and r.json()["reply"].startswith("Not flown")
     r = await api.post(

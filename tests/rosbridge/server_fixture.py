@@ -60,7 +60,7 @@ def running_server(
     """``ws``: uvicorn's WebSocket implementation; by default the one ``serve`` uses (the
     transport's pre-auth frame cap, ``server.ws_guard``)."""
     settings_overrides = {
-        k: ctx_overrides.pop(k) for k in list(ctx_overrides) if hasattr(Settings, k)
+        k: ctx_overrides.pop(k) for k in list(ctx_overrides) if k in Settings.model_fields
     }
     host = str(settings_overrides.pop("host", "127.0.0.1"))
     port = free_port(host)

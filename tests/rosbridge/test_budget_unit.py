@@ -16,7 +16,7 @@ from typing import Any
 
 import cbor2
 import pytest
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from server.rosbridge import ops
@@ -191,6 +191,7 @@ def test_count_values_counts_every_value_and_key(obj: Any) -> None:
         assert count_values(obj, n - 1) > n - 1  # stops once over the limit
 
 
+@settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(JSON_VALUES)
 def test_the_text_bound_is_never_below_the_count(obj: Any) -> None:
     assert json_values_bound(json.dumps(obj)) >= exact_count(obj)
