@@ -216,7 +216,8 @@ def sample(seed: int, worlds: dict[str, World] | None = None) -> Sample:
         ok, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, rng.randint(60, 90)])
         assert ok
         frame = np.asarray(cv2.imdecode(buf, cv2.IMREAD_COLOR), np.uint8)
-    return Sample(seed, name, variant, pose, frame, _truth(renderer.visible(pose)))
+    # every thing with a pixel in view counts as there (naming it is not wrong)
+    return Sample(seed, name, variant, pose, frame, _truth(renderer.visible(pose, 0.0)))
 
 
 def samples(n: int, start: int = SEED_BASE) -> Iterator[Sample]:
