@@ -7,9 +7,10 @@ of the object covering most of the region when the region has that object's pain
 otherwise (a part in another paint, floor, sky). Then fits a one-hidden-layer network (ReLU,
 softmax) with full-batch Adam in numpy: seeded, single-threaded, exactly reproducible.
 
-    .venv/bin/python tools/train_scene_regions.py --scenes 3000 --out models/captioner/regions.json
+    .venv/bin/python tools/train_scene_regions.py --workers 2 --out models/captioner/regions.json
 
-About 6 minutes for 3000 scenes on one core (rendering and parsing dominate).
+8000 scenes (about 33 000 regions); rendering and parsing take a few minutes of CPU per
+thousand scenes, fitting a few more.
 """
 
 from __future__ import annotations
@@ -39,8 +40,9 @@ from server.captioner.scene import (  # noqa: E402
     parse,
 )
 
-TRAIN_SEED_BASE = 6_000_000
-"""Training scenes: a seed range of their own, disjoint from the held-out set (3 000 000+)."""
+TRAIN_SEED_BASES = (6_000_000, 6_020_000)
+"""Training scenes: seed ranges of their own (half the scenes from each, rendered in parallel
+with ``--workers 2``), disjoint from the held-out set (3 000 000+) and its tuning twin."""
 
 
 def collect(n: int, start: int) -> tuple[np.ndarray, np.ndarray]:
@@ -60,7 +62,7 @@ def collect(n: int, start: int) -> tuple[np.ndarray, np.ndarray]:
         done += 1
         frame = renderer.render(pose, frame=seed)
         if seed % 3 == 0:  # some frames through JPEG, as the video path delivers them
-            ok, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 60 + seed % 31])
+            _, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 60 + seed % 31])
             frame = cv2.imdecode(buf, cv2.IMREAD_COLOR)
         ids = renderer.render_ids(pose, WORK_W / frame.shape[1])
         assert ids.shape == (WORK_H, WORK_W)
@@ -131,12 +133,22 @@ def train(
     }
 
 
+def _without_cache(argv: list[str] | None) -> list[str]:
+    args = list(sys.argv[1:] if argv is None else argv)
+    while "--cache" in args:
+        i = args.index("--cache")
+        del args[i : i + 2]
+    return args
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("--scenes", type=int, default=3000)
-    ap.add_argument("--hidden", type=int, default=48)
-    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--scenes", type=int, default=8000)
+    ap.add_argument("--hidden", type=int, default=64)
+    ap.add_argument("--steps", type=int, default=1500)
+    ap.add_argument("--l2", type=float, default=0.003)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--workers", type=int, default=1, help="render the seed ranges in parallel")
     ap.add_argument("--out", type=Path, default=Path("models/captioner/regions.json"))
     ap.add_argument("--cache", type=Path, help="keep the rendered features here (npz)")
     args = ap.parse_args(argv)
@@ -145,24 +157,36 @@ def main(argv: list[str] | None = None) -> int:
         data = np.load(args.cache)
         x, y = data["x"], data["y"]
     else:
-        x, y = collect(args.scenes, TRAIN_SEED_BASE)
+        jobs = [(args.scenes // len(TRAIN_SEED_BASES), base) for base in TRAIN_SEED_BASES]
+        if args.workers > 1:
+            import multiprocessing
+
+            with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+                parts = pool.starmap(collect, jobs)
+        else:
+            parts = [collect(*job) for job in jobs]
+        x = np.concatenate([p[0] for p in parts])
+        y = np.concatenate([p[1] for p in parts])
         if args.cache is not None:
             np.savez_compressed(args.cache, x=x, y=y)
     assert x.shape[1] == N_FEATURES, (x.shape, N_FEATURES)
     counts = {KINDS[i]: int(c) for i, c in enumerate(np.bincount(y, minlength=len(KINDS)))}
-    print(f"{len(y)} regions from {args.scenes} scenes in {time.perf_counter() - t0:.0f} s: {counts}")
-    weights = train(x, y, args.hidden, args.steps, args.seed)
+    took = time.perf_counter() - t0
+    print(f"{len(y)} regions from {args.scenes} scenes in {took:.0f} s: {counts}")
+    weights = train(x, y, args.hidden, args.steps, args.seed, args.l2)
     out = {
         "format": "uav-console-scene-regions/1",
         "kinds": list(KINDS),
         "features": N_FEATURES,
         "trained": {
-            "command": " ".join(["tools/train_scene_regions.py", *(argv or sys.argv[1:])]),
+            # the features cache only saves rendering again: it is left out of the command
+            "command": " ".join(["tools/train_scene_regions.py", *_without_cache(argv)]),
             "scenes": args.scenes,
-            "seed_base": TRAIN_SEED_BASE,
+            "seed_bases": list(TRAIN_SEED_BASES),
             "regions": counts,
             "hidden": args.hidden,
             "steps": args.steps,
+            "l2": args.l2,
             "seed": args.seed,
         },
         **weights,

@@ -147,6 +147,7 @@ def evaluate(
 
 # -- descriptions against the simulator's truth (bench/describe.py) ----------------------------
 
+
 @dataclass(frozen=True)
 class Said:
     """One thing a description names: a kind (``marker`` included) or only a colour

@@ -108,7 +108,9 @@ def _truth(visible: list[Visible]) -> tuple[Truth, ...]:
 
 
 def _random_objects(world: World, rng: random.Random) -> tuple[SceneObject, ...]:
-    def make(i: int, kind: str, colour: str, x: float, y: float, z: float, yaw: float) -> SceneObject:
+    def make(
+        i: int, kind: str, colour: str, x: float, y: float, z: float, yaw: float
+    ) -> SceneObject:
         w, d, h = _SIZES[kind]
         s = rng.uniform(0.8, 1.25)
         size = (w * s, d, h * s) if kind in ("door", "window") else (w * s, d * s, h * s)

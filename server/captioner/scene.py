@@ -156,7 +156,7 @@ def _classify(
     d = np.linalg.norm(chroma[..., None, :] - _PROTO, axis=-1)
     logv = np.log(np.maximum(v, 1.0))
     d += _V_WEIGHT * np.abs(logv[..., None] - _V_EXPECT - _PROTO_LOGV)
-    labels = np.asarray(_PROTO_IDX, np.uint8)[np.argmin(d, axis=-1)]
+    labels: npt.NDArray[np.uint8] = np.asarray(_PROTO_IDX, np.uint8)[np.argmin(d, axis=-1)]
     grey = s < CHROMA_MIN
     labels[grey] = BACKGROUND
     labels[grey & (v < BLACK_V)] = BLACK
@@ -184,8 +184,9 @@ def warm_up() -> None:
 
 
 def _small(frame_bgr: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
-    small = cv2.resize(frame_bgr, (WORK_W, WORK_H), interpolation=cv2.INTER_AREA)
-    out: npt.NDArray[np.uint8] = cv2.medianBlur(small, 3)
+    """The frame at 320×180 (area average), 3×3 median-filtered against sensor noise."""
+    resized = cv2.resize(frame_bgr, (WORK_W, WORK_H), interpolation=cv2.INTER_AREA)
+    out: npt.NDArray[np.uint8] = np.asarray(cv2.medianBlur(resized, 3), np.uint8)
     return out
 
 
@@ -221,10 +222,13 @@ def region_features(
     box: tuple[int, int, int, int],
     area_px: int,
     outdoor: bool,
-    brightness: tuple[float, float] = (0.0, 0.0),
+    grey: npt.NDArray[np.uint8],
+    top: float,
 ) -> tuple[float, ...]:
-    """Shape, colour and surroundings of a region (the classifier's input); ``brightness``:
-    the region's median grey level and its ratio to the frame's brightest grey surfaces."""
+    """Shape, colour, brightness and surroundings of a region (the classifier's input).
+
+    ``grey``: the frame's grey levels at 320×180; ``top``: the level of its brightest grey
+    surfaces (a region's level against it tells white from grey under any exposure)."""
     x0, y0, x1, y1 = box  # exclusive x1, y1
     w, h = x1 - x0, y1 - y0
     feats: list[float] = [1.0 if colour == c else 0.0 for c in REGION_COLOURS]
@@ -243,14 +247,18 @@ def region_features(
         float(outdoor),
     ]
     # how the region's rows and columns are filled (a table top is wide and thin, a chair's
-    # legs leave its lower half sparse, a person's arms widen the middle)
+    # legs leave its lower part sparse, a person's arms widen the middle)
     sub = mask[y0:y1, x0:x1]
-    for a, b in ((0.0, 0.33), (0.33, 0.66), (0.66, 1.0)):
+    for k in range(_PROFILE_BINS):
+        a, b = k / _PROFILE_BINS, (k + 1) / _PROFILE_BINS
         rows = sub[int(a * h) : max(int(b * h), int(a * h) + 1)]
         feats.append(float(rows.mean()) if rows.size else 0.0)
-    for a, b in ((0.0, 0.33), (0.33, 0.66), (0.66, 1.0)):
+    for k in range(_PROFILE_BINS):
+        a, b = k / _PROFILE_BINS, (k + 1) / _PROFILE_BINS
         cols = sub[:, int(a * w) : max(int(b * w), int(a * w) + 1)]
         feats.append(float(cols.mean()) if cols.size else 0.0)
+    hu = cv2.HuMoments(cv2.moments(sub.astype(np.uint8), binaryImage=True)).ravel()
+    feats += [float(-np.sign(v) * np.log10(abs(v) + 1e-12)) / 10.0 for v in hu[:4]]
     hh, ww = max(h // 2, 2), max(w // 4, 1)
     zones = (
         (x0, y0 - hh, x1, y0),  # above
@@ -262,11 +270,20 @@ def region_features(
     for zone in zones:
         for cue in CUES:
             feats.append(_frac(labels, zone, _INDEX[cue]))
-    feats += [brightness[0] / 255.0, brightness[1]]
+    levels = grey[y0:y1, x0:x1][sub]
+    level = float(np.median(levels))
+    ring = grey[max(y0 - 3, 0) : y1 + 3, max(x0 - 3, 0) : x1 + 3]
+    feats += [
+        level / 255.0,
+        level / max(top, 1.0),
+        float(np.std(levels)) / 64.0,  # several faces in different light, or one flat face
+        (level - float(np.median(ring))) / 255.0,  # brighter or darker than its surroundings
+    ]
     return tuple(feats)
 
 
-N_FEATURES = len(REGION_COLOURS) + 12 + 6 + 5 * len(CUES) + 2
+_PROFILE_BINS = 5
+N_FEATURES = len(REGION_COLOURS) + 12 + 2 * _PROFILE_BINS + 4 + 5 * len(CUES) + 4
 
 
 class RegionClassifier:
@@ -362,12 +379,11 @@ def parse(
             x, y, w, h, a = (int(v) for v in stats[k])
             if a >= min_px:
                 regions.append((colour, comp == k, (x, y, x + w, y + h), a))
-    grey = cv2.cvtColor(smooth, cv2.COLOR_BGR2GRAY)
+    grey: npt.NDArray[np.uint8] = np.asarray(cv2.cvtColor(smooth, cv2.COLOR_BGR2GRAY), np.uint8)
     flat = (labels == BACKGROUND) & (cv2.dilate(cv2.Canny(grey, 12, 30), kernel) == 0)
     n, comp, stats, _ = cv2.connectedComponentsWithStats(flat.astype(np.uint8), connectivity=4)
     background = labels == BACKGROUND
     top = float(np.percentile(grey[background], 99)) if background.any() else 255.0
-    levels: dict[int, tuple[float, float]] = {}
     for k in range(1, n):
         x, y, w, h, a = (int(v) for v in stats[k])
         if a < min_px or a > GREY_MAX_FRAC * WORK_W * WORK_H:
@@ -375,12 +391,8 @@ def parse(
         mask = comp == k
         level = float(np.median(grey[mask]))
         colour = "white" if level >= WHITE_RATIO * top else "grey"
-        levels[len(regions)] = (level, level / max(top, 1.0))
         regions.append((colour, mask, (x, y, x + w, y + h), a))
-    feats = [
-        region_features(labels, m, c, b, a, outdoor, levels.get(i, (0.0, 0.0)))
-        for i, (c, m, b, a) in enumerate(regions)
-    ]
+    feats = [region_features(labels, m, c, b, a, outdoor, grey, top) for c, m, b, a in regions]
     probs = classifier.probs(feats) if classifier is not None and feats else None
     out: list[tuple[Region, npt.NDArray[np.bool_]]] = []
     for i, (colour, mask, box, area) in enumerate(regions):
@@ -390,12 +402,12 @@ def parse(
         bearing = math.degrees(math.atan2(_CAMERA.cx - u, _CAMERA.fx))
         side = "left" if bearing > SIDE_DEG else "right" if bearing < -SIDE_DEG else "ahead"
         region = Region(
-                colour=colour,
-                side=side,
-                area=area / (WORK_W * WORK_H),
-                box=box,
-                bearing_deg=bearing,
-                features=feats[i],
+            colour=colour,
+            side=side,
+            area=area / (WORK_W * WORK_H),
+            box=box,
+            bearing_deg=bearing,
+            features=feats[i],
             probs=tuple(float(p) for p in probs[i]) if probs is not None else (),
         )
         out.append((region, mask))

@@ -118,9 +118,7 @@ async def describe_timed(
         return early, None
     assert isinstance(captioner, Captioner)
     try:
-        caption = await captioner.run(
-            lambda: ground(captioner, frame, beam=beam, markers=markers)
-        )
+        caption = await captioner.run(lambda: ground(captioner, frame, beam=beam, markers=markers))
     except BadFrame as exc:
         return f"I cannot describe this camera image: {exc}.", None
     return caption.text, caption.ms
