@@ -7,14 +7,14 @@ the nearest paint in hue–saturation (brightness only breaks ties between paint
 such as orange and brown); near-grey pixels are dark ("black") or background (walls, ceiling,
 light panels). Floor tan, grass and sky are named too, so that they are never taken for objects.
 
-Connected regions of one paint are the candidate objects. A region's kind comes from a small
-classifier (``RegionClassifier``: softmax regression on its shape and on the paints around it,
-e.g. skin above and dark blue below a shirt is a person, a brown stem below green is a tree),
-trained on simulator renders by ``tools/train_scene_regions.py``; it may also say "none" (a part
-of another object, floor, sky). Nothing here reads the simulator's scene: only pixels.
-
-White and grey paints are not separated from the room's near-white walls and grey dado, so
-white and grey objects are not found here (the captioner may still name them, without colour).
+Candidate objects are the connected regions of one paint, and the flat faces (bounded by
+edges) of the grey background that are not wall-sized: white or grey by their brightness
+against the frame's brightest grey surfaces. A region's kind comes from a small classifier
+(:class:`RegionClassifier`, one hidden layer) on its shape (box, fill, row and column profiles,
+Hu moments), brightness and the paints around it (skin above and dark blue below a shirt is a
+person, a brown stem below green is a tree), trained on simulator renders by
+``tools/train_scene_regions.py``; it may also say "none" (a wall face, a part of another
+object). Nothing here reads the simulator's scene: only pixels.
 """
 
 from __future__ import annotations
@@ -287,7 +287,8 @@ N_FEATURES = len(REGION_COLOURS) + 12 + 2 * _PROFILE_BINS + 4 + 5 * len(CUES) + 
 
 
 class RegionClassifier:
-    """Softmax regression over standardised region features (weights from a JSON file)."""
+    """One hidden ReLU layer and a softmax over standardised region features (weights from
+    ``regions.json``)."""
 
     def __init__(
         self,
