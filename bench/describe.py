@@ -42,7 +42,9 @@ TARGETS = {"kind P": 0.90, "kind R": 0.80, "colour": 0.90, "absent": 0.02}
 
 
 def truth_items(s: Sample) -> list[TruthItem]:
-    return [TruthItem(t.kind, t.colour, t.side, t.area, t.marker_id, t.mentionable) for t in s.truth]
+    return [
+        TruthItem(t.kind, t.colour, t.side, t.area, t.marker_id, t.mentionable) for t in s.truth
+    ]
 
 
 def run(

@@ -24,7 +24,9 @@ def test_said_reads_kinds_colours_sides_and_marker_ids() -> None:
         Said("person", "orange", "right"),
         Said("marker", None, "ahead", 4),
     ]
-    assert _said("There is a light blue window far off on the left. Markers 4, 5 and 7 in view.") == [
+    assert _said(
+        "There is a light blue window far off on the left. Markers 4, 5 and 7 in view."
+    ) == [
         Said("window", "light blue", "left"),
         Said("marker", None, None, 4),
         Said("marker", None, None, 5),
@@ -37,7 +39,9 @@ def test_said_reads_kinds_colours_sides_and_marker_ids() -> None:
     assert _said("Nothing in view.") == []
 
 
-def _t(kind: str, colour: str | None, side: str = "ahead", area: float = 0.05, mid: int | None = None) -> TruthItem:
+def _t(
+    kind: str, colour: str | None, side: str = "ahead", area: float = 0.05, mid: int | None = None
+) -> TruthItem:
     return TruthItem(kind, colour, side, area, mid, area >= (0.005 if kind == "marker" else 0.012))
 
 
