@@ -19,9 +19,12 @@ from fastapi import APIRouter
 
 from drone.sim.world import World, load_world
 from server.audit_trail import AuditTrail
-from server.captioner import BadFrame, Captioner, CaptionerUnavailable, describe_frame
-from server.captioner.grounding import ground_marker_ids
-from server.captioner.service import NOTHING, load_captioner, unavailable_text
+from server.captioner import (
+    Captioner,
+    CaptionerUnavailable,
+    describe_timed,
+)
+from server.captioner.service import load_captioner, unavailable_text
 from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
 from server.dialog.addressing import parse_address
 from server.dialog.manager import UTTERANCE, DialogManager
@@ -255,7 +258,8 @@ class Runtime:
         return {str(c["action"]) for c in self.interpret(parse_address(text).text, None)}
 
     async def describe(self, drone: str) -> tuple[str, float | None]:
-        """Caption ``drone``'s latest camera frame: (sentence, ms), or (why not, None).
+        """Describe ``drone``'s latest camera frame in words the image supports: (sentence, ms),
+        or (why not, None); marker ids from the frame and the vehicle's perception.
 
         Raises:
             LookupError: no such drone.
@@ -264,14 +268,8 @@ class Runtime:
         if stack is None:
             raise LookupError(f"no drone '{drone}'")
         frame = stack.driver.latest_frame
-        if isinstance(self._captioner, Captioner) and frame is not None:
-            seen = stack.seen_markers()
-            try:
-                caption = await self._captioner.describe(frame)
-            except BadFrame as exc:
-                return f"I cannot describe this camera image: {exc}.", None
-            return ground_marker_ids(caption.text or NOTHING, seen), caption.ms
-        return await describe_frame(self._captioner, frame), None
+        seen = stack.seen_markers() if frame is not None else []
+        return await describe_timed(self._captioner, frame, markers=seen)
 
     async def _describe_service(self, args: dict[str, Any]) -> dict[str, Any]:
         name = str(args.get("drone") or self.default_drone)

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import cv2
 import numpy as np
@@ -26,11 +26,15 @@ from server.captioner.vocab import Vocab, detokenize
 if TYPE_CHECKING:
     import onnxruntime as ort
 
+    from server.captioner.scene import RegionClassifier
+
 ENCODER_FILE = "encoder.onnx"
 DECODER_FILE = "decoder.onnx"
 VOCAB_FILE = "vocab.json"
+REGIONS_FILE = "regions.json"  # optional: the scene-region classifier (server/captioner/scene.py)
 DEFAULT_BEAM = 3
 DEFAULT_MAX_LEN = 40
+_T = TypeVar("_T")
 MAX_FRAME_SIDE = 8192  # larger frames are refused rather than resized (memory)
 
 
@@ -56,6 +60,7 @@ class Captioner:
         input_hw: tuple[int, int],
         state_size: int,
         clock: Callable[[], float] = time.perf_counter,
+        regions: RegionClassifier | None = None,
     ) -> None:
         self._encoder = encoder
         self._decoder = decoder
@@ -63,6 +68,7 @@ class Captioner:
         self.input_hw = input_hw
         self.state_size = state_size
         self._clock = clock
+        self.regions = regions  # grounds descriptions in the image when present
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="captioner")
 
     @classmethod
@@ -70,6 +76,8 @@ class Captioner:
         """Open and check ``encoder.onnx``, ``decoder.onnx`` and ``vocab.json`` in ``model_dir``.
 
         Runs the encoder on a black image and one decoder step to verify shapes end to end.
+        ``regions.json`` (the scene-region classifier that checks captions against the image)
+        is optional; without it descriptions are the captioner's sentences, marker ids grounded.
 
         Raises:
             CaptionerUnavailable: a file is missing or corrupt, or the models break the contract.
@@ -94,7 +102,18 @@ class Captioner:
         decoder = _session(root / DECODER_FILE, options)
         input_hw = _check_encoder(encoder)
         state_size = _check_decoder(decoder)
-        captioner = cls(encoder, decoder, vocab, input_hw=input_hw, state_size=state_size)
+        regions = None
+        if (root / REGIONS_FILE).is_file():
+            from server.captioner.scene import RegionClassifier, warm_up
+
+            warm_up()
+            try:
+                regions = RegionClassifier.load(root / REGIONS_FILE)
+            except (ValueError, KeyError, TypeError) as exc:
+                raise CaptionerUnavailable(f"{REGIONS_FILE} is unusable: {exc}") from exc
+        captioner = cls(
+            encoder, decoder, vocab, input_hw=input_hw, state_size=state_size, regions=regions
+        )
         captioner._smoke_test()
         return captioner
 
@@ -157,6 +176,11 @@ class Captioner:
         return await loop.run_in_executor(
             self._executor, lambda: self.caption(frame, beam=beam, max_len=max_len)
         )
+
+    async def run(self, fn: Callable[[], _T]) -> _T:
+        """Run ``fn`` in the captioner's worker thread (one at a time, the loop keeps running)."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._executor, fn)
 
     def close(self) -> None:
         """Stop the worker thread (pending calls finish first)."""

@@ -20,7 +20,7 @@ from server.captioner import (
     load_captioner,
 )
 from server.captioner.search import beam_search, log_softmax
-from server.captioner.service import NO_FRAME
+from server.captioner.service import NO_FRAME, ground
 from server.graph import Graph
 from tests.captioner.conftest import MODEL_DIR, chair_scene
 from tools.make_caption_dataset import SEED_BASE, make_sample
@@ -151,7 +151,7 @@ async def test_describe_runs_in_the_worker_thread(
     assert seen and seen[0].startswith("captioner") and seen[0] != threading.current_thread().name
     assert c.text == captioner.caption(held_out[3]).text
     texts = await asyncio.gather(*(describe_frame(captioner, f) for f in held_out[:3]))
-    assert texts == [captioner.caption(f).text for f in held_out[:3]]
+    assert texts == [ground(captioner, f).text for f in held_out[:3]]  # checked against the image
     assert texts == [describe_frame_sync(captioner, f) for f in held_out[:3]]
 
 
@@ -191,6 +191,6 @@ async def test_describe_service_on_the_real_graph(
 
     graph.advertise_service("/console/describe", "uav_console/Describe", handler)
     got = await graph.call_service("/console/describe", {"drone": "uav1"}, timeout=30.0)
-    assert got["text"] == captioner.caption(jpeg.tobytes()).text and got["ms"] > 0
+    assert got["text"] == ground(captioner, jpeg.tobytes()).text and got["ms"] > 0
     nothing = await graph.call_service("/console/describe", {"drone": "uav9"}, timeout=30.0)
     assert nothing == {"drone": "uav9", "text": NO_FRAME, "ms": None}
