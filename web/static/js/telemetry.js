@@ -32,6 +32,8 @@ export class TelemetryPanel {
     this.onFlight = () => {};
     /** Called with (text, level, lost) on every link render. */
     this.onLink = () => {};
+    /** Called on every navdata message: a word from the vehicle (freshness.js). */
+    this.onNavdataSeen = () => {};
     this.timer = setInterval(() => this.renderLink(), 250);
     this.renderLink();
   }
@@ -41,6 +43,7 @@ export class TelemetryPanel {
     this.navTimes.push(t);
     while (this.navTimes.length && t - this.navTimes[0] > 2) this.navTimes.shift();
     this.lastNav = t;
+    this.onNavdataSeen();
 
     const battery = Number(msg.batteryPercent);
     const meter = this.$("battery-meter");
