@@ -196,7 +196,6 @@ class Console {
     this.recordings = new RecordingsMenu(
       this.api,
       { pill: $("rec"), menu: $("recordings"), list: $("recordings-list") },
-      this.token,
     );
     this.recordings.start();
     this.ros.connect();

@@ -9,9 +9,10 @@
 //
 // What stale does, the same for every panel that registered the source: the panel gets
 // data-stale="true" (console.css greys it), its badge says "3.2 s old", and the source that
-// stopped (not the ones behind it) raises an alarm that names it; when it speaks again the
-// alarm says so and stays until acknowledged, like every alarm (alerts.js). A source never
-// heard from is "waiting", not stale: a drone without a camera raises nothing.
+// stopped (not the ones behind it) raises an alarm that names it, once it has been silent long
+// enough for a stopped upstream to show too (so the alarm names the cause); when it speaks
+// again the alarm says so and stays until acknowledged, like every alarm (alerts.js). A source
+// never heard from is "waiting", not stale: a drone without a camera raises nothing.
 
 export const STALE_MIN_S = 1.0;
 export const STALE_PERIODS = 2.5;
@@ -179,13 +180,23 @@ export class Freshness {
     for (const [name, s] of this.sources) this.judge(name, s, now);
   }
 
+  /** Whether ``name`` has been silent long enough that a stale upstream would show by now: a
+   *  camera's last frame may precede its vehicle's last navdata by a few tens of ms, and the
+   *  alarm must name the vehicle then, not the camera. */
+  causeKnown(name, now) {
+    const s = this.sources.get(name);
+    const up = s.spec.upstream ? this.sources.get(s.spec.upstream) : null;
+    const wait = staleAfterS(s.spec.periodS) + (up ? staleAfterS(up.spec.periodS) : 0);
+    return this.age(name, now) > wait;
+  }
+
   judge(name, s, now) {
     if (!this.alarms) return;
     const key = this.alarmKey(name);
     const own = !this.suspended && this.ownStale(name, now);
     const upstream = s.spec.upstream ? this.staleAge(s.spec.upstream, now) !== null : false;
     const age = ageWords(this.age(name, now));
-    if (own && !s.alarmed && !upstream && s.spec.alarm) {
+    if (own && !s.alarmed && !upstream && s.spec.alarm && this.causeKnown(name, now)) {
       s.alarmed = true;
       s.staleSince = s.heardAt;
       this.alarms.raise(key, s.spec.alarm(age, s.why));
