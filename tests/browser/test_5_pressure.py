@@ -19,7 +19,6 @@ from server.store import AuditLog
 from tests.browser.conftest import (
     PILOT,
     ROOT,
-    SCREENSHOTS,
     ConsolePage,
     ServerProcess,
     _server,
@@ -247,7 +246,6 @@ def test_stop_stays_put_and_visible_at_every_size(browser: Any, srv: ServerProce
     try:
         page = cp.page
         page.wait_for_timeout(1500)  # telemetry, map and voice check settle
-        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         for name, (w, h) in SIZES.items():
             page.set_viewport_size({"width": w, "height": h})
             page.evaluate("window.scrollTo(0, 0)")
@@ -265,7 +263,6 @@ def _check_the_stop_at(page: Any, name: str, w: int, h: int) -> None:
     x, y, bw, bh = before
     assert x >= 0 and y >= 0 and x + bw <= w and y + bh <= h, (name, before)
     assert bw >= 44 and bh >= 44, (name, before)
-    page.screenshot(path=str(SCREENSHOTS / f"size-{name}.png"))
     # The dialog grows; the page scrolls to its end: the stop does not move.
     page.evaluate(
         """() => { for (let i = 0; i < 40; i++)
