@@ -202,7 +202,7 @@ def test_a_layout_made_for_flying_at_five_sizes(
         page.set_viewport_size({"width": 1280, "height": 800})
         pilot.page.click("#btn-takeoff")
         ok, truth, _ = wait_until(srv.truth, lambda t: position(t)[2] > 0.5, timeout_s=30)
-        assert ok, truth
+        assert ok, (truth, pilot.page.text_content("#banner"), pilot.page.text_content("#dialog"))
         type_command(pilot.page, "patrol markers 0 and 1")
         page.wait_for_function(
             "document.getElementById('sb-task-v').textContent.startsWith('patrol')",
@@ -222,8 +222,10 @@ def test_a_layout_made_for_flying_at_five_sizes(
             timeout=10.0,
         )
         assert r.status_code == 200, r.text
-        page.wait_for_selector("#alert-banner:not([hidden])", timeout=15_000)
-        assert "attery" in (page.text_content("#alert-text") or "")
+        page.wait_for_function(
+            "document.getElementById('alert-text').textContent.includes('attery')",
+            timeout=15_000,
+        )
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         for name, (w, h) in SIZES.items():
             after = at_size(page, w, h)
