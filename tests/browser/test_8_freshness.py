@@ -7,7 +7,8 @@ an alarm that names the source (and only that one), then say when it is back:
 
 - the camera: its encoder waits, as a hung camera would;
 - the vehicle process: SIGSTOP (frozen) with the drone hovering, then SIGKILL (serve restarts it);
-- the web server: SIGSTOP (the page's socket stays open, nothing comes).
+- the web server: SIGSTOP (the page's socket stays open, nothing comes), also with a fleet,
+  whose list greys out with it.
 
 ``UAVC_SKIP_BROWSER=1`` skips it where Chromium is missing.
 """
@@ -24,7 +25,7 @@ from typing import Any
 import pytest
 
 from drone.sim.probe import ProbeSim, SimThread
-from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS
+from tests.browser.conftest import ServerProcess, open_console
 from tests.isolation.conftest import HOST, PILOT, Served, serve, wait_for
 from tests.loopback import for_worker
 
@@ -43,7 +44,7 @@ VIEW = """() => {
   const badge = (s) => shown(q(s + ' .age-badge'));
   const grey = (s) => getComputedStyle(q(s)).filter.includes('grayscale');
   return {
-    sources: document.body.dataset.stale || '',
+    sources: document.body.dataset.stale ?? null,
     telemetry: stale('#telemetry-panel'), telemetryAge: badge('#telemetry-panel'),
     map: stale('#map-panel'), mapAge: badge('#map-panel'),
     camera: stale('#camera-panel'), cameraSays: shown(q('#camera-empty')),
@@ -75,27 +76,17 @@ class CameraSim(ProbeSim):
 
 
 @pytest.fixture(scope="module")
-def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[SimThread, Served, Any]]:
-    from playwright.sync_api import sync_playwright
-
+def rig(
+    tmp_path_factory: pytest.TempPathFactory, browser: Any
+) -> Iterator[tuple[SimThread, Served, Any]]:
     tmp: Path = tmp_path_factory.mktemp("freshness")
     sim = SimThread(SIM_ADDR)
     camera = CameraSim(SIM_ADDR, "indoor", seed=1)
     sim.sim = camera
     try:
-        with (
-            sim,
-            serve(tmp, SIM_ADDR, extra=("--vehicles", "process")) as srv,
-            sync_playwright() as pw,
-        ):
+        with sim, serve(tmp, SIM_ADDR, extra=("--vehicles", "process")) as srv:
             srv.wait_vehicle()
-            browser = pw.chromium.launch(
-                executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
-            )
-            try:
-                yield sim, srv, browser
-            finally:
-                browser.close()
+            yield sim, srv, browser
     finally:
         camera.camera_on.set()  # a waiting encoder thread must end
 
@@ -249,5 +240,36 @@ def test_a_frozen_server_greys_the_whole_page_and_names_the_server(
         text, over = alarm(v, "fresh:server")  # type: ignore[misc]
         assert over and text.startswith("The server answers again")
         assert v["pill"] == "Connected" and v["statusSays"] == ""
+    finally:
+        ctx.close()
+
+
+def test_a_fleet_list_greys_out_with_a_frozen_server(
+    browser: Any, fleet_server: ServerProcess
+) -> None:
+    """Two drones (inline): the fleet list and every panel grey out while the server is frozen;
+    the fleet status behind it is greyed, not blamed."""
+    ctx, cp = open_console(browser, fleet_server.url())
+    page = cp.page
+    proc = fleet_server.proc
+    assert proc is not None
+    try:
+        page.wait_for_selector("#fleet-list li", timeout=15_000)
+        until(page, lambda v: v["sources"] == "", "every source fresh")
+        assert page.get_attribute("#fleet-list", "data-stale") == "false"
+        os.kill(proc.pid, signal.SIGSTOP)
+        try:
+            v = until(page, lambda v: "fleet" in (v["sources"] or "").split(), "fleet stale")
+            assert page.get_attribute("#fleet-list", "data-stale") == "true"
+            assert v["map"] and v["telemetry"] and v["statusbar"]
+            assert page.eval_on_selector(
+                "#fleet-list", "l => getComputedStyle(l).filter.includes('grayscale')"
+            )
+            v = until(page, lambda v: alarm(v, "fresh:server") is not None, "the server named")
+            assert alarm(v, "fresh:fleet") is None
+        finally:
+            os.kill(proc.pid, signal.SIGCONT)
+        until(page, lambda v: v["sources"] == "", "every source fresh again", 60)
+        assert page.get_attribute("#fleet-list", "data-stale") == "false"
     finally:
         ctx.close()
