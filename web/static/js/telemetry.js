@@ -102,6 +102,7 @@ export class TelemetryPanel {
     }
     if (msg.detail) text += ` — ${msg.detail}`;
     setText(this.$("task"), text);
+    this.$("task").title = text;
     const failed = /fail|abort|refus/i.test(msg.state || "");
     setLevel(this.$("m-task"), failed ? "warn" : "ok");
   }
@@ -133,6 +134,7 @@ export class TelemetryPanel {
     if (loop.stalls) bits.push(`${loop.stalls} stalls`);
     if (loop.stalled) bits.push("stalled");
     setText(el, bits.join(" · ") || "running");
+    el.title = el.textContent;
     const level =
       loop.stalled || (loop.p99_ms ?? 0) > LOOP_ALERT_MS
         ? "alert"
