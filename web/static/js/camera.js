@@ -5,6 +5,8 @@
 import { ageText } from "./freshness.js";
 import { setText, stampSeconds } from "./util.js";
 
+const PAUSED_MS = 1000; // no frame for this long: paused (fps() says 0 from then on too)
+
 export class CameraPanel {
   /**
    * @param {{img: HTMLImageElement, empty: HTMLElement, fps: HTMLElement, latency: HTMLElement}} els
@@ -94,7 +96,8 @@ export class CameraPanel {
     } else if (stale) {
       setText(this.els.empty, `Picture ${ageText(this.staleAge)}`);
       this.els.empty.hidden = false;
-    } else if (fps === 0) {
+    } else if (performance.now() - (this.frameTimes.at(-1) ?? 0) > PAUSED_MS) {
+      // A replay paused (the page's rule is off then): the picture is the recording's.
       setText(this.els.empty, "Video paused");
       this.els.empty.hidden = false;
     } else {

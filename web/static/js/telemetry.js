@@ -118,8 +118,12 @@ export class TelemetryPanel {
       this.onFlight(this.flight, num(status.battery_pct));
     }
     document.body.dataset.droneEmergency = this.emergency ? "1" : "";
-    // Navdata over rosbridge is the live source; the 1 Hz REST snapshot fills in without it.
-    if (this.lastNav === null || this.now() - this.lastNav > 1.5) this.fromSnapshot(status);
+    // Navdata over rosbridge is the live source; the 1 Hz REST snapshot fills in without it,
+    // but never with a snapshot older than what is shown (a vehicle process gone silent, a lost
+    // link: the server answers with its last word, the panel keeps the newer one, greyed).
+    const silent = this.lastNav === null || this.now() - this.lastNav > 1.5;
+    const fresh = status.link_ok !== false && status.vehicle?.connected !== false;
+    if (silent && fresh) this.fromSnapshot(status);
     const loop = loopHealth(status);
     const el = this.$("loop");
     if (!loop) {
