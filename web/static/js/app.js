@@ -26,6 +26,7 @@ import { StatusBar, flightLabel, lostWhileAway } from "./status.js";
 import { STOP_ACTIONS, StopSender, stopText } from "./stops.js";
 import { VoiceInput } from "./voice.js";
 import { TelemetryPanel } from "./telemetry.js";
+import { TrainingPanel } from "./training.js";
 import { droneTopic, quaternionYaw, stampSeconds } from "./util.js";
 
 const $ = (id) => document.getElementById(id);
@@ -139,6 +140,14 @@ class Console {
       describe: () => this.describe(),
     });
     $("describe").addEventListener("click", () => this.describe());
+    // Simulator faults for operator training: a pilot with the lease, a simulated drone, live.
+    this.training = new TrainingPanel($("training"), this.api, {
+      drone: () => this.drone,
+      role: () => this.role,
+      lease: () => this.haveLease,
+      replay: () => document.body.dataset.replay === "1",
+      say: (text) => this.dialog.addSystem(text),
+    });
 
     $("input-form").addEventListener("submit", (ev) => {
       ev.preventDefault();
@@ -312,6 +321,7 @@ class Console {
     document.body.dataset.role = this.role || "";
     document.body.dataset.connected = String(connected);
     if (observer) $("text-input").placeholder = "Observers watch only";
+    this.training?.refresh();
   }
 
   /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over. */
@@ -419,6 +429,7 @@ class Console {
       /* private mode */
     }
     this.controls.releaseAll(true);
+    this.training?.refresh();
     for (const s of this.droneSubs) s.unsubscribe();
     this.camera.reset();
     this.map.setSelected(name);
@@ -532,6 +543,7 @@ class Console {
       // A drone in its own vehicle process has a safety door: stops that no web traffic delays.
       this.learnDoor(this.drone, status.vehicle);
       this.telemetry.onDroneStatus(status);
+      this.training.setSimulated(this.drone, status.simulated);
       this.map.onSnapshot(this.drone, status);
       this.map.setLocalised(this.drone, status.localised);
       this.status.setTask(status.task || null);
