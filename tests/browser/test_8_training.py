@@ -30,9 +30,7 @@ def test_training_panel_link_loss_and_wind_gust(browser: Any, own_server: Server
         assert observer.page.is_hidden("#training")
 
         page.click("#btn-takeoff")
-        ok, truth, _ = wait_until(
-            server.truth, lambda t: is_flying(t) and position(t)[2] > 0.6, 30
-        )
+        ok, truth, _ = wait_until(server.truth, lambda t: is_flying(t) and position(t)[2] > 0.6, 30)
         assert ok, truth
         page.click("#training > summary")
 
@@ -47,8 +45,9 @@ def test_training_panel_link_loss_and_wind_gust(browser: Any, own_server: Server
         status = page.inner_text("#training .training-status")
         assert "link loss for 3 s on uav1" in status
         # the link comes back on its own; the drone hovered meanwhile (its watchdog)
-        ok, truth, _ = wait_until(lambda: server.api("GET", "/drones/uav1").json(),
-                                  lambda d: d["link_ok"], 20)
+        ok, truth, _ = wait_until(
+            lambda: server.api("GET", "/drones/uav1").json(), lambda d: d["link_ok"], 20
+        )
         assert ok, truth
         page.click("#alert-ack")
 

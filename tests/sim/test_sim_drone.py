@@ -235,8 +235,14 @@ def test_lost_markers_fault_hides_every_marker_from_the_camera_for_its_duration(
     m = world.markers[0]
     # 1.5 m in front of the marker, at its height, facing it
     nx, ny = float(m.normal[0]), float(m.normal[1])
-    pose = (m.position[0] + 1.5 * nx, m.position[1] + 1.5 * ny, m.position[2], 0.0, 0.0,
-            math.atan2(-ny, -nx))
+    pose = (
+        m.position[0] + 1.5 * nx,
+        m.position[1] + 1.5 * ny,
+        m.position[2],
+        0.0,
+        0.0,
+        math.atan2(-ny, -nx),
+    )
     detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
 
     def seen() -> set[int]:
