@@ -25,7 +25,7 @@ from pydantic import BaseModel, Field
 from server.api.deps import RoleDep
 from server.recorder.index import drones_of, iso
 from server.recorder.mcapfile import Recording
-from server.recorder.replay import Played, Player, Timeline
+from server.recorder.replay import Played, Player, Timeline, flight_start_ns
 from server.runtime import DroneStack
 from server.settings import Settings
 
@@ -173,7 +173,7 @@ def create_replay_app(
     settings = base.with_(drone="none", recorder=False, world=world)
     app = create_app(settings)
     runtime = app.state.runtime
-    timeline = Timeline(played, speed)
+    timeline = Timeline(played, speed, start_ns=flight_start_ns(recording))
     names = drones_of(list(recording.topics)) or ["uav1"]
     # A drone's topics are prefixed /NAME in a fleet and bare for a single drone (DESIGN §4).
     prefixes = {
