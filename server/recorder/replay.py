@@ -178,6 +178,7 @@ class Player:
         self._clock = clock
         self._wake = asyncio.Event()
         self.latest: dict[str, dict[str, Any]] = {}
+        self.latest_ns: dict[str, int] = {}  # when (recording time) each was logged
 
     def now(self) -> float:
         return self._clock() if self._clock is not None else time.monotonic()
@@ -192,6 +193,7 @@ class Player:
     def publish(self, items: list[Played]) -> None:
         for p in items:
             self.latest[p.topic] = p.msg
+            self.latest_ns[p.topic] = p.t_ns
             try:
                 self.graph.publish(p.topic, p.msg, type=p.type)
             except Exception as exc:  # a topic the live graph types differently

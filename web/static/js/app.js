@@ -21,7 +21,7 @@ import {
   roleFromStatus,
 } from "./session.js";
 import { RecordingsMenu } from "./recordings.js";
-import { ReplayBar } from "./replay.js";
+import { ReplayBar, pageReplay, replayApiBase, replayRosbridgeUrl } from "./replay.js";
 import { StatusBar, flightLabel, lostWhileAway } from "./status.js";
 import { STOP_ACTIONS, StopSender, stopText } from "./stops.js";
 import { VoiceInput } from "./voice.js";
@@ -42,8 +42,16 @@ class Console {
     this.clockOffset = 0; // server time - local time, seconds
     // Commands say when they were issued, on the server's clock (deadlines: docs/deadlines.md).
     this.serverNow = () => Date.now() / 1000 + this.clockOffset;
-    this.api = new Api("/api/v1", this.token, this.serverNow);
-    this.ros = new RosbridgeClient(rosbridgeUrl(window.location, this.token));
+    // ?replay=FLIGHT: a recorded flight, read-only, on a graph of its own (replay.js).
+    this.replayId = pageReplay();
+    const base = this.replayId ? replayApiBase(this.replayId) : "/api/v1";
+    this.api = new Api(base, this.token, this.serverNow);
+    this.liveApi = this.replayId ? new Api("/api/v1", this.token) : this.api;
+    this.ros = new RosbridgeClient(
+      this.replayId
+        ? replayRosbridgeUrl(window.location, this.token, this.replayId)
+        : rosbridgeUrl(window.location, this.token),
+    );
     this.serverSpeaking = 0; // replies the server's voice is playing now (serverSpeak)
     this.drones = [];
     this.fleet = false;
@@ -104,6 +112,8 @@ class Console {
       lastReply: $("last-reply"),
     }, {
       serverSpeak: (text) => this.serverSpeak(text),
+      now: () => this.pageNow(),
+      replay: () => Boolean(this.replayId),
       // "Did you say …?" answered by a button: to the drone that asked (dialog.js addAnswers).
       onAnswer: (answer, drone) => this.sendUtterance(answer, "button", 1, drone || this.drone),
     });
@@ -181,11 +191,16 @@ class Console {
       return;
     }
     await this.loadServerInfo();
-    // `uav-console replay`: a timeline bar; a seek clears the trails drawn so far.
-    this.replay = new ReplayBar(this.api, $("replay-bar"), () => this.map.clearTrails());
-    this.replay.start();
+    // A replay: a timeline bar; a seek clears the trails and the dialog shown so far.
+    this.replay = new ReplayBar(this.api, $("replay-bar"), () => {
+      this.map.clearTrails();
+      this.dialog.clear();
+    });
+    this.replay.start().then((on) => {
+      if (on && this.replayId) document.title = `uav-console — replay of ${this.replayId}`;
+    });
     this.recordings = new RecordingsMenu(
-      this.api,
+      this.liveApi,
       { pill: $("rec"), menu: $("recordings"), list: $("recordings-list") },
       this.token,
     );
@@ -411,6 +426,7 @@ class Console {
     const list = names.length ? names : ["uav1"];
     this.drones = list;
     this.fleet = list.length > 1;
+    this.dialog.setFleet(this.fleet);
     const sel = $("drone-select");
     sel.replaceChildren(...list.map((n) => new Option(n, n)));
     $("drone-select-wrap").hidden = !this.fleet;
@@ -452,7 +468,23 @@ class Console {
     document.body.dataset.drone = name;
   }
 
+  /** Unix seconds of "now" as the page shows times: the recording's in a replay. */
+  pageNow() {
+    const recorded = this.replay?.active ? this.replay.now() : null;
+    return recorded ?? Date.now() / 1000 + this.clockOffset;
+  }
+
   subscribeGlobal() {
+    if (this.replayId) {
+      // What the operator said, as recorded (live, the page shows its own as it sends them).
+      this.ros.subscribe("/console/utterance", TOPIC_TYPES["/console/utterance"], (m) =>
+        this.dialog.addUtterance(m.text || "", {
+          source: m.source,
+          confidence: m.confidence,
+          drone: m.drone,
+        }),
+      );
+    }
     this.ros.subscribe("/console/reply", TOPIC_TYPES["/console/reply"], (m) => {
       this.dialog.onReply(m);
       this.onAlarm(m);
@@ -516,7 +548,9 @@ class Console {
     if (!alarm || (this.fleet && m.drone && m.drone !== this.drone && m.level !== "alert")) return;
     const who = this.fleet && m.drone ? `${m.drone}: ` : "";
     if (alarm === "link") this.alertBanner.drop(`${m.drone}:link-rest`); // one banner per event
-    if (m.level === "alert" || m.level === "warn") this.alertBanner.raise(`${m.drone}:${alarm}`, `${who}${m.text}`);
+    // Stamped when the drone raised it (a replay's: the recording's time, not today's).
+    const at = new Date((stampSeconds(m.header?.stamp) ?? this.pageNow()) * 1000);
+    if (m.level === "alert" || m.level === "warn") this.alertBanner.raise(`${m.drone}:${alarm}`, `${who}${m.text}`, at);
     else this.alertBanner.clear(`${m.drone}:${alarm}`, `${who}${m.text}`);
   }
 
@@ -551,7 +585,8 @@ class Console {
       // The dialog's link alarm says it first; this covers a server without one (a replay).
       const ansSaidIt = this.alertBanner.active.some((x) => x.key === `${this.drone}:link`);
       if (status.link_ok === false && !ansSaidIt) {
-        this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`);
+        const at = new Date(this.pageNow() * 1000);
+        this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`, at);
       } else if (status.link_ok === true) {
         this.alertBanner.clear(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is back.`);
       }
@@ -573,7 +608,7 @@ class Console {
       this.flash("Not connected: the command was not sent.", "alert");
       return false;
     }
-    this.dialog.addUtterance(text, { source, confidence });
+    this.dialog.addUtterance(text, { source, confidence, drone: drone || "" });
     return true;
   }
 
@@ -651,7 +686,7 @@ class Console {
   async goToMarker(id) {
     const text = `go to marker ${id}`;
     this.supersedeStops();
-    this.dialog.addUtterance(text, { source: "map" });
+    this.dialog.addUtterance(text, { source: "map", drone: this.drone || "" });
     try {
       const res = await this.api.command(text, { drone: this.drone || undefined });
       // The reply also arrives on /console/reply; show REST-only refusals here.
