@@ -20,6 +20,7 @@ from server.api.deps import fleet_access, fleet_deadline
 from server.audit_trail import RestAuditMiddleware
 from server.deadlines import CommandExpired
 from server.http_guard import HttpGuard, content_security_policy
+from server.map_tiles import tile_source
 from server.recorder import replay_live
 from server.recorder.replay_live import ReplayHub
 from server.runtime import Runtime
@@ -127,7 +128,9 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         # request named (a phone on the LAN): its policy names exactly those doors.
         host = request.headers.get("host")
         doors = [advertised_url(url, host) for url in runtime.vehicles.door_urls()]
-        csp = content_security_policy(d for d in doors if d)
+        # and the outdoor map's tiles, from the one tile host the operator set
+        tiles = tile_source(settings.tile_url)
+        csp = content_security_policy((d for d in doors if d), [tiles] if tiles else [])
         page.headers["content-security-policy"] = csp
         return page
 
