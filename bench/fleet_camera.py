@@ -8,11 +8,14 @@ and, for each drone in turn, selects it and samples what the page shows for ``--
   arrival   server stamp of the frame -> the page receives it (the wire and the browser's queue)
   display   server stamp of the frame -> the page has decoded and shown it (what the HUD says)
 
-Baseline: the same measures with one drone (``--fleet 1``) in the same run. Targets (issue 29):
-with two drones each camera keeps >= 10 fps and <= 200 ms. The stamp is taken when the vehicle
-has encoded the JPEG (server/vehicle_node.py), so rendering and perception are not included.
+Baselines: one drone (``--fleets 1,2``) in the same run, and another checkout's server and page
+(``--root /path/to/checkout``, e.g. the code before a change) run back to back. Targets (issue
+29): with two drones each camera keeps >= 10 fps and <= 200 ms. The stamp is taken when the
+vehicle has encoded the JPEG (server/vehicle_node.py), so rendering and perception are not
+included. "throttle at end" is the page's camera throttle (camera_feed.js) when sampling ended.
 
-Usage: ``python bench/fleet_camera.py [--fleets 1,2] [--seconds 15] [--vehicles process]``.
+Usage: ``python bench/fleet_camera.py [--fleets 1,2] [--seconds 15] [--vehicles process]
+[--root CHECKOUT]``.
 """
 
 from __future__ import annotations
@@ -121,6 +124,9 @@ def measure(
                 page.evaluate(PROBE)
                 page.wait_for_timeout(int(seconds * 1000))
                 got = page.evaluate("clearInterval(window.__camTimer), window.__cam")
+                throttle = page.evaluate(
+                    "uavConsole.cameraFeed ? uavConsole.cameraFeed.throttleMs : null"
+                )
                 rows.append(
                     {
                         "fleet": fleet,
@@ -129,6 +135,7 @@ def measure(
                         "arrival": p50(got["arrival"]),
                         "display": p50(got["display"]),
                         "frames": len(got["arrival"]),
+                        "throttle": throttle,
                     }
                 )
             page.fill("#text-input", "all drones land" if fleet > 1 else "land")
@@ -171,13 +178,17 @@ def main() -> None:
         f"\nCamera in the page ({args.root}), vehicles={args.vehicles}, {seconds:g} s per drone,"
         f" load {load:.1f}"
     )
-    print("| fleet | drone | fps p50 | arrival p50 | display p50 | frames | display / baseline |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "| fleet | drone | fps p50 | arrival p50 | display p50 | frames | throttle at end |"
+        " display / first row |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         ratio = r["display"] / base["display"] if base["display"] else float("nan")
+        throttle = "–" if r["throttle"] is None else f"{r['throttle']} ms"
         print(
             f"| {r['fleet']} | {r['drone']} | {r['fps']:.1f} | {r['arrival']:.0f} ms | "
-            f"{r['display']:.0f} ms | {r['frames']} | {ratio:.2f} |"
+            f"{r['display']:.0f} ms | {r['frames']} | {throttle} | {ratio:.2f} |"
         )
 
 

@@ -6,6 +6,7 @@
 import { AlertBanner, checkVoices } from "./alerts.js";
 import { Api, ApiError } from "./api.js";
 import { CameraPanel } from "./camera.js";
+import { CameraFeed } from "./camera_feed.js";
 import { Controls } from "./controls.js";
 import { DialogPanel } from "./dialog.js";
 import { DOOR_DEAD_MS, Doors } from "./door.js";
@@ -78,6 +79,7 @@ class Console {
       { img: $("camera"), empty: $("camera-empty"), fps: $("cam-fps"), latency: $("cam-latency") },
       () => Date.now() / 1000 + this.clockOffset,
     );
+    this.cameraFeed = new CameraFeed(this.ros, this.camera, () => Date.now() / 1000 + this.clockOffset);
     this.telemetry = new TelemetryPanel(document);
     this.status = new StatusBar(document);
     this.telemetry.onFlight = (label, battery) => {
@@ -454,7 +456,8 @@ class Console {
     const sub = (topic, cb, opts) => this.ros.subscribe(t(topic), TOPIC_TYPES[topic], cb, opts);
     this.droneSubs = [
       sub("/ardrone/navdata", (m) => this.telemetry.onNavdata(m), { throttle_rate: 50, queue_length: 1 }),
-      sub("/ardrone/image_raw/compressed", (m) => this.camera.onImage(m), { queue_length: 1 }),
+      // throttled to what this page can show, so frames never queue (camera_feed.js)
+      this.cameraFeed.attach(t("/ardrone/image_raw/compressed"), TOPIC_TYPES["/ardrone/image_raw/compressed"]),
       sub("/uav/pose", (m) => {
         this.map.onPose(name, m);
         this.telemetry.onPoseYaw(quaternionYaw(m?.pose?.orientation));
