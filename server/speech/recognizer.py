@@ -103,6 +103,7 @@ class Recognition:
             "snap_distance": round(self.snap_distance, 4),
             "audio_s": round(self.audio_s, 3),
             "decode_ms": round(self.decode_ms, 1),
+            "doubt": self.doubt,
         }
 
 
