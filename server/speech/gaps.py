@@ -73,7 +73,9 @@ class GapLog:
                 continue
             for text in lines:
                 try:
-                    out.append(json.loads(text))
+                    entry = json.loads(text)
                 except json.JSONDecodeError:  # a line cut short by a crash: skipped
                     continue
+                if isinstance(entry, dict):
+                    out.append(entry)
         return out
