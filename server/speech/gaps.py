@@ -73,9 +73,9 @@ class GapLog:
                 continue
             for text in lines:
                 try:
-                    entry = json.loads(text)
+                    item = json.loads(text)
                 except json.JSONDecodeError:  # a line cut short by a crash: skipped
                     continue
-                if isinstance(entry, dict):
-                    out.append(entry)
+                if isinstance(item, dict):
+                    out.append(item)
         return out
