@@ -424,8 +424,10 @@ def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
         ):
             why = why or "contested"
         heard_whole = s is not None and s.whole_as_heard  # a snapped beam is no evidence here
-        if heard_whole and r.asr >= OPPOSITE_RATIO * asr and any(
-            opposite(d) in mine for c in theirs if (d := direction(c)) is not None
+        if (
+            heard_whole
+            and r.asr >= OPPOSITE_RATIO * asr
+            and any(opposite(d) in mine for c in theirs if (d := direction(c)) is not None)
         ):
             return "opposite"
     return why
