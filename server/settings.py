@@ -205,14 +205,11 @@ class Settings(BaseSettings):
         except ValidationError as exc:
             raise SettingsError(describe(exc)) from None
 
-    @field_validator("data_dir", "grammar_dir", "model_dir", "asr_model", "cert", "key")
+    @field_validator(
+        "data_dir", "grammar_dir", "model_dir", "asr_model", "cert", "key", "recordings_dir"
+    )
     @classmethod
     def _expand(cls, value: Path | None) -> Path | None:
-        return value.expanduser() if value is not None else None
-
-    @field_validator("recordings_dir")
-    @classmethod
-    def _expand_recordings(cls, value: Path | None) -> Path | None:
         return value.expanduser() if value is not None else None
 
     @model_validator(mode="after")

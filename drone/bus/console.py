@@ -111,13 +111,18 @@ class ConsoleBus:
         )
 
     @property
+    def client_endpoints(self) -> list[str]:
+        """Where a client dials this router (a wildcard listen address as loopback)."""
+        return [_reachable(e) for e in self.listen]
+
+    @property
     def client_file(self) -> Path:
         return self.directory / CLIENT_FILE
 
     def vehicle_credential(self, name: str) -> VehicleCredential:
         assert self.credentials is not None, "start() first"
         return VehicleCredential(
-            tuple(_reachable(e) for e in self.listen),
+            tuple(self.client_endpoints),
             vehicle_user(name),
             self.credentials.password(vehicle_user(name)),
         )
@@ -138,7 +143,7 @@ class ConsoleBus:
     def _write_client(self, name: str, user: str) -> None:
         assert self.credentials is not None
         config = client_config(
-            connect=[_reachable(e) for e in self.listen],
+            connect=self.client_endpoints,
             user=user,
             password=self.credentials.password(user),
         )
