@@ -170,7 +170,7 @@ async def speech_stream(websocket: WebSocket) -> None:
     Query: ``token``, ``mode`` (ptt | handsfree), ``lease`` (the holding's secret key,
     as ``/console/lease`` tells its holder and REST callers name in ``X-Pilot-Lease``),
     ``rate`` (must be 16000). Sends ``{"type": "ready"}``, ``{"type": "interim", "text"}``,
-    ``{"type": "final", text, confidence, commands, heard}``, ``{"type": "error", "error"}``.
+    ``{"type": "final", text, confidence, commands, heard, doubt}``, ``{"type": "error", "error"}``.
     """
     runtime = websocket.app.state.runtime
     security = runtime.security

@@ -73,7 +73,9 @@ class GapLog:
                 continue
             for text in lines:
                 try:
-                    out.append(json.loads(text))
+                    item = json.loads(text)
                 except json.JSONDecodeError:  # a line cut short by a crash: skipped
                     continue
+                if isinstance(item, dict):
+                    out.append(item)
         return out

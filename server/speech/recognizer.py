@@ -103,6 +103,7 @@ class Recognition:
             "snap_distance": round(self.snap_distance, 4),
             "audio_s": round(self.audio_s, 3),
             "decode_ms": round(self.decode_ms, 1),
+            "doubt": self.doubt,
         }
 
 
@@ -398,8 +399,8 @@ def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
       snapped ("Please turn right." beside "Please don't right.", "Head to marker eight"
       beside "Head to marker, I"): the words that fly were in doubt ("Fly to marker at
       eleven." beside "Fly to marker 11." is no doubt: both read marker 11);
-    * ``opposite``: a beam, even a weak one (:data:`OPPOSITE_RATIO`), reads the opposite
-      direction ("Climb immediately." beside "Landing immediately.").
+    * ``opposite``: a beam, even a weak one (:data:`OPPOSITE_RATIO`), reads whole as heard
+      the opposite direction ("Climb immediately." beside "Landing immediately.").
     """
     if not chosen.commands:
         return ""
@@ -422,8 +423,11 @@ def doubt(chosen: Recognition, readings: list[_Reading]) -> str:
             and not (s is not None and s.complete and same_commands(s.commands, chosen.commands))
         ):
             why = why or "contested"
-        if r.asr >= OPPOSITE_RATIO * asr and any(
-            opposite(d) in mine for c in theirs if (d := direction(c)) is not None
+        heard_whole = s is not None and s.whole_as_heard  # a snapped beam is no evidence here
+        if (
+            heard_whole
+            and r.asr >= OPPOSITE_RATIO * asr
+            and any(opposite(d) in mine for c in theirs if (d := direction(c)) is not None)
         ):
             return "opposite"
     return why

@@ -7,6 +7,8 @@ import asyncio
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from server.language.nlu import default_nlu
 from server.speech.gaps import GapLog
@@ -92,3 +94,19 @@ def test_the_service_logs_the_gaps_of_whole_utterances(tmp_path: Path) -> None:
     [logged] = GapLog(path).read()
     assert logged["t"] == 42.0 and "photo" in logged["heard"].lower()
     assert logged["asr_confidence"] >= GAP_CONFIDENCE
+
+
+@settings(max_examples=50, deadline=None, derandomize=True)
+@given(st.text(max_size=300))
+def test_a_damaged_gap_log_is_read_without_error(junk: str) -> None:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "gaps.jsonl"
+        log = GapLog(path)
+        assert log.record(Recognition("down", 0.4, gap="Slow down."), 1.0)
+        with path.open("a", encoding="utf-8") as f:
+            f.write(junk)
+        kept = log.read()
+        assert kept[0]["heard"] == "Slow down."
+        assert all(isinstance(e, dict) for e in kept)

@@ -169,3 +169,26 @@ def test_interpret_audio_cli_with_a_damaged_model_says_so(tmp_path: Path, synth:
     )
     assert out.returncode == 2
     assert "config.json" in out.stderr and out.stdout == ""
+
+
+@pytest.mark.parametrize(
+    ("text", "commands"),
+    [
+        # Heard "Y'all left by thirty degrees.", which was snapped to "kill left by 30 degrees":
+        # an emergency and a turn.
+        ("yaw left by thirty degrees", [{"action": "turn", "direction": "left", "angle": 30}]),
+        # Heard word for word, which was snapped to "hover floor …": a move down.
+        (
+            "hover for now and tell me your battery level",
+            [{"action": "hover"}, {"action": "query", "item": "battery"}],
+        ),
+    ],
+)
+def test_speech_the_grammars_did_not_read_is_never_a_motor_cut_or_a_descent(
+    recognizer: Recognizer, synth: Synth, text: str, commands: list[dict[str, object]]
+) -> None:
+    pytest.importorskip("hibari")
+    clip = synth(text, voice="heart", speed=160, tts="hibari")
+    rec = recognizer.recognize(read_wav(clip.read_bytes()))
+    assert rec.commands == commands, rec
+    assert rec.confidence >= 0.5, rec
