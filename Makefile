@@ -7,7 +7,7 @@ HOST   ?= 127.0.0.1
 PORT   ?= 8000
 ARGS   ?=
 
-.PHONY: run test bench lint node-deps clean
+.PHONY: run test test-lower bench lint node-deps clean
 
 $(VENV)/.installed-run: pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -20,6 +20,15 @@ $(VENV)/.installed-test: pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'
 	touch $(VENV)/.installed-run $@
+
+# The lower bounds of pyproject.toml, installed as they are written (uv's lowest-direct
+# resolution): `make test-lower` runs the whole suite on them, so a bound is a version tested.
+LOWER ?= .venv-lower
+$(LOWER)/.installed-test: pyproject.toml
+	test -x $(LOWER)/bin/python || $(PYTHON) -m venv $(LOWER)
+	$(LOWER)/bin/python -m pip install -q --upgrade pip uv
+	VIRTUAL_ENV=$(LOWER) $(LOWER)/bin/uv pip install -q --resolution lowest-direct -e '.[test]'
+	touch $(LOWER)/.installed-run $@
 
 tests/node/node_modules/.installed: tests/node/package.json tests/node/package-lock.json
 	cd tests/node && npm ci --no-audit --no-fund --loglevel=error
@@ -47,6 +56,9 @@ else
 	$(PY) -m pytest $(ARGS)
 endif
 
+test-lower: $(LOWER)/.installed-test node-deps
+	$(MAKE) test VENV=$(LOWER)
+
 bench: $(VENV)/.installed-test
 	$(VENV)/bin/uav-console bench $(ARGS)
 
@@ -56,4 +68,4 @@ lint: $(VENV)/.installed-test
 	$(VENV)/bin/mypy
 
 clean:
-	rm -rf $(VENV) tests/node/node_modules .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) $(LOWER) tests/node/node_modules .pytest_cache .ruff_cache .mypy_cache

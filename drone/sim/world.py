@@ -517,8 +517,11 @@ def _parse_geo(c: _Ctx, raw: Any, where: str) -> GeoPoint:
     )
 
 
-def parse_world(data: Any, source: str = "<memory>") -> World:
+def parse_world(data: Any, source: str = "<memory>") -> World:  # noqa: C901
     """Build and validate a :class:`World` from a decoded YAML/JSON document.
+
+    Complexity: one validation step per section and field of the world file, in the file's
+    order, so that the function reads as its schema.
 
     Raises:
         WorldError: naming ``source`` and the offending field.

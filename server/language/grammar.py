@@ -409,7 +409,11 @@ def _attr(
 # -- mappings.xml ---------------------------------------------------------------------------------
 
 
-def _load_sets(path: Path) -> dict[str, WordSet]:
+def _load_sets(path: Path) -> dict[str, WordSet]:  # noqa: C901
+    """The word sets of one ``<mappings>`` file, each checked as it is read.
+
+    Complexity: one check per element and attribute of the file's schema, each raising a
+    :class:`GrammarSchemaError` that names the file and line."""
     file = path.name
     root, lines = _read_xml(path)
     if root.tag != "mappings":

@@ -104,7 +104,7 @@ def decode_frame(payload: str | bytes, max_frame_bytes: int) -> Any:
 
     Raises:
         FrameTooLarge: over ``max_frame_bytes``.
-        FrameError: not JSON / CBOR.
+        FrameError: not JSON, or not one CBOR map.
     """
     if len(payload) > max_frame_bytes:
         raise FrameTooLarge(
@@ -113,9 +113,12 @@ def decode_frame(payload: str | bytes, max_frame_bytes: int) -> Any:
     if isinstance(payload, str):
         return parse_json(payload, "invalid JSON", None)
     try:
-        return cbor2.loads(payload)
+        obj = cbor2.loads(payload)
     except Exception as exc:
         raise FrameError(f"binary frames must hold one CBOR object: {exc}") from exc
+    if not isinstance(obj, dict):  # cbor2 < 6 returns a lone break marker (0xff) as a value
+        raise FrameError(f"binary frames must hold one CBOR map, not {type(obj).__name__}")
+    return obj
 
 
 def parse_json(text: str | bytes, what: str, fid: str | None) -> Any:
