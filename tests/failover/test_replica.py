@@ -77,13 +77,18 @@ def runs() -> tuple[tuple[Any, PatrolReport, list[Any]], tuple[Any, PatrolReport
 
 
 def test_a_restored_ctm_flies_the_patrol_on_as_the_original(runs: Any) -> None:
-    (_, base, sent_base), (_, switched, sent_sw) = runs
+    (exp_base, base, sent_base), (exp_sw, switched, sent_sw) = runs
     assert switched.handoffs == base.handoffs >= 2  # the handoffs after the switch happen too
     assert switched.max_gap_s == base.max_gap_s
     assert switched.coverage == base.coverage
     assert switched.revisit_s == base.revisit_s
     # the same plans, to the same drones, at the same times, but numbered past the margin
     assert sent_sw == sent_base
+    # and the console shows the same coverage: every waypoint's visits, the lap, the handoffs
+    end = exp_base.rig.clock.now()
+    cov_base = [m.coverage.as_dict(end) for m in exp_base.ctm.missions.values() if m.coverage]
+    cov_sw = [m.coverage.as_dict(end) for m in exp_sw.ctm.missions.values() if m.coverage]
+    assert cov_sw == cov_base
 
 
 def test_a_restored_ctm_numbers_its_plans_past_the_snapshots() -> None:
