@@ -137,6 +137,13 @@ class Runtime:
             if stack.tasks is not None:
                 self.fleet.add_local(stack.name, stack.vehicle, stack.tasks)
         await self.fleet.start()
+        bus = self.vehicles.bus
+        if bus is not None and bus.session is not None:  # the central role, elected on the bus
+            from server.fleet.failover import default_console_name
+
+            s = self.settings
+            name = s.console_name or default_console_name(s.host, s.port)
+            await self.fleet.join_bus(bus.session, s.fleet_name, name)
         await self.speech.start(preload=self.settings.asr_preload)
         if self.settings.rosbridge_port:
             port = self.settings.rosbridge_port
@@ -174,6 +181,7 @@ class Runtime:
         self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
 
     async def stop(self) -> None:
+        await self.fleet.leave_bus()  # its tokens go before the bus does
         await self.vehicles.stop()
         for task in self._tasks:
             task.cancel()

@@ -92,6 +92,7 @@ CHILD_SETTINGS = (
     "ans_period_s",
     "search_after_s",
     "central_loss_land_s",
+    "central_grace_s",
     "vehicle_nice",
     "control_rt_priority",
     "vehicle_rt_priority",
@@ -279,7 +280,8 @@ class VehicleCentral:
             return {}
         cred = self.bus.vehicle_credential(name)  # the password is its vehicle key
         return {
-            "UAVC_BUS_CONNECT": ",".join(cred.connect),
+            # our router first, then the routers we join: the vehicle fails over to them
+            "UAVC_BUS_CONNECT": ",".join([*cred.connect, *self.runtime.settings.bus_connect]),
             "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
         }
 
