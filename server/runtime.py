@@ -139,11 +139,10 @@ class Runtime:
         await self.fleet.start()
         bus = self.vehicles.bus
         if bus is not None and bus.session is not None:  # the central role, elected on the bus
-            from server.fleet.failover import default_console_name
+            from server.vehicles.central import console_name
 
-            s = self.settings
-            name = s.console_name or default_console_name(s.host, s.port)
-            await self.fleet.join_bus(bus.session, s.fleet_name, name)
+            name = console_name(self.settings)
+            await self.fleet.join_bus(bus.session, self.settings.fleet_name, name)
         await self.speech.start(preload=self.settings.asr_preload)
         if self.settings.rosbridge_port:
             port = self.settings.rosbridge_port

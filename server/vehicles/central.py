@@ -266,6 +266,7 @@ class VehicleCentral:
             listen=s.bus_listen,
             connect=s.bus_connect,
             vehicle_passwords=passwords,
+            name=console_name(s),
         )
         try:
             bus.start()
@@ -501,6 +502,13 @@ class VehicleCentral:
                 self.alert(f"{vp.name}'s flight process cannot be started: {exc}")
                 continue
             log.warning("%s: vehicle process restarted (pid %s)", vp.name, vp.pid)
+
+
+def console_name(settings: Settings) -> str:
+    """This console's name on the bus (``console_name``, else ``HOST-PORT``)."""
+    from server.fleet.failover import default_console_name
+
+    return settings.console_name or default_console_name(settings.host, settings.port)
 
 
 def free_door_port(host: str) -> int:
