@@ -166,6 +166,7 @@ class Settings(BaseSettings):
     fleet_name: str = Field("default", description="The fleet's name on the bus (its keys).")
     console_name: str | None = Field(
         None,
+        pattern=r"^[A-Za-z0-9_-]{1,64}$",  # one key segment (drone/bus/keys.py)
         description="This console's name on the bus, unique in the fleet; the central role "
         "goes to the lowest name alive when nobody holds it. Unset: HOST-PORT.",
     )
