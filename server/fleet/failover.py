@@ -98,6 +98,8 @@ class CentralRole:
         self.claimed_at: float | None = None
         self.lost_holder_at: float | None = None  # when the last holder's token left the bus
         self.takeovers: list[float] = []  # seconds from a holder's loss to this claim
+        self.claimed_unix: float | None = None  # Unix time of the last claim (for a log, a test)
+        self.lost_holder_unix: float | None = None  # Unix time the last holder's loss was seen
         self._next_replica = 0.0
         self._task: asyncio.Task[None] | None = None
 
@@ -154,6 +156,8 @@ class CentralRole:
             "consoles": sorted(consoles),
             "holders": sorted(holders),
             "takeovers_s": [round(t, 3) for t in self.takeovers],
+            "claimed_unix": self.claimed_unix,
+            "lost_holder_unix": self.lost_holder_unix,
             "replicas_in": self.replicas_in,
             "on_bus": sorted(self.on_bus),
         }
@@ -166,11 +170,11 @@ class CentralRole:
         had_holder = self.election.holder
         action = self.election.observe(View.of(consoles, holders), now)
         if had_holder not in (None, self.console) and had_holder not in holders:
-            self.lost_holder_at = now
+            self.lost_holder_at, self.lost_holder_unix = now, time.time()
             log.warning("central role: %s left the bus", had_holder)
         if action is Action.CLAIM:
             self.bus.claim()
-            self.claimed_at = now
+            self.claimed_at, self.claimed_unix = now, time.time()
             if self.lost_holder_at is not None:
                 self.takeovers.append(now - self.lost_holder_at)
             log.warning(
