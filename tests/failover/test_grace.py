@@ -35,7 +35,7 @@ GRACE_S = 8.0  # UAVC_CENTRAL_GRACE_S for the vehicle (60 s by default)
 STATION = Enu(1.0, 3.0, 0.0)  # worlds/indoor.yaml: home1, uav1's pad
 
 
-class TestRouter:
+class SiteRouter:
     """A Zenoh router in the test process with the fleet's credentials (as ``zenohd`` would
     run), joined to ``connect``; it watches the fleet's telemetry and LTM statuses."""
 
@@ -83,7 +83,7 @@ def test_a_drone_on_a_plan_flies_on_for_the_grace_then_home(tmp_path: Path) -> N
         a = stack.enter_context(serve(tmp_path, "console-a", extra))
         wait_for(lambda: central_of(a)["role"] == "central", "console-a central", 30)
         stack.enter_context(vehicle(tmp_path, "uav1", 0, a, [bus_a, bus_t], grace_env))
-        router = TestRouter(tmp_path / "data" / "bus", bus_t, [bus_a])
+        router = SiteRouter(tmp_path / "data" / "bus", bus_t, [bus_a])
         stack.callback(router.close)
         wait_for(lambda: central_of(a)["on_bus"] == ["uav1"], "uav1's LTM on the bus", 90)
         r = a.http.post("/api/v1/patrol", json={})
