@@ -68,6 +68,9 @@ def _parser() -> argparse.ArgumentParser:
         "--bus-connect", action="append", default=None, help="another bus router (repeatable)"
     )
     s.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
+    s.add_argument(
+        "--console-name", default=None, help="this console's name on the bus (HOST-PORT)"
+    )
 
     sim = sub.add_parser("sim", help="the simulator alone, behind the AR.Drone protocol")
     sim.add_argument(
@@ -253,6 +256,7 @@ def _serve(args: argparse.Namespace) -> int:
         bus_listen=tuple(args.bus_listen) if args.bus_listen else None,
         bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
         fleet_name=args.fleet_name,
+        console_name=args.console_name,
         sim_base_addr=args.sim_addr,
     )
     if settings.recognizer not in ("server", "browser", "auto"):

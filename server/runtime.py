@@ -137,6 +137,12 @@ class Runtime:
             if stack.tasks is not None:
                 self.fleet.add_local(stack.name, stack.vehicle, stack.tasks)
         await self.fleet.start()
+        bus = self.vehicles.bus
+        if bus is not None and bus.session is not None:  # the central role, elected on the bus
+            from server.vehicles.central import console_name
+
+            name = console_name(self.settings)
+            await self.fleet.join_bus(bus.session, self.settings.fleet_name, name)
         await self.speech.start(preload=self.settings.asr_preload)
         if self.settings.rosbridge_port:
             port = self.settings.rosbridge_port
@@ -174,6 +180,7 @@ class Runtime:
         self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
 
     async def stop(self) -> None:
+        await self.fleet.leave_bus()  # its tokens go before the bus does
         await self.vehicles.stop()
         for task in self._tasks:
             task.cancel()

@@ -164,6 +164,18 @@ class Settings(BaseSettings):
         "vehicle process, the routers it joins as vehicle-NAME with its vehicle key.",
     )
     fleet_name: str = Field("default", description="The fleet's name on the bus (its keys).")
+    console_name: str | None = Field(
+        None,
+        pattern=r"^[A-Za-z0-9_-]{1,64}$",  # one key segment (drone/bus/keys.py)
+        description="This console's name on the bus, unique in the fleet; the central role "
+        "goes to the lowest name alive when nobody holds it. Unset: HOST-PORT.",
+    )
+    central_grace_s: float = Field(
+        60.0,
+        gt=0,
+        description="A vehicle flying a plan keeps flying it this long while no console holds "
+        "the central role, then flies home (docs/failover.md).",
+    )
     # -- vehicle processes ---------------------------------------------------------------------
     vehicles: Literal["inline", "process"] = Field(
         "inline",

@@ -43,8 +43,14 @@ def vehicle_user(name: str) -> str:
     return VEHICLE_PREFIX + keys.segment(name)
 
 
-def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
-    """The router's ACL for ``fleet`` and these vehicle names (ACLs are fixed at start)."""
+def access_control(
+    fleet: str, vehicles: Iterable[str], peers: Iterable[str] = ()
+) -> dict[str, Any]:
+    """The router's ACL for ``fleet`` and these vehicle names (ACLs are fixed at start).
+
+    ``peers``: the Zenoh ids of the consoles' routers this one joins; they may do what a
+    console does (the link to a router we join carries no user name on our side:
+    ``drone.bus.session.router_ids``)."""
     root = f"{keys.ROOT}/{keys.segment(fleet)}"
     rules: list[dict[str, Any]] = [
         _rule("deliver", ["egress"], _EVERYTHING, [f"{keys.ROOT}/**"]),
@@ -62,6 +68,9 @@ def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
         {"id": "pilots-command", "rules": ["command"], "subjects": ["commanders"]},
         {"id": "consoles-all", "rules": ["console"], "subjects": ["consoles"]},
     ]
+    if peers := sorted(set(peers)):
+        subjects.append({"id": "peer-routers", "zids": peers})
+        policies.append({"id": "peers-all", "rules": ["console"], "subjects": ["peer-routers"]})
     for name in sorted(set(vehicles)):
         rid = f"own-{name}"
         rules.append(_rule(rid, ["ingress"], _OWN, [f"{root}/{keys.segment(name)}/**"]))

@@ -3,6 +3,7 @@ hears (which vehicles are alive, their latest telemetry)."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import threading
@@ -25,7 +26,7 @@ from drone.bus.config import (
 from drone.bus.credentials import Credentials, write_private
 from drone.bus.errors import PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry
-from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session
+from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session, router_ids
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +64,7 @@ class ConsoleBus:
         listen: Iterable[str] = (),
         connect: Iterable[str] = (),
         vehicle_passwords: Mapping[str, str] | None = None,
+        name: str | None = None,
     ) -> None:
         self.directory = directory
         self.fleet = keys.segment(fleet)
@@ -72,6 +74,7 @@ class ConsoleBus:
         )
         self.listen = list(listen) or [free_listen_endpoint(DEFAULT_LISTEN)]
         self.connect = list(connect)
+        self.name = name  # the console's name: its router's id derives from it (router_id)
         self.credentials: Credentials | None = None
         self.session: zenoh.Session | None = None
         self._lock = threading.Lock()
@@ -90,16 +93,19 @@ class ConsoleBus:
             self.directory, self.vehicle_names, self.vehicle_passwords
         )
         self.credentials = creds
-        acl = access_control(self.fleet, creds.vehicles())
-        self.session = open_session(
-            router_config(
-                listen=self.listen,
-                connect=self.connect,
-                password=creds.password(CONSOLE_USER),
-                dictionary_file=str(creds.path),
-                acl=acl,
-            )
+        # the routers we join, known by their ids (drone.bus.session.router_ids)
+        peers = router_ids(self.connect, CONSOLE_USER, creds.password(CONSOLE_USER))
+        acl = access_control(self.fleet, creds.vehicles(), peers)
+        config = router_config(
+            listen=self.listen,
+            connect=self.connect,
+            password=creds.password(CONSOLE_USER),
+            dictionary_file=str(creds.path),
+            acl=acl,
         )
+        if self.name is not None:  # the same across restarts: peers' access control names it
+            config["id"] = router_id(self.fleet, self.name)
+        self.session = open_session(config)
         self._write_client(CLIENT_FILE, OBSERVER_USER)
         self._write_client(PILOT_FILE, PILOT_USER)
         liveliness = self.session.liveliness()
@@ -175,6 +181,13 @@ class ConsoleBus:
             return
         with self._lock:
             self._latest[drone] = telemetry
+
+
+def router_id(fleet: str, console: str) -> str:
+    """The Zenoh id of console ``console``'s router: 16 bytes of SHA-256 of the fleet and the
+    console's name, in hex (stable across restarts, unique while console names are)."""
+    digest = hashlib.sha256(f"uavc/{fleet}/{console}".encode()).hexdigest()[:32]
+    return digest if digest.strip("0") else "1" + digest[1:]
 
 
 def _reachable(endpoint: str) -> str:

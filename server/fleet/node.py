@@ -15,7 +15,7 @@ import contextlib
 import json
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 from server.fleet.ctm import CentralTaskManager
@@ -81,6 +81,11 @@ class CtmNode:
         graph.advertise(MISSIONS_TOPIC, "std_msgs/String", latch=True)
         graph.advertise(REPLY_TOPIC, REPLY_TYPE)
         self._had_missions = False
+        # Where the fleet has several consoles (server.fleet.failover): only the one holding
+        # the central role decides, and it may send plans over the bus instead of the graph.
+        self.active: Callable[[], bool] = lambda: True
+        self.send_plan: Callable[[str, dict[str, Any], float], Awaitable[dict[str, Any]]] | None
+        self.send_plan = None
 
     def poke(self) -> None:
         """Decide now (a mission was added)."""
@@ -105,7 +110,7 @@ class CtmNode:
         """One decision round: discover, decide, send plans, publish the fleet status."""
         now = self.clock()
         self.discover()
-        for d in self.ctm.step(now):
+        for d in self.ctm.step(now) if self.active() else ():
             t = asyncio.create_task(self._send(d.drone, d.plan.to_dict(), d.plan.plan_id))
             self._pending.add(t)
             t.add_done_callback(self._pending.discard)
@@ -137,9 +142,12 @@ class CtmNode:
 
     async def _send(self, name: str, plan: dict[str, Any], plan_id: int) -> None:
         try:
-            res = await self.graph.call_service(
-                plan_service(name), plan, timeout=self.plan_timeout_s
-            )
+            if self.send_plan is not None:
+                res = await self.send_plan(name, plan, self.plan_timeout_s)
+            else:
+                res = await self.graph.call_service(
+                    plan_service(name), plan, timeout=self.plan_timeout_s
+                )
             ok, reason = bool(res.get("accepted")), str(res.get("reason", ""))
         except GraphError as exc:
             ok, reason = False, f"not delivered: {exc}"

@@ -22,10 +22,11 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from fastapi import APIRouter, params
+from fastapi import APIRouter, Depends, params
 
 from server.fleet.central import CentralPatrol, make_patrol_router
 from server.fleet.ctm import CentralTaskManager
+from server.fleet.failover import CentralRole, standby_guard
 from server.fleet.geo import origin_of
 from server.fleet.ltm import LocalTaskManager
 from server.fleet.messages import PATROL_SERVICE, PATROL_SERVICE_TYPE, Handoff
@@ -71,6 +72,14 @@ class FleetService:
         self.ltm_nodes: list[LtmNode] = []
         self.period_s = 1.0 / ltm_rate_hz
         self._task: asyncio.Task[None] | None = None
+        # this console's part in the central role, when it is on a bus (server.fleet.failover)
+        self.role: CentralRole | None = None
+
+    async def join_bus(self, session: Any, fleet: str, console: str) -> CentralRole:
+        """Take part in the central role's election on the bus (after :meth:`start`)."""
+        self.role = CentralRole(self, session, fleet, console, clock=self.clock)
+        await self.role.start()
+        return self.role
 
     def add_local(self, name: str, vehicle: Any, tasks: Any) -> LocalTaskManager:
         """An in-process drone joins the fleet (its station: the world's n-th station)."""
@@ -80,10 +89,20 @@ class FleetService:
         return ltm
 
     def router(self, dependencies: Sequence[params.Depends] | None = None) -> APIRouter:
+        deps = [*(dependencies or ()), Depends(standby_guard(lambda: self.role))]
         router = make_fleet_router(
-            self.ctm, clock=self.clock, dependencies=dependencies, on_change=self.node.poke
+            self.ctm, clock=self.clock, dependencies=deps, on_change=self.node.poke
         )
         router.include_router(make_patrol_router(self.central))
+
+        @router.get("/central")
+        async def central_role() -> dict[str, Any]:
+            """Who holds the fleet's central role, as this console sees it (``role``:
+            ``central``, ``standby``, or ``only`` for a console on no bus)."""
+            if self.role is None:
+                return {"role": "only", "central": None}
+            return self.role.info()
+
         return router
 
     async def start(self) -> None:
@@ -123,7 +142,14 @@ class FleetService:
                 n.step(now)
             await asyncio.sleep(self.period_s)
 
+    async def leave_bus(self) -> None:
+        """Leave the election (releasing the role if held), before the bus closes."""
+        if self.role is not None:
+            await self.role.stop()
+            self.role = None
+
     async def stop(self) -> None:
+        await self.leave_bus()
         self.graph.unadvertise_service(PATROL_SERVICE)
         if self._task is not None:
             self._task.cancel()

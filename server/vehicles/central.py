@@ -92,6 +92,7 @@ CHILD_SETTINGS = (
     "ans_period_s",
     "search_after_s",
     "central_loss_land_s",
+    "central_grace_s",
     "vehicle_nice",
     "control_rt_priority",
     "vehicle_rt_priority",
@@ -265,6 +266,7 @@ class VehicleCentral:
             listen=s.bus_listen,
             connect=s.bus_connect,
             vehicle_passwords=passwords,
+            name=console_name(s),
         )
         try:
             bus.start()
@@ -279,7 +281,8 @@ class VehicleCentral:
             return {}
         cred = self.bus.vehicle_credential(name)  # the password is its vehicle key
         return {
-            "UAVC_BUS_CONNECT": ",".join(cred.connect),
+            # our router first, then the routers we join: the vehicle fails over to them
+            "UAVC_BUS_CONNECT": ",".join([*cred.connect, *self.runtime.settings.bus_connect]),
             "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
         }
 
@@ -499,6 +502,13 @@ class VehicleCentral:
                 self.alert(f"{vp.name}'s flight process cannot be started: {exc}")
                 continue
             log.warning("%s: vehicle process restarted (pid %s)", vp.name, vp.pid)
+
+
+def console_name(settings: Settings) -> str:
+    """This console's name on the bus (``console_name``, else ``HOST-PORT``)."""
+    from server.fleet.failover import default_console_name
+
+    return settings.console_name or default_console_name(settings.host, settings.port)
 
 
 def free_door_port(host: str) -> int:

@@ -230,9 +230,9 @@ class VehicleHost:
         from drone.sim.world import load_world
         from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
         from server.dialog.manager import DialogManager
+        from server.fleet.bus_ltm import BusLtmNode
         from server.fleet.geo import origin_of
         from server.fleet.ltm import LocalTaskManager
-        from server.fleet.node import LtmNode
         from server.fleet.patrol import station_positions
         from server.graph import Graph
         from server.language.nlu import default_nlu
@@ -303,11 +303,15 @@ class VehicleHost:
         # its replies, state and interpret service, under this vehicle's own names
         self._dialog_out = dialog_out(self.graph, self.name, o.prefix)
         pad = station_positions(self.world, o.index + 1)[-1]
-        self.ltm = LtmNode(
-            self.graph,
-            LocalTaskManager(self.name, vehicle, tasks, pad, origin=origin_of(self.world)),
-            clock=time.monotonic,
+        ltm = LocalTaskManager(
+            self.name,
+            vehicle,
+            tasks,
+            pad,
+            origin=origin_of(self.world),
+            ctm_timeout_s=s.central_grace_s,  # a drone on a plan flies on while no central
         )
+        self.ltm = BusLtmNode(self.graph, ltm, clock=time.monotonic)
         self.graph.advertise_service(
             names.control_service(self.name), names.CONTROL_TYPE, self._control
         )
@@ -349,6 +353,8 @@ class VehicleHost:
             self.door.port = 0
             await self.door.start()
         self.bus = join_bus(s, self.name, self.key)
+        if self.bus is not None and self.bus.session is not None:  # plans from any central
+            self.ltm.join_bus(self.bus.session, s.fleet_name)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         self._tasks = [
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
@@ -541,6 +547,8 @@ class VehicleHost:
             now = time.monotonic()
             try:
                 heard = self.link.last_heard if self.link.last_heard is not None else self._started
+                if self.ltm.flying_a_plan():  # the LTM's grace keeps it, not the console watch
+                    heard = max(heard, now - self.settings.heartbeat_timeout_s / 2)
                 action = self.watch.step(now, heard, bool(self.stack.vehicle.snapshot().flying))
                 if action is not None:
                     self._on_loss(action, now - heard)

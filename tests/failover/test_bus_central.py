@@ -1,0 +1,142 @@
+"""The central role's bus parts on real Zenoh routers on loopback: two consoles' routers (one
+joins the other, as ``serve --bus-connect`` does, with the fleet's credentials and access
+control), a vehicle client on both, the consoles' presence and role tokens, replicas, LTM
+statuses and plans as queries."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from drone.bus.central import CentralBus
+from drone.bus.console import ConsoleBus, router_id
+from drone.bus.plans import VehiclePlans
+from drone.bus.vehicle import VehicleBus
+from tests.loopback import free_port
+
+
+async def until(pred: Callable[[], Any], what: str, timeout: float = 10.0) -> Any:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if out := pred():
+            return out
+        await asyncio.sleep(0.02)
+    raise AssertionError(f"{what}: not in {timeout} s")
+
+
+@dataclass
+class Console:
+    router: ConsoleBus
+    central: CentralBus
+    replicas: list[bytes] = field(default_factory=list)
+    statuses: list[tuple[str, bytes]] = field(default_factory=list)
+
+
+@dataclass
+class Fleet:
+    a: Console
+    b: Console
+    vehicle: VehicleBus
+    bus_a: str
+    bus_b: str
+
+
+@pytest.fixture
+async def fleet(tmp_path: Path) -> AsyncIterator[Fleet]:
+    loop = asyncio.get_running_loop()
+    bus_a, bus_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    consoles = []
+    for name, listen, connect in (("console-a", bus_a, []), ("console-b", bus_b, [bus_a])):
+        router = ConsoleBus(
+            tmp_path / "bus", "default", ["uav1"], listen=[listen], connect=connect, name=name
+        )
+        router.start()
+        assert router.session is not None
+        replicas: list[bytes] = []
+        statuses: list[tuple[str, bytes]] = []
+        central = CentralBus(
+            router.session,
+            "default",
+            name,
+            loop,
+            on_replica=replicas.append,
+            on_ltm=lambda d, b, into=statuses: into.append((d, b)),
+        )
+        central.start()
+        consoles.append(Console(router, central, replicas, statuses))
+    a, b = consoles
+    cred = a.router.vehicle_credential("uav1")
+    vehicle = VehicleBus([bus_a, bus_b], cred.user, cred.password, "default", "uav1")
+    vehicle.start()
+    try:
+        yield Fleet(a, b, vehicle, bus_a, bus_b)
+    finally:
+        vehicle.close()
+        for c in (b, a):
+            c.central.close()
+            c.router.close()
+
+
+async def test_each_console_sees_the_other_and_the_holder(fleet: Fleet) -> None:
+    both = {"console-a", "console-b"}
+    # the joining router is not authenticated by the one it joins: without the peer's id in
+    # its access control, console-b would not see console-a's tokens
+    await until(lambda: fleet.b.central.view()[0] == both, "console-b sees console-a")
+    await until(lambda: fleet.a.central.view()[0] == both, "console-a sees console-b")
+    fleet.a.central.claim()
+    await until(lambda: fleet.b.central.view()[1] == {"console-a"}, "console-b sees the holder")
+    fleet.a.central.release()
+    await until(lambda: fleet.b.central.view()[1] == set(), "the holder's token gone")
+
+
+async def test_the_routers_ids_derive_from_the_consoles_names(fleet: Fleet) -> None:
+    assert fleet.a.router.session is not None
+    assert str(fleet.a.router.session.info.zid()) == router_id("default", "console-a")
+    assert router_id("default", "console-a") != router_id("default", "console-b")
+
+
+async def test_replicas_reach_the_standby_and_plans_reach_the_vehicle(fleet: Fleet) -> None:
+    loop = asyncio.get_running_loop()
+    await until(lambda: fleet.b.central.view()[0] == {"console-a", "console-b"}, "joined")
+    fleet.a.central.publish_replica(b'{"console": "console-a"}')
+    await until(lambda: fleet.b.replicas, "the replica at console-b")
+    assert fleet.b.replicas == [b'{"console": "console-a"}']
+
+    async def on_plan(payload: bytes) -> bytes:
+        plan = json.loads(payload)
+        return json.dumps({"accepted": True, "reason": "ok", "plan_id": plan["plan_id"]}).encode()
+
+    assert fleet.vehicle.session is not None
+    plans = VehiclePlans(fleet.vehicle.session, "default", "uav1", loop, on_plan)
+    plans.start()
+    try:
+        plans.publish_status(b'{"name": "uav1"}')
+        await until(lambda: fleet.b.statuses, "the LTM status at console-b")
+        assert fleet.b.statuses[0] == ("uav1", b'{"name": "uav1"}')
+        # both consoles reach it: console-a directly, console-b through console-a's router
+        for console in (fleet.a, fleet.b):
+            raw = await console.central.send_plan("uav1", b'{"plan_id": 7}', 5.0)
+            assert json.loads(raw) == {"accepted": True, "reason": "ok", "plan_id": 7}
+        # the vehicle sees the central's token come and go
+        assert not plans.central_alive
+        fleet.b.central.claim()
+        await until(lambda: plans.central_alive, "the vehicle sees a central")
+        assert plans.central_name == "console-b"
+        fleet.b.central.release()
+        await until(lambda: not plans.central_alive, "the vehicle sees none")
+    finally:
+        plans.close()
+
+
+async def test_a_plan_to_a_vehicle_that_is_not_there_is_a_clear_error(fleet: Fleet) -> None:
+    from drone.bus.errors import BusError
+
+    with pytest.raises(BusError, match="uav9 did not answer"):
+        await fleet.a.central.send_plan("uav9", b"{}", 0.5)

@@ -1,0 +1,158 @@
+"""The CTM's replica (server.fleet.replica): a CTM restored from the JSON of another's snapshot
+decides as the first one would have, so a standby resumes a mission where it stands."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from server.fleet.ctm import CentralTaskManager, DroneRecord
+from server.fleet.errors import MessageError
+from server.fleet.geo import Enu
+from server.fleet.messages import FlightPlan, PlanKind
+from server.fleet.patrol import LockstepLink, PatrolConfig, PatrolExperiment, PatrolReport
+from server.fleet.replica import PLAN_ID_MARGIN, restore, snapshot
+
+FAST = {"flight_time_s": 150.0, "swap_s": 20.0}
+SWITCH_AT_S = 100.0  # mid-shift: the first drone patrols, its relief is not sent yet
+
+
+def fresh_like(exp: PatrolExperiment) -> CentralTaskManager:
+    old = exp.ctm
+    return CentralTaskManager(
+        model=old.model,
+        stations=old.stations,
+        lost_after_s=old.lost_after_s,
+        corridor_m=old.corridor_m,
+        origin=old.origin,
+        world=old.world,
+        continuity=old.continuity,
+    )
+
+
+def fly(switch_at: float | None) -> tuple[PatrolExperiment, PatrolReport, list[Any]]:
+    """The paper's patrol with 2 drones; at ``switch_at`` the CTM is replaced by a new one
+    restored from the JSON of its snapshot (the standby's takeover, without the bus)."""
+    exp = PatrolExperiment(PatrolConfig(drones=2, duration_s=260.0, **FAST))
+    sent: list[Any] = []
+    switched: list[float] = []
+
+    class Recording(LockstepLink):
+        """The lockstep link, noting every plan the CTM (whichever) sends, and when."""
+
+        def ctm_step(self, now: float) -> None:
+            out = self.ctm.step(now)
+            sent.extend((round(now, 1), d.drone, d.plan.kind.value) for d in out)
+            for d in out:
+                ok, reason = self.ltms[d.drone].apply_plan(d.plan, now)
+                self.ctm.on_plan_result(d.drone, d.plan.plan_id, ok, reason, now)
+            for ltm in self.ltms.values():
+                ltm.heard_ctm(now)
+
+    exp.link = Recording(exp.ctm, exp.ltms)
+    start = exp.rig.clock.now()
+
+    def hook(now: float) -> None:
+        if switch_at is not None and not switched and now - start >= switch_at:
+            data = json.loads(json.dumps(snapshot(exp.ctm, now)))
+            new = fresh_like(exp)
+            restore(new, data, now)
+            exp.ctm = exp.link.ctm = new
+            switched.append(now)
+
+    exp.hooks.append(hook)
+    report = exp.run()
+    assert switched or switch_at is None
+    return exp, report, sent
+
+
+@pytest.fixture(scope="module")
+def runs() -> tuple[tuple[Any, PatrolReport, list[Any]], tuple[Any, PatrolReport, list[Any]]]:
+    return fly(None), fly(SWITCH_AT_S)
+
+
+def test_a_restored_ctm_flies_the_patrol_on_as_the_original(runs: Any) -> None:
+    (exp_base, base, sent_base), (exp_sw, switched, sent_sw) = runs
+    assert switched.handoffs == base.handoffs >= 2  # the handoffs after the switch happen too
+    assert switched.max_gap_s == base.max_gap_s
+    assert switched.coverage == base.coverage
+    assert switched.revisit_s == base.revisit_s
+    # the same plans, to the same drones, at the same times, but numbered past the margin
+    assert sent_sw == sent_base
+    # and the console shows the same coverage: every waypoint's visits, the lap, the handoffs
+    end = exp_base.rig.clock.now()
+    cov_base = [m.coverage.as_dict(end) for m in exp_base.ctm.missions.values() if m.coverage]
+    cov_sw = [m.coverage.as_dict(end) for m in exp_sw.ctm.missions.values() if m.coverage]
+    assert cov_sw == cov_base
+
+
+def test_a_restored_ctm_numbers_its_plans_past_the_snapshots() -> None:
+    ctm = CentralTaskManager()
+    first = next(ctm._plan_ids)
+    data = snapshot(ctm, 0.0)
+    assert data["next_plan_id"] == first + 1 and next(ctm._plan_ids) == first + 1  # not consumed
+    new = CentralTaskManager()
+    restore(new, json.loads(json.dumps(data)), 5.0)
+    assert next(new._plan_ids) == first + 1 + PLAN_ID_MARGIN
+
+
+@given(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6))
+@settings(max_examples=50, deadline=None)
+def test_times_keep_their_meaning_on_another_clock(now: float, there: float) -> None:
+    ctm = CentralTaskManager()
+
+    ctm.add_mission([Enu(0, 0, 2), Enu(5, 0, 2)], now=now - 30.0, mission_id="m")
+    ctm.missions["m"].coverage.visits[1].append(now - 7.5)  # type: ignore[union-attr]
+    rec = ctm.drones["uav1"] = DroneRecord("uav1", last_heard=now - 0.5)
+    rec.plan = FlightPlan(3, PlanKind.HOLD)
+    restored = CentralTaskManager()
+    restore(restored, json.loads(json.dumps(snapshot(ctm, now))), there)
+    r = restored.drones["uav1"]
+    assert r.last_heard == pytest.approx(there - 0.5, abs=1e-6)
+    assert r.plan_sent_t == -math.inf and r.plan == rec.plan
+    cov = restored.missions["m"].coverage
+    assert cov is not None
+    assert cov.since_last_s(1, there) == pytest.approx(7.5, abs=1e-6)
+    assert cov.since_last_s(0, there) == pytest.approx(30.0, abs=1e-6)
+
+
+@given(
+    st.recursive(
+        st.none() | st.booleans() | st.integers() | st.text(max_size=5),
+        lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=8), c, max_size=4),
+        max_leaves=12,
+    )
+)
+@settings(max_examples=300, deadline=None)
+def test_anything_else_is_refused_with_a_reason_and_changes_nothing(junk: Any) -> None:
+    ctm = CentralTaskManager()
+    ctm.add_mission([Enu(0, 0, 2)], now=0.0)
+    before = snapshot(ctm, 0.0)
+    with pytest.raises(MessageError):
+        restore(ctm, junk, 1.0)
+    assert snapshot(ctm, 0.0) == before
+
+
+def test_a_snapshot_with_one_field_wrong_is_refused() -> None:
+    ctm = CentralTaskManager()
+
+    ctm.add_mission([Enu(0, 0, 2), Enu(5, 0, 2)], now=0.0, mission_id="m")
+    good = json.loads(json.dumps(snapshot(ctm, 0.0)))
+    for path, value in [
+        (("missions", 0, "state"), "flying"),
+        (("missions", 0, "mission", "route"), [[0, 0]]),
+        (("missions", 0, "coverage", "visits"), [[1.0]]),
+        (("next_plan_id",), "7"),
+    ]:
+        bad = json.loads(json.dumps(good))
+        node = bad
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = value
+        with pytest.raises(MessageError):
+            restore(CentralTaskManager(), bad, 0.0)
