@@ -25,7 +25,7 @@ from server.captioner import (
     describe_timed,
 )
 from server.captioner.service import load_captioner, unavailable_text
-from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehicleAdapter
 from server.dialog.addressing import parse_address
 from server.dialog.manager import UTTERANCE, DialogManager
 from server.fleet.service import FleetService
@@ -151,16 +151,22 @@ class Runtime:
         )
         assert stack.node is not None and stack.tasks is not None
         await stack.node.start()
-        self._start_dialog(name, prefix, stack.vehicle, stack.tasks)
+        dialog = self._start_dialog(name, prefix, stack.vehicle, stack.tasks)
+        if stack.supervisor is not None:  # its alarms are spoken by the drone's dialog
+            stack.supervisor.on_alarm(dialog.hear)
+            run = stack.supervisor.run(stack.vehicle.clock.now)
+            self._tasks.append(asyncio.create_task(run, name=f"supervisor:{name}"))
         return stack
 
-    def _start_dialog(self, name: str, prefix: str, vehicle: Any, tasks: TaskManager) -> None:
-        """The drone's dialog manager (SNS + its ANS monitors), running until ``stop``."""
+    def _start_dialog(
+        self, name: str, prefix: str, vehicle: Any, tasks: TaskManager
+    ) -> DialogManager:
+        """The drone's dialog manager, following the drone until ``stop``."""
         dialog = DialogManager(
             self.graph,
             self.settings,
             TaskManagerPort(tasks),
-            VehiclePort(vehicle, self.world),
+            VehicleAdapter(vehicle, self.world),
             CallableDescriber(lambda: self.describe(name)),
             self.audit,
             vehicle.clock.now,
@@ -172,6 +178,7 @@ class Runtime:
         )
         self.dialogs[name] = dialog
         self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
+        return dialog
 
     async def stop(self) -> None:
         await self.vehicles.stop()

@@ -228,7 +228,7 @@ class VehicleHost:
 
     async def start(self) -> None:
         from drone.sim.world import load_world
-        from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+        from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehicleAdapter
         from server.dialog.manager import DialogManager
         from server.fleet.geo import origin_of
         from server.fleet.ltm import LocalTaskManager
@@ -289,7 +289,7 @@ class VehicleHost:
             self.graph,
             s,
             TaskManagerPort(tasks),
-            VehiclePort(vehicle, self.world),
+            VehicleAdapter(vehicle, self.world),
             CallableDescriber(self._describe),
             self.audit,
             vehicle.clock.now,
@@ -350,7 +350,11 @@ class VehicleHost:
             await self.door.start()
         self.bus = join_bus(s, self.name, self.key)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
+        supervisor = self.stack.supervisor
+        assert supervisor is not None
+        supervisor.on_alarm(self.dialog.hear)
         self._tasks = [
+            asyncio.create_task(supervisor.run(vehicle.clock.now), name=f"ans:{self.name}"),
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]

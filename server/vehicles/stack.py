@@ -18,6 +18,7 @@ from drone.ardrone.driver import ARDroneDriver, DriverConfig
 from drone.camera import CameraModel
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World
+from drone.supervisor import Supervisor, supervise
 from drone.vehicle import Vehicle
 from server.captioner.grounding import SeenMarker, seen_markers
 from server.graph import Graph
@@ -40,6 +41,7 @@ class DroneStack:
     sim: SimServer | None = None
     tasks: TaskManager | None = None
     node: VehicleNode | None = None
+    supervisor: Supervisor | None = None  # the safety monitors (ANS), acting on this drone
     # stop ids run and superseded: each stop runs once, whichever road brings it first
     stops: StopLedger = field(default_factory=StopLedger)
 
@@ -106,7 +108,8 @@ async def build_drone_stack(
 ) -> DroneStack:
     """One drone's flight stack, built alike in the web process (inline) and in a vehicle
     process: its simulator for ``sim`` / ``sim-mavlink`` (started) or its link, the driver and
-    vehicle (started), the task manager and its graph node (not yet started). ``kind`` is the
+    vehicle (started), the task manager, its supervisor and its graph node (not yet started;
+    the supervisor is stepped by whoever runs the drone: ``supervisor.run``). ``kind`` is the
     drone's ``--drone`` entry; ``audit`` (an AuditLog) gets the node's jog and topic rows;
     ``own_process``: built by a vehicle process (the AR.Drone's control thread then holds the
     GIL while it spins and asks for ``control_rt_priority``).
@@ -158,7 +161,8 @@ async def build_drone_stack(
         audit=audit,
         command_deadline_s=s.command_deadline_s,
     )
-    return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
+    supervisor = supervise(vehicle, tasks, world, s)
+    return DroneStack(name, prefix, vehicle, driver, sim, tasks, node, supervisor=supervisor)
 
 
 def to_json_ready(value: Any) -> Any:

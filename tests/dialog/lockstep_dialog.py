@@ -8,13 +8,14 @@ from typing import Any
 
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
-from server.dialog.adapters import TaskManagerPort, VehiclePort
+from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.graph import Graph
 from server.language.nlu import NLU
 from server.settings import Settings
 from server.store import AuditLog
 from server.tasks import TaskManager
+from tests.supervisor.snaps import supervised
 
 
 @dataclass
@@ -58,7 +59,7 @@ def dialog_rig(
         graph,
         settings or Settings(),
         TaskManagerPort(tm),
-        VehiclePort(rig.vehicle, world),
+        VehicleAdapter(rig.vehicle, world),
         None,
         audit,
         rig.clock.now,
@@ -67,4 +68,5 @@ def dialog_rig(
         drones=lambda: list(drones),
     )
     rig.add_stepper(lambda now, dt: dm.step(now))
+    supervised(rig, tm, world, dm, settings or Settings())
     return DialogRig(rig, tm, dm, audit, replies)
