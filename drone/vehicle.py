@@ -143,6 +143,10 @@ class VehicleSnapshot:
     jog_limit: str = ""  # why the jog is being slowed/stopped near a limit ("" when it is not)
     navdata_doubt: str = ""  # why the driver doubts the navdata ("" while it trusts it)
     gps_age_s: float | None = None  # since the GPS option last carried a new fix (None: never)
+    # The drone's own temperature reading, °C: the barometer's compensated temperature of the
+    # raw-pressure option (tag 21, ardrone_autonomy's ``temp``), on the nav board inside the
+    # hull, which the motors' and electronics' heat warms (None: no reading yet).
+    temperature_c: float | None = None
 
     @property
     def yaw_deg(self) -> float:
@@ -211,6 +215,7 @@ class Vehicle:
         self._last_marker_t: float | None = None
         self._last_gps: tuple[float, float, float, int] | None = None
         self._last_gps_t: float | None = None
+        self._temperature_c: float | None = None
         self._last_result: FrameResult | None = None
         self._last_frame: np.ndarray | None = None
         self._last_cmd: PcmdCommand | None = None
@@ -362,6 +367,8 @@ class Vehicle:
         self._nav = nav
         self._nav_t = now
         self._link_ok = True
+        if nav.pressure is not None:  # kept between packets that do not carry the option
+            self._temperature_c = nav.pressure.temperature_c
         if nav.demo is None:
             return
         body = nav.to_body()
@@ -569,6 +576,7 @@ class Vehicle:
             jog_limit=self._jog_limit if self._mode is VehicleMode.MANUAL else "",
             navdata_doubt=self._navdata_doubt,
             gps_age_s=None if self._last_gps_t is None else max(0.0, now - self._last_gps_t),
+            temperature_c=self._temperature_c,
         )
 
     def overlay(self, lines: tuple[str, ...] = ()) -> np.ndarray | None:

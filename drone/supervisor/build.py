@@ -14,6 +14,7 @@ from drone.supervisor.jog import JogLimitMonitor
 from drone.supervisor.link import LinkMonitor
 from drone.supervisor.markers import MarkersLostMonitor
 from drone.supervisor.navdata import NavdataMonitor
+from drone.supervisor.temperature import LAND_C, WARN_C, TemperatureMonitor
 
 
 @dataclass(frozen=True)
@@ -25,6 +26,8 @@ class SupervisorParams:
     altitude_ceiling_m: float | None = None  # None: the world's (drone/limits.py)
     ans_period_s: float = 0.5
     search_after_s: float = 1.5
+    temperature_warn_c: float = WARN_C
+    temperature_land_c: float = LAND_C
 
     @classmethod
     def from_settings(cls, settings: Any) -> SupervisorParams:
@@ -47,7 +50,11 @@ def default_monitors(params: SupervisorParams, world: Any) -> list[Monitor]:
     b = getattr(world, "bounds", None)
     if b is not None:
         out.append(GeofenceMonitor(b.x_min, b.x_max, b.y_min, b.y_max, period_s=fast))
-    out += [SensorAgreementMonitor(period_s=fast), JogLimitMonitor(period_s=fast)]
+    out += [
+        SensorAgreementMonitor(period_s=fast),
+        JogLimitMonitor(period_s=fast),
+        TemperatureMonitor(p.temperature_warn_c, p.temperature_land_c, period_s=p.ans_period_s),
+    ]
     return out
 
 
