@@ -44,6 +44,7 @@ from drone.ardrone.navdata import (
 from drone.sim.battery import Battery
 from drone.sim.errors import FaultError, SimConfigError
 from drone.sim.physics import Body, FlightParams, Physics, as_box
+from drone.sim.people import PersonPose, people_at
 from drone.sim.thermal import Thermal
 
 DEFAULT_BOUNDS = (0.0, 8.0, 0.0, 6.0, 0.0, 3.0)  # the default indoor room, metres
@@ -308,6 +309,11 @@ class SimDrone:
             self._pad = pad if pad is not None and pad.charge_pct_s > 0.0 else None
         if self._pad is not None:
             ph.battery.charge(self._pad.charge_pct_s * dt)
+
+    def people(self) -> tuple[PersonPose, ...]:
+        """Where the world's people are now (drone/sim/people.py): what a person tracker
+        would tell the drone's supervisor."""
+        return people_at(self.world, self.time)
 
     @property
     def charging(self) -> bool:

@@ -6,7 +6,7 @@ assembles a drone's. It imports nothing from ``server``: it runs in the vehicle 
 """
 
 from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
-from drone.supervisor.build import SupervisorParams, default_monitors, supervise
+from drone.supervisor.build import SupervisorParams, default_monitors, keep_away_of, supervise
 from drone.supervisor.core import Monitor, Supervisor
 from drone.supervisor.phase import FLYING, Phase, phase_of
 
@@ -21,6 +21,7 @@ __all__ = [
     "Supervisor",
     "SupervisorParams",
     "default_monitors",
+    "keep_away_of",
     "phase_of",
     "supervise",
 ]

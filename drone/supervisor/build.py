@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,6 +15,7 @@ from drone.supervisor.jog import JogLimitMonitor
 from drone.supervisor.link import LinkMonitor
 from drone.supervisor.markers import MarkersLostMonitor
 from drone.supervisor.navdata import NavdataMonitor
+from drone.supervisor.people import KeepAway, KeepAwayMonitor, Person
 from drone.supervisor.temperature import LAND_C, WARN_C, TemperatureMonitor
 
 
@@ -58,13 +60,32 @@ def default_monitors(params: SupervisorParams, world: Any) -> list[Monitor]:
     return out
 
 
-def supervise(vehicle: Any, executor: Executor, world: Any, params: Any = None) -> Supervisor:
+def keep_away_of(world: Any, people: Callable[[], Sequence[Person]]) -> KeepAway:
+    """The world's keep-away from people (``limits.person_distance_m``), ``people`` tracked."""
+    from drone.limits import limits_of
+
+    lim = limits_of(world)
+    return KeepAway(people, lim.person_distance_m, lim)
+
+
+def supervise(
+    vehicle: Any,
+    executor: Executor,
+    world: Any,
+    params: Any = None,
+    *,
+    keep_away: KeepAway | None = None,
+) -> Supervisor:
     """The supervisor of ``vehicle`` acting through ``executor`` (its task executor);
-    ``params``: a :class:`SupervisorParams` or a ``Settings`` (None: the defaults)."""
+    ``params``: a :class:`SupervisorParams` or a ``Settings`` (None: the defaults);
+    ``keep_away``: where people are tracked (:func:`keep_away_of`), the keep-away monitor."""
     if not isinstance(params, SupervisorParams):
         params = SupervisorParams() if params is None else SupervisorParams.from_settings(params)
+    monitors = default_monitors(params, world)
+    if keep_away is not None and keep_away.distance_m > 0.0:
+        monitors.append(KeepAwayMonitor(keep_away, period_s=min(params.ans_period_s, 0.25)))
     return Supervisor(
-        default_monitors(params, world),
+        monitors,
         vehicle.snapshot,
         executor_phase(executor),
         act_on(executor),

@@ -18,7 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from drone.supervisor.alarms import PREEMPTING, Action, Alarm, Severity
+from drone.supervisor.alarms import PREEMPTING, Action, ActionKind, Alarm, Severity
 from drone.supervisor.phase import Phase, phase_of
 from drone.vehicle import VehicleSnapshot
 
@@ -52,8 +52,11 @@ def act_on(executor: Executor) -> Callable[[Action, str], None]:
     def act(action: Action, by: str) -> None:
         if action.kind in PREEMPTING:
             executor.preempt(action.kind.value, by=by)
-        else:
-            executor.submit([action.command()], replace=True)
+            return
+        decisions = executor.submit([action.command()], replace=True)
+        if not all(getattr(d, "accepted", True) for d in decisions or ()):
+            log.warning("%s: %s refused (%s); hovering", by, action.kind, decisions)
+            executor.preempt(ActionKind.HOVER.value, by=by)
 
     return act
 

@@ -12,15 +12,14 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drone.ardrone.driver import ARDroneDriver, DriverConfig
 from drone.camera import CameraModel
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World
-from drone.supervisor import Supervisor, supervise
+from drone.supervisor import Supervisor, keep_away_of, supervise
 from drone.vehicle import Vehicle
-from server.captioner.grounding import SeenMarker, seen_markers
 from server.graph import Graph
 from server.mavlink_stack import is_mavlink, start_mavlink
 from server.mavros_node import MavrosNode
@@ -28,6 +27,9 @@ from server.settings import Settings
 from server.tasks.manager import TaskManager
 from server.vehicle_node import VehicleNode
 from server.vehicles.stops import StopLedger
+
+if TYPE_CHECKING:  # the captioner is the console's: a vehicle process never loads it
+    from server.captioner.grounding import SeenMarker
 
 
 @dataclass
@@ -69,6 +71,8 @@ class DroneStack:
 
     def seen_markers(self) -> list[SeenMarker]:
         """The markers the detector sees now (grounding a caption's "marker N on the left")."""
+        from server.captioner.grounding import seen_markers
+
         return seen_markers(self.vehicle.snapshot())
 
     def latest_jpeg(self) -> tuple[int, bytes | None]:
@@ -148,8 +152,16 @@ async def build_drone_stack(
             realtime_priority=s.control_rt_priority if own_process else 0,
         )
         node_class, idle_search = VehicleNode, True
+    # People: where the simulator has them (its person tracker); a real drone has no tracker
+    # here, so only its own sensors and the operator keep it from people.
+    keep = keep_away_of(world, sim.sim.people) if isinstance(sim, SimServer) else None
     tasks = TaskManager(
-        vehicle, world, vehicle.clock, search_after_s=s.search_after_s, idle_search=idle_search
+        vehicle,
+        world,
+        vehicle.clock,
+        search_after_s=s.search_after_s,
+        idle_search=idle_search,
+        keep_away=keep,
     )
     node = node_class(
         graph,
@@ -161,7 +173,7 @@ async def build_drone_stack(
         audit=audit,
         command_deadline_s=s.command_deadline_s,
     )
-    supervisor = supervise(vehicle, tasks, world, s)
+    supervisor = supervise(vehicle, tasks, world, s, keep_away=keep)
     return DroneStack(name, prefix, vehicle, driver, sim, tasks, node, supervisor=supervisor)
 
 

@@ -78,12 +78,14 @@ def fake_flight_supervisor(flight: Any, world: Any = None) -> Supervisor:
     return Supervisor(default_monitors(SupervisorParams(), world), snapshot, phase, act)
 
 
-def supervised(rig: Any, tm: Any, world: Any, dm: Any, settings: Any = None) -> Supervisor:
+def supervised(
+    rig: Any, tm: Any, world: Any, dm: Any, settings: Any = None, *, keep_away: Any = None
+) -> Supervisor:
     """The vehicle's supervisor for a lockstep rig's drone and task manager, stepped by the rig
     after the dialog (as the dialog stepped its monitors), its alarms spoken by ``dm``."""
     from drone.supervisor import supervise
 
-    sup = supervise(rig.vehicle, tm, world, settings)
+    sup = supervise(rig.vehicle, tm, world, settings, keep_away=keep_away)
     sup.on_alarm(dm.hear)
     rig.add_stepper(lambda now, dt: sup.step(now))
     return sup
