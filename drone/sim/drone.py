@@ -43,8 +43,8 @@ from drone.ardrone.navdata import (
 )
 from drone.sim.battery import Battery
 from drone.sim.errors import FaultError, SimConfigError
-from drone.sim.physics import Body, FlightParams, Physics, as_box
 from drone.sim.people import PersonPose, people_at
+from drone.sim.physics import Body, FlightParams, Physics, as_box
 from drone.sim.thermal import Thermal
 
 DEFAULT_BOUNDS = (0.0, 8.0, 0.0, 6.0, 0.0, 3.0)  # the default indoor room, metres
