@@ -18,6 +18,7 @@ from typing import Any
 from fastapi import APIRouter
 
 from drone.sim.world import World, load_world
+from drone.vehicle import Vehicle
 from server.audit_trail import AuditTrail
 from server.captioner import (
     Captioner,
@@ -159,7 +160,7 @@ class Runtime:
         return stack
 
     def _start_dialog(
-        self, name: str, prefix: str, vehicle: Any, tasks: TaskManager
+        self, name: str, prefix: str, vehicle: Vehicle, tasks: TaskManager
     ) -> DialogManager:
         """The drone's dialog manager, following the drone until ``stop``."""
         dialog = DialogManager(

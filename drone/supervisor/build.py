@@ -17,6 +17,7 @@ from drone.supervisor.markers import MarkersLostMonitor
 from drone.supervisor.navdata import NavdataMonitor
 from drone.supervisor.people import KeepAway, KeepAwayMonitor, Person
 from drone.supervisor.temperature import LAND_C, WARN_C, TemperatureMonitor
+from drone.vehicle import Vehicle
 
 
 @dataclass(frozen=True)
@@ -69,7 +70,7 @@ def keep_away_of(world: Any, people: Callable[[], Sequence[Person]]) -> KeepAway
 
 
 def supervise(
-    vehicle: Any,
+    vehicle: Vehicle,
     executor: Executor,
     world: Any,
     params: Any = None,

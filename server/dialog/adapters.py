@@ -10,6 +10,7 @@ import math
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import Any
 
+from drone.vehicle import Vehicle
 from server.dialog.ports import DroneView, TaskDecision, TaskEvent
 
 SAFETY_ACTIONS = ("land", "emergency", "return_home", "hover")
@@ -65,9 +66,9 @@ class TaskManagerPort:
 
 
 class VehicleAdapter:
-    """drone.vehicle.Vehicle (+ its world) as a :class:`~server.dialog.ports.VehiclePort`."""
+    """A :class:`drone.vehicle.Vehicle` (+ its world) as a :class:`~server.dialog.ports.VehiclePort`."""
 
-    def __init__(self, vehicle: Any, world: Any) -> None:
+    def __init__(self, vehicle: Vehicle, world: Any) -> None:
         self.vehicle = vehicle
         self._markers = frozenset(int(m.id) for m in getattr(world, "markers", ()))
 

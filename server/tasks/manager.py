@@ -58,7 +58,7 @@ from drone.control.clock import Clock
 from drone.control.pid import Setpoint
 from drone.limits import limits_of
 from drone.supervisor.people import KeepAway
-from drone.vehicle import VehicleSnapshot
+from drone.vehicle import Vehicle, VehicleSnapshot
 from server.tasks.build import build_task
 from server.tasks.errors import CommandError, IllegalTransition, RefusedError
 from server.tasks.states import TaskEvent, TaskState, transition
@@ -129,7 +129,7 @@ class TaskManager(Context):
 
     def __init__(
         self,
-        vehicle: Any,
+        vehicle: Vehicle,
         world: Any,
         clock: Clock,
         *,

@@ -19,7 +19,7 @@ from typing import Any
 
 from drone.control.pid import Setpoint, wrap_angle
 from drone.limits import FlightLimits
-from drone.vehicle import VehicleSnapshot
+from drone.vehicle import Vehicle, VehicleSnapshot
 from server.tasks.errors import CommandError, RefusedError
 from server.tasks.states import TaskState
 
@@ -66,7 +66,7 @@ class Outcome:
 class Context:
     """What tasks use from the manager (the manager implements it)."""
 
-    vehicle: Any
+    vehicle: Vehicle
     world: Any
     arrival: ArrivalRule
     margin_m: float

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, fields, is_dataclass
 from typing import TYPE_CHECKING, Any
 
 from drone.ardrone.driver import ARDroneDriver, DriverConfig
+from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World
@@ -125,7 +126,7 @@ async def build_drone_stack(
     node_class: type[VehicleNode]
     if is_mavlink(kind):
         parts = await start_mavlink(name, kind, index, world, s)
-        vehicle: Any = parts.vehicle
+        vehicle: Vehicle = parts.vehicle
         driver: Any = parts.driver
         sim: Any = parts.sim
         node_class, idle_search = MavrosNode, False  # the autopilot flies; no camera to search
@@ -145,12 +146,13 @@ async def build_drone_stack(
         else:
             driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
         await driver.start()
-        vehicle = Vehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
-        await vehicle.start(
+        ardrone = ARDroneVehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
+        await ardrone.start(
             driver,
             own_process=own_process,
             realtime_priority=s.control_rt_priority if own_process else 0,
         )
+        vehicle = ardrone
         node_class, idle_search = VehicleNode, True
     # People: where the simulator has them (its person tracker); a real drone has no tracker
     # here, so only its own sensors and the operator keep it from people.

@@ -40,7 +40,7 @@ def test_the_hull_settles_at_its_rise_with_the_square_of_the_load_and_cools_land
 def test_the_navdata_carries_the_heated_reading_where_the_sdk_puts_it() -> None:
     sim = SimDrone(load_world("indoor"), seed=3)
     sim.thermal.rise_c = 30.0
-    sim._navdata_options = 1 << TAG_PRESSURE_RAW  # as the vehicle asks (drone/vehicle.py)
+    sim._navdata_options = 1 << TAG_PRESSURE_RAW  # as the vehicle asks (drone/ardrone/vehicle.py)
     sim._demo = True  # past the bootstrap handshake
     nav = decode_navdata(encode_navdata(sim.navdata()))
     assert nav.pressure is not None
