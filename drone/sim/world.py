@@ -258,7 +258,8 @@ class World:
     start: PlanarPose = PlanarPose(0.0, 0.0, 0.0, 0.0)
     surfaces: Surfaces = field(default_factory=Surfaces)
     source: str = ""
-    limits: Mapping[str, float] | None = None  # the file's ``limits:`` (drone.limits.limits_of)
+    # the file's ``limits:`` (drone.limits.limits_of); out of the hash (a dict), kept in ==
+    limits: Mapping[str, float] | None = field(default=None, hash=False)
 
     @property
     def indoor(self) -> bool:

@@ -45,6 +45,8 @@ def _doc(**person: object) -> dict[str, object]:
 def test_worlds_say_how_far_to_keep_from_people_and_where_people_walk() -> None:
     assert limits_of(load_world("outdoor")).person_distance_m == 2.0  # the default
     assert limits_of(load_world("indoor")).person_distance_m == 1.0  # the room's own
+    # worlds stay hashable with a limits section (renderers are cached per world)
+    assert len({load_world("indoor"), load_world("outdoor")}) == 2
     w = parse_world(_doc(walk={"path": [[5, 1], [5, 4]], "speed_m_s": 0.5, "seed": 2}))
     assert w.objects[0].walk == Walk(((5.0, 1.0), (5.0, 4.0)), 0.5, 2)
     with pytest.raises(WorldError, match="only people walk"):
