@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import math
 import time
@@ -45,6 +46,7 @@ from server.speech.service import SpeechConfig, SpeechService
 from server.store import AuditLog
 from server.tasks.manager import TaskManager
 from server.tls import TLSFiles, display_host
+from server.vehicles import names
 from server.vehicles.central import VehicleCentral
 from server.vehicles.stack import DroneStack, build_drone_stack
 
@@ -153,8 +155,15 @@ class Runtime:
         assert stack.node is not None and stack.tasks is not None
         await stack.node.start()
         dialog = self._start_dialog(name, prefix, stack.vehicle, stack.tasks)
-        if stack.supervisor is not None:  # its alarms are spoken by the drone's dialog
+        if stack.supervisor is not None:  # its alarms: spoken by the dialog, and published
             stack.supervisor.on_alarm(dialog.hear)
+            topic = names.alarm_topic(name)
+            self.graph.advertise(topic, names.STRING)
+            stack.supervisor.on_alarm(
+                lambda alarm: self.graph.publish(
+                    topic, {"data": json.dumps(alarm.as_message(name))}
+                )
+            )
             run = stack.supervisor.run(stack.vehicle.clock.now)
             self._tasks.append(asyncio.create_task(run, name=f"supervisor:{name}"))
         return stack

@@ -71,6 +71,7 @@ from server.vehicles.relay import dialog_out
 from server.vehicles.watch import CentralWatch, LossAction
 
 if TYPE_CHECKING:
+    from drone.supervisor import Alarm
     from server.direct_actions import DirectOutcome
     from server.vehicles.stops import StopVerdict
 
@@ -148,6 +149,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         TopicSpec(f"/{name}/{STATUS_TOPIC}", STATUS_TYPE),
         TopicSpec(names.info_topic(name), names.STRING, latch=True),
         TopicSpec(names.telemetry_topic(name), names.STRING),
+        TopicSpec(names.alarm_topic(name), names.STRING),
     )
     inn = (
         TopicSpec(f"{p}/cmd_vel", TWIST),
@@ -353,11 +355,19 @@ class VehicleHost:
         supervisor = self.stack.supervisor
         assert supervisor is not None
         supervisor.on_alarm(self.dialog.hear)
+        self.graph.advertise(names.alarm_topic(self.name), names.STRING)
+        supervisor.on_alarm(self._publish_alarm)
         self._tasks = [
             asyncio.create_task(supervisor.run(vehicle.clock.now), name=f"ans:{self.name}"),
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]
+
+    def _publish_alarm(self, alarm: Alarm) -> None:
+        """Every alarm on ``/NAME/vehicle/alarm`` too: the console, its clients and the flight
+        recording see what the supervisor did and why."""
+        msg = {"data": json.dumps(alarm.as_message(self.name))}
+        self.graph.publish(names.alarm_topic(self.name), msg)
 
     def info(self) -> dict[str, Any]:
         return {
