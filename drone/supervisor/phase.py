@@ -12,7 +12,8 @@ class Phase(StrEnum):
     GROUNDED = "grounded"
     TAKING_OFF = "taking_off"
     AIRBORNE = "airborne"  # flying with nothing to do (or holding a hover)
-    EXECUTING = "executing"  # a voluntary task flies
+    EXECUTING = "executing"  # an operator's motion flies (move, turn, goto, patrol)
+    WAYPOINTS = "waypoints"  # a plan's waypoints fly (the fleet's, or the supervisor's back-off)
     SEARCHING = "searching"  # a task turns in place looking for markers
     RETURNING = "returning"
     LANDING = "landing"
@@ -20,8 +21,17 @@ class Phase(StrEnum):
 
 
 FLYING = frozenset(
-    {Phase.TAKING_OFF, Phase.AIRBORNE, Phase.EXECUTING, Phase.SEARCHING, Phase.RETURNING}
+    {
+        Phase.TAKING_OFF,
+        Phase.AIRBORNE,
+        Phase.EXECUTING,
+        Phase.WAYPOINTS,
+        Phase.SEARCHING,
+        Phase.RETURNING,
+    }
 )
+# The operator's motions (the dialog's MOTION): the markers monitor watches only these.
+MOTIONS = ("move", "turn", "goto", "patrol")
 
 
 def phase_of(snap: VehicleSnapshot, task: str = "", task_state: str = "idle") -> Phase:
@@ -38,6 +48,8 @@ def phase_of(snap: VehicleSnapshot, task: str = "", task_state: str = "idle") ->
         return Phase.RETURNING
     if task_state == "searching" or task == "search":
         return Phase.SEARCHING
-    if task and task not in ("hover", "describe"):
+    if task in MOTIONS:
         return Phase.EXECUTING
-    return Phase.AIRBORNE
+    if task == "waypoints":
+        return Phase.WAYPOINTS
+    return Phase.AIRBORNE  # holding a hover, describing, or nothing to do
