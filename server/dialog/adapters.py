@@ -66,7 +66,8 @@ class TaskManagerPort:
 
 
 class VehicleAdapter:
-    """A :class:`drone.vehicle.Vehicle` (+ its world) as a :class:`~server.dialog.ports.VehiclePort`."""
+    """A :class:`drone.vehicle.Vehicle` (+ its world) as a dialog's
+    :class:`~server.dialog.ports.VehiclePort`."""
 
     def __init__(self, vehicle: Vehicle, world: Any) -> None:
         self.vehicle = vehicle
