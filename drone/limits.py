@@ -29,6 +29,7 @@ from typing import Any
 WALL_MARGIN_M = 0.35
 FLOOR_M = 0.3
 CEILING_CLEARANCE_M = 0.3
+PERSON_DISTANCE_M = 2.0  # keep-away from people unless the world says otherwise (issue 28)
 JOG_SLOW_ZONE_M = 1.0  # within this distance of a limit the jog towards it is scaled down
 JOG_STOP_M = 0.15  # this close to a limit the jog towards it stops (and brakes)
 JOG_AT_STOP_M = 0.05  # this near the stop line the jog is said to have stopped
@@ -70,6 +71,7 @@ class FlightLimits:
     ceiling_m: float  # highest commanded height above the floor
     wall_margin_m: float = WALL_MARGIN_M
     indoor: bool = True
+    person_distance_m: float = PERSON_DISTANCE_M  # how close to a person a drone may fly
 
     @property
     def area(self) -> str:
@@ -183,6 +185,7 @@ def limits_of(world: Any) -> FlightLimits:
         ("ceiling_m", default_ceiling),
         ("floor_m", FLOOR_M),
         ("wall_margin_m", WALL_MARGIN_M),
+        ("person_distance_m", PERSON_DISTANCE_M),
     ):
         v = raw.get(key, default)
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
@@ -202,4 +205,5 @@ def limits_of(world: Any) -> FlightLimits:
         vals["ceiling_m"],
         vals["wall_margin_m"],
         indoor,
+        vals["person_distance_m"],
     )

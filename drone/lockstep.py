@@ -4,11 +4,11 @@ order on one virtual clock — no sockets, no sleeping, deterministic for a seed
 One tick of ``dt`` (default 10 ms = the controller period), per drone, in this order:
 
 1. ``InMemoryLink.step``: the driver core's AT datagrams → ``SimDrone`` → physics → navdata
-   bytes → the driver core → events → ``Vehicle.on_driver_event`` (EKF predict/update);
+   bytes → the driver core → events → ``ARDroneVehicle.on_driver_event`` (EKF predict/update);
 2. camera at ``camera_rate_hz`` (15 fps as the AR.Drone's stream): ``SimDrone.render_frame``
-   at the true pose, delivered to ``Vehicle.on_frame`` ``frame_latency_s`` later with its
+   at the true pose, delivered to ``ARDroneVehicle.on_frame`` ``frame_latency_s`` later with its
    capture time (so the EKF's late-measurement path runs as it does live);
-3. ``Vehicle.control_step`` (the same code the 100 Hz thread runs);
+3. ``ARDroneVehicle.control_step`` (the same code the 100 Hz thread runs);
 4. extra steppers (``add_stepper(fn(now, dt))``: task managers, fleet managers, monitors).
 
 Usage::
@@ -31,11 +31,11 @@ from typing import Any
 import numpy as np
 
 from drone.ardrone.driver import DriverProtocol
+from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
 from drone.control.clock import VirtualClock
 from drone.sim.drone import SimConfig, SimDrone
 from drone.sim.link import InMemoryLink
-from drone.vehicle import Vehicle
 
 Stepper = Callable[[float, float], None]
 
@@ -79,7 +79,7 @@ class LockstepRig:
         self.frame_latency_s = frame_latency_s
         self.sims: list[SimDrone] = []
         self.links: list[InMemoryLink] = []
-        self.vehicles: list[Vehicle] = []
+        self.vehicles: list[ARDroneVehicle] = []
         self._steppers: list[Stepper] = []
         self._frames: list[deque[tuple[float, float, np.ndarray]]] = []
         self._next_frame = 0.0
@@ -100,7 +100,7 @@ class LockstepRig:
             proto = DriverProtocol()
             link = InMemoryLink(proto, sim)
             link.start(self.clock.now())
-            v = Vehicle(f"uav{i + 1}", world, proto, camera=cam_model, clock=self.clock)
+            v = ARDroneVehicle(f"uav{i + 1}", world, proto, camera=cam_model, clock=self.clock)
             if known_start:
                 t = sim.truth
                 v.ekf.reset(self.clock.now(), t.x, t.y, t.z, t.yaw_rad)
@@ -110,7 +110,7 @@ class LockstepRig:
             self._frames.append(deque())
 
     @property
-    def vehicle(self) -> Vehicle:
+    def vehicle(self) -> ARDroneVehicle:
         """The first (or only) vehicle."""
         return self.vehicles[0]
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 import math
 import time
@@ -18,6 +19,7 @@ from typing import Any
 from fastapi import APIRouter
 
 from drone.sim.world import World, load_world
+from drone.vehicle import Vehicle
 from server.audit_trail import AuditTrail
 from server.captioner import (
     Captioner,
@@ -25,7 +27,7 @@ from server.captioner import (
     describe_timed,
 )
 from server.captioner.service import load_captioner, unavailable_text
-from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehicleAdapter
 from server.dialog.addressing import parse_address
 from server.dialog.manager import UTTERANCE, DialogManager
 from server.fleet.service import FleetService
@@ -44,6 +46,7 @@ from server.speech.service import SpeechConfig, SpeechService
 from server.store import AuditLog
 from server.tasks.manager import TaskManager
 from server.tls import TLSFiles, display_host
+from server.vehicles import names
 from server.vehicles.central import VehicleCentral
 from server.vehicles.stack import DroneStack, build_drone_stack
 
@@ -157,16 +160,29 @@ class Runtime:
         )
         assert stack.node is not None and stack.tasks is not None
         await stack.node.start()
-        self._start_dialog(name, prefix, stack.vehicle, stack.tasks)
+        dialog = self._start_dialog(name, prefix, stack.vehicle, stack.tasks)
+        if stack.supervisor is not None:  # its alarms: spoken by the dialog, and published
+            stack.supervisor.on_alarm(dialog.hear)
+            topic = names.alarm_topic(name)
+            self.graph.advertise(topic, names.STRING)
+            stack.supervisor.on_alarm(
+                lambda alarm: self.graph.publish(
+                    topic, {"data": json.dumps(alarm.as_message(name))}
+                )
+            )
+            run = stack.supervisor.run(stack.vehicle.clock.now)
+            self._tasks.append(asyncio.create_task(run, name=f"supervisor:{name}"))
         return stack
 
-    def _start_dialog(self, name: str, prefix: str, vehicle: Any, tasks: TaskManager) -> None:
-        """The drone's dialog manager (SNS + its ANS monitors), running until ``stop``."""
+    def _start_dialog(
+        self, name: str, prefix: str, vehicle: Vehicle, tasks: TaskManager
+    ) -> DialogManager:
+        """The drone's dialog manager, following the drone until ``stop``."""
         dialog = DialogManager(
             self.graph,
             self.settings,
             TaskManagerPort(tasks),
-            VehiclePort(vehicle, self.world),
+            VehicleAdapter(vehicle, self.world),
             CallableDescriber(lambda: self.describe(name)),
             self.audit,
             vehicle.clock.now,
@@ -178,6 +194,7 @@ class Runtime:
         )
         self.dialogs[name] = dialog
         self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
+        return dialog
 
     async def stop(self) -> None:
         await self.fleet.leave_bus()  # its tokens go before the bus does

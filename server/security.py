@@ -35,12 +35,13 @@ import tempfile
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
-from fastapi import HTTPException, Request
-
 from server.settings import Settings
+
+if TYPE_CHECKING:  # FastAPI is the web process's: a vehicle process uses the rest without it
+    from fastapi import Request
 
 TOKEN_FILE = "tokens.json"
 
@@ -423,6 +424,8 @@ def require_role(security: Security, *roles: Role | str) -> Callable[..., Any]:
 
     401 without a valid token, 403 when the role is not allowed; the detail names the role.
     """
+    from fastapi import HTTPException, Request
+
     wanted: Iterable[Role] = [Role(r) for r in roles] or list(Role)
     wanted_set = set(wanted)
 
@@ -441,4 +444,6 @@ def require_role(security: Security, *roles: Role | str) -> Callable[..., Any]:
             )
         return role
 
+    # FastAPI reads the parameter's type to inject the request: the class, not the name
+    dependency.__annotations__["request"] = Request
     return dependency

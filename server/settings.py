@@ -110,6 +110,16 @@ class Settings(BaseSettings):
         None, description="ANS ceiling; unset: the world's (drone/limits.py); may only lower it."
     )
     ans_period_s: float = Field(0.5, description="Period of the ANS checks.")
+    temperature_warn_c: float = Field(
+        55.0,
+        description="ANS: the drone's temperature (navdata) above this: tell the operator (5 °C "
+        "under the 60 °C most Li-Po cells are rated to discharge at).",
+    )
+    temperature_land_c: float = Field(
+        60.0,
+        description="ANS: the drone's temperature above this: land (the Li-Po cells' rated "
+        "discharge limit; the battery shares the hull with the thermometer).",
+    )
     search_after_s: float = Field(
         1.5, description="Hovering with an uncertain position this long: search for a tag."
     )
@@ -249,6 +259,11 @@ class Settings(BaseSettings):
             raise ValueError(f"command_deadline_s: {exc}") from exc
         if not 0 <= self.asr_beams <= 16:
             raise ValueError(f"asr_beams must be 0 (default) or 1 to 16, not {self.asr_beams}")
+        if not self.temperature_warn_c < self.temperature_land_c:
+            raise ValueError(
+                f"temperature_warn_c ({self.temperature_warn_c}) must be below "
+                f"temperature_land_c ({self.temperature_land_c}): the warning comes first"
+            )
         return self
 
     def with_(self, **changes: Any) -> Settings:

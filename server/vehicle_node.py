@@ -129,7 +129,7 @@ class VehicleNode:
 
     Args:
         graph: the process graph.
-        vehicle: a ``drone.vehicle.Vehicle``.
+        vehicle: a ``drone.ardrone.vehicle.ARDroneVehicle`` (MavrosNode: a ``MavlinkVehicle``).
         task_manager: its ``server.tasks.TaskManager``.
         name: the drone's name (``uav1``), carried in ``/uav/task``.
         prefix: ``""`` for a single drone, ``"/uav2"`` in a fleet.
@@ -141,7 +141,7 @@ class VehicleNode:
     def __init__(
         self,
         graph: Graph,
-        vehicle: Any,
+        vehicle: Any,  # an ARDroneVehicle (a MavlinkVehicle in MavrosNode, its subclass)
         task_manager: Any,
         name: str,
         prefix: str = "",

@@ -38,7 +38,7 @@ verdicts out), in three pure parts that :class:`NavdataPlausibility` puts togeth
   reading there only refuses a take-off, the safe side.
 
   What is safe for a real cliff. A drop the model allows and that lasts is believed, and a
-  critical level then lands the drone as any critical level does (server/dialog/autonomic.py):
+  critical level then lands the drone as any critical level does (drone/supervisor/battery.py):
   a pack that sags to critical for seconds on end cannot be trusted with more flight; landing
   lowers the current (descending needs less thrust than hovering) and ends the flight where the
   drone is, before the voltage collapses further. Hovering to ask would keep drawing hover
@@ -53,7 +53,7 @@ verdicts out), in three pure parts that :class:`NavdataPlausibility` puts togeth
   restart that arrive while the old stream is silent. ``trust_again_s`` without any suspicious
   packet makes the stream trusted again.
   The driver reports both (``NavdataDoubt``/``NavdataTrusted``); the ANS then hovers the drone and
-  asks the operator rather than act on the readings (``server/dialog/monitors.py``).
+  asks the operator rather than act on the readings (``drone/supervisor/navdata.py``).
 
 The numbers: a 1000 mAh AR.Drone 2.0 battery lasts ~12 minutes of flight (Parrot's figure), the
 model's fastest drain is ≈ 0.21 %/s (full climb); 2 %/s is ten times that, room for the steep

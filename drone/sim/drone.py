@@ -43,7 +43,9 @@ from drone.ardrone.navdata import (
 )
 from drone.sim.battery import Battery
 from drone.sim.errors import FaultError, SimConfigError
+from drone.sim.people import PersonPose, people_at
 from drone.sim.physics import Body, FlightParams, Physics, as_box
+from drone.sim.thermal import Thermal
 
 DEFAULT_BOUNDS = (0.0, 8.0, 0.0, 6.0, 0.0, 3.0)  # the default indoor room, metres
 COMMAND_TIMEOUT_S = 2.0  # Developer Guide §6.1: the drone treats 2 s without commands as lost
@@ -101,9 +103,10 @@ class Truth:
     ctrl_state: CtrlState
     flying: bool
     emergency: bool
+    temperature_c: float = 0.0  # what the barometer reads in the hull (drone/sim/thermal.py)
 
 
-FAULT_KINDS = ("link_loss", "battery", "wind_gust", "wind", "clear")
+FAULT_KINDS = ("link_loss", "battery", "wind_gust", "wind", "payload", "clear")
 
 
 class SimDrone:
@@ -154,6 +157,7 @@ class SimDrone:
             battery=Battery(pct=battery_pct),
             body=Body(x=x, y=y, z=box[4], yaw_rad=yaw),
         )
+        self.thermal = Thermal()
         self.gps_origin = getattr(world, "gps_origin", None)
         self.rng = np.random.default_rng(self.config.seed)
         # its own stream: asking for the barometer does not change the other sensors' noise
@@ -287,6 +291,7 @@ class SimDrone:
             self._com_watchdog = True
         flew = self.physics.motors_on
         self.physics.step(dt)
+        self.thermal.step(dt, self.physics.battery.load, self.physics.motors_on)
         self._charge(dt, flew)
 
     def _charge(self, dt: float, flew: bool) -> None:
@@ -304,6 +309,11 @@ class SimDrone:
             self._pad = pad if pad is not None and pad.charge_pct_s > 0.0 else None
         if self._pad is not None:
             ph.battery.charge(self._pad.charge_pct_s * dt)
+
+    def people(self) -> tuple[PersonPose, ...]:
+        """Where the world's people are now (drone/sim/people.py): what a person tracker
+        would tell the drone's supervisor."""
+        return people_at(self.world, self.time)
 
     @property
     def charging(self) -> bool:
@@ -400,18 +410,27 @@ class SimDrone:
         """ISA barometric formula p = p0·(1 − L·h/T0)^(g·M/(R·L)) at the drone's height above
         sea level (ISO 2533 troposphere: L 0.0065 K/m, T0 288.15 K, exponent 5.25588)."""
         c, rng = self.config, self._baro_rng
-        elevation = self.gps_origin.alt_m if self.gps_origin is not None else 0.0
-        h = elevation + self.physics.body.z
+        h = self._height_amsl_m()
         p = c.sea_level_pressure_pa * (1.0 - 2.25577e-5 * h) ** 5.25588
-        if c.ground_temperature_c is not None:
-            temp = c.ground_temperature_c
-        elif self.world is not None and getattr(self.world, "indoor", False):
-            temp = 21.0
-        else:
-            temp = 15.0 - 0.0065 * h
         p += rng.normal(0.0, c.pressure_noise_pa)
+        # the hull's air: the outside air warmed by the motors (drone/sim/thermal.py)
+        temp = self.air_temperature_c() + self.thermal.rise_c
         temp += rng.normal(0.0, c.temperature_noise_c)
         return PressureRaw(up=0, ut=0, temperature_dc=round(temp * 10.0), pressure_pa=round(p))
+
+    def _height_amsl_m(self) -> float:
+        elevation = self.gps_origin.alt_m if self.gps_origin is not None else 0.0
+        return float(elevation + self.physics.body.z)
+
+    def air_temperature_c(self) -> float:
+        """The outside air: the configured ground temperature, a heated room's 21 °C indoors,
+        else ISA's 15 °C at sea level less 6.5 °C/km (ISO 2533)."""
+        c = self.config
+        if c.ground_temperature_c is not None:
+            return c.ground_temperature_c
+        if self.world is not None and getattr(self.world, "indoor", False):
+            return 21.0
+        return 15.0 - 0.0065 * self._height_amsl_m()
 
     def _gps_option(self) -> Gps | None:
         """The receiver's latest fix: a new one every ``1 / gps_rate_hz`` s of simulated time
@@ -474,6 +493,7 @@ class SimDrone:
             ctrl_state=CtrlState.DEFAULT if ph.emergency else ph.ctrl,
             flying=ph.flying,
             emergency=ph.emergency,
+            temperature_c=self.air_temperature_c() + self.thermal.rise_c,
         )
 
     def inject_fault(self, kind: str, **params: float) -> None:
@@ -485,6 +505,8 @@ class SimDrone:
             ``wind_gust(vx, vy, duration_s)``: extra wind in m/s (map frame) for that long.
             ``wind(vx [wind_x], vy [wind_y])``: steady wind in m/s (map frame); with
             ``duration_s`` it is a gust instead.
+            ``payload(kg)``: carry ``kg`` (0..0.25; 0 removes it): the motors draw more and
+            heat the hull more (drone/sim/thermal.py); the flight itself is unchanged.
             ``clear()``: end link loss, wind and gusts (the battery keeps its charge).
 
         Raises:
@@ -499,6 +521,7 @@ class SimDrone:
             "battery": {"pct"},
             "wind_gust": {"vx", "vy", "duration_s"},
             "wind": {"vx", "vy"},
+            "payload": {"kg"},
             "clear": set(),
         }
         if kind not in required:
@@ -524,6 +547,11 @@ class SimDrone:
             self.physics.gust(vals["vx"], vals["vy"], vals["duration_s"])
         elif kind == "wind":
             self.physics.wind = (vals["vx"], vals["vy"])
+        elif kind == "payload":
+            try:
+                self.thermal.carry(vals["kg"])
+            except SimConfigError as exc:
+                raise FaultError(str(exc)) from exc
         else:
             self._link_down_until = -math.inf
             self.physics.wind = (0.0, 0.0)

@@ -166,6 +166,20 @@ class Marker:
         )
 
 
+MAX_WALK_SPEED_M_S = 3.0  # a jog; anything faster in a world file is a typo
+
+
+@dataclass(frozen=True)
+class Walk:
+    """Where a person walks (the simulator moves them: drone/sim/people.py): from the person's
+    ``position`` through ``path`` (map-frame x, y) and back the same way, again and again, at
+    ``speed_m_s`` varied by up to ±10 % by ``seed`` (people do not walk at a set speed)."""
+
+    path: tuple[tuple[float, float], ...]
+    speed_m_s: float
+    seed: int = 0
+
+
 @dataclass(frozen=True)
 class SceneObject:
     """A piece of furniture, a door, a window, a person-like figure…
@@ -181,6 +195,7 @@ class SceneObject:
     position: Vec3
     yaw_rad: float
     size: Vec3
+    walk: Walk | None = None  # a person who walks (kind "person" only)
 
     @property
     def centre(self) -> Vec3:
@@ -243,7 +258,8 @@ class World:
     start: PlanarPose = PlanarPose(0.0, 0.0, 0.0, 0.0)
     surfaces: Surfaces = field(default_factory=Surfaces)
     source: str = ""
-    limits: Mapping[str, float] | None = None  # the file's ``limits:`` (drone.limits.limits_of)
+    # the file's ``limits:`` (drone.limits.limits_of); out of the hash (a dict), kept in ==
+    limits: Mapping[str, float] | None = field(default=None, hash=False)
 
     @property
     def indoor(self) -> bool:
@@ -331,6 +347,16 @@ class World:
                     "position": {"x": o.position[0], "y": o.position[1], "z": o.position[2]},
                     "yaw_deg": math.degrees(o.yaw_rad),
                     "size": {"w": o.size[0], "d": o.size[1], "h": o.size[2]},
+                    **(
+                        {
+                            "walk": {
+                                "path": [{"x": x, "y": y} for x, y in o.walk.path],
+                                "speed_m_s": o.walk.speed_m_s,
+                            }
+                        }
+                        if o.walk is not None
+                        else {}
+                    ),
                 }
                 for o in self.objects
             ],
@@ -497,6 +523,11 @@ def _parse_object(c: _Ctx, raw: Any, i: int) -> SceneObject:
         if s <= 0:
             raise c.fail(f"{where}.size[{k}]", f"must be > 0, got {s}")
     oid = str(d.get("id", f"{kind}{i}"))
+    walk = None
+    if d.get("walk") is not None:
+        if kind != "person":
+            raise c.fail(f"{where}.walk", f"only people walk, not a {kind}")
+        walk = _parse_walk(c, d["walk"], f"{where}.walk")
     return SceneObject(
         id=oid,
         kind=kind,
@@ -505,7 +536,25 @@ def _parse_object(c: _Ctx, raw: Any, i: int) -> SceneObject:
         position=c.vec3(c.req(d, "position", where), f"{where}.position"),
         yaw_rad=c.yaw(d, where, required=False),
         size=size,
+        walk=walk,
     )
+
+
+def _parse_walk(c: _Ctx, raw: Any, where: str) -> Walk:
+    d = c.mapping(raw, where)
+    points = c.seq(c.req(d, "path", where), f"{where}.path")
+    if not points:
+        raise c.fail(f"{where}.path", "needs at least one [x, y] point")
+    path = []
+    for k, pt in enumerate(points):
+        if not isinstance(pt, list | tuple) or len(pt) != 2:
+            raise c.fail(f"{where}.path[{k}]", f"expected [x, y], got {pt!r}")
+        path.append((c.num(pt[0], f"{where}.path[{k}][0]"), c.num(pt[1], f"{where}.path[{k}][1]")))
+    speed = c.num(c.req(d, "speed_m_s", where), f"{where}.speed_m_s", 0.01, MAX_WALK_SPEED_M_S)
+    seed = d.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise c.fail(f"{where}.seed", f"expected an integer, got {seed!r}")
+    return Walk(tuple(path), speed, seed)
 
 
 def _parse_geo(c: _Ctx, raw: Any, where: str) -> GeoPoint:
@@ -559,6 +608,9 @@ def parse_world(data: Any, source: str = "<memory>") -> World:  # noqa: C901
         if o.id in oids:
             raise c.fail(f"objects[{i}].id", f"duplicate object id {o.id!r}")
         oids.add(o.id)
+        for k, (x, y) in enumerate(o.walk.path if o.walk is not None else ()):
+            if not bounds.contains(x, y, bounds.z_min):
+                raise c.fail(f"objects[{i}].walk.path[{k}]", f"({x}, {y}) lies outside the bounds")
 
     stations = []
     for i, s in enumerate(c.seq(d.get("stations"), "stations")):
@@ -656,7 +708,7 @@ def _limits_dict(world: World) -> dict[str, Any]:
 
 def _parse_limits(c: _Ctx, raw: Any) -> dict[str, float]:
     d = c.mapping(raw, "limits")
-    known = ("ceiling_m", "floor_m", "wall_margin_m")
+    known = ("ceiling_m", "floor_m", "wall_margin_m", "person_distance_m")
     for key in d:
         if key not in known:
             raise c.fail(f"limits.{key}", f"unknown limit; known: {', '.join(known)}")

@@ -10,10 +10,10 @@ import math
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import Any
 
-from server.dialog.ports import TaskDecision, TaskEvent, VehicleSnapshot
+from drone.vehicle import Vehicle
+from server.dialog.ports import DroneView, TaskDecision, TaskEvent
 
 SAFETY_ACTIONS = ("land", "emergency", "return_home", "hover")
-GPS_FRESH_S = 2.0  # a GPS fix this recent keeps the position (receivers give 1-5 fixes a second)
 
 
 class TaskManagerPort:
@@ -65,23 +65,17 @@ class TaskManagerPort:
         self.tm.on_event(translate)
 
 
-class VehiclePort:
-    """drone.vehicle.Vehicle (+ its world) as a :class:`~server.dialog.ports.VehiclePort`."""
+class VehicleAdapter:
+    """A :class:`drone.vehicle.Vehicle` (+ its world) as a dialog's
+    :class:`~server.dialog.ports.VehiclePort`."""
 
-    def __init__(self, vehicle: Any, world: Any) -> None:
+    def __init__(self, vehicle: Vehicle, world: Any) -> None:
         self.vehicle = vehicle
         self._markers = frozenset(int(m.id) for m in getattr(world, "markers", ()))
-        self.bounds = getattr(world, "bounds", None)  # the geofence (server.dialog.monitors)
-        # the ANS altitude monitor watches the world's ceiling (drone/limits.py)
-        self.ceiling_m: float | None = None
-        if world is not None and hasattr(world, "bounds"):
-            from drone.limits import limits_of
 
-            self.ceiling_m = limits_of(world).ceiling_m
-
-    def snapshot(self) -> VehicleSnapshot:
+    def snapshot(self) -> DroneView:
         s = self.vehicle.snapshot()
-        return VehicleSnapshot(
+        return DroneView(
             battery_pct=float(s.battery_pct),
             altitude_m=float(s.altitude_m),
             flying=bool(s.flying),
@@ -91,25 +85,13 @@ class VehiclePort:
             yaw_deg=math.degrees(float(s.yaw_rad)),
             visible_markers=tuple(int(m.id) for m in s.markers),
             ctrl_state=str(s.ctrl_state),
-            flight_mode=str(s.extra.get("flight_mode") or ""),
-            failsafe=str(s.extra.get("failsafe") or ""),
             emergency=bool(s.emergency),
-            localised=bool(s.localised),
-            position_sigma_m=float(s.position_sigma_m),
             battery_known=bool(getattr(s, "battery_known", True)),
-            estimator_disagreement=tuple(getattr(s, "estimator_disagreement", ())),
-            estimator_reinits=int(getattr(s, "estimator_reinits", 0)),
-            jog_limit=str(getattr(s, "jog_limit", "")),
             navdata_doubt=str(getattr(s, "navdata_doubt", "")),
-            gps=_fresh(getattr(s, "gps_age_s", None)),
         )
 
     def marker_ids(self) -> frozenset[int]:
         return self._markers
-
-
-def _fresh(age_s: float | None) -> bool:
-    return age_s is not None and age_s <= GPS_FRESH_S
 
 
 class CallableDescriber:

@@ -1,10 +1,12 @@
-"""The dialog and system manager: SNS (voluntary tasks, a state machine) + ANS (monitors).
+"""The dialog manager: SNS (voluntary tasks, a state machine); it speaks the supervisor's alarms.
 
 An utterance is interpreted with every grammar, then checked command by command against the
 state the drone will be in when that command runs (the active grammars of states.xml and the
 transition table of states.py): one refused command refuses the sentence, with the reason, and
 nothing runs. Accepted commands run in spoken order through the task manager; emergency, and a
-leading land/hover, bypass the queue. ANS alarms preempt voluntary tasks and are spoken.
+leading land/hover, bypass the queue. The safety monitors (ANS) are the vehicle's
+(:mod:`drone.supervisor`): they act on the drone themselves, and the dialog hears their alarms
+(:meth:`DialogManager.hear`), says them and follows the state they put the drone in.
 
 An utterance that carries when it was issued (REST's ``issued``, rosbridge's, or the graph's
 :attr:`~server.graph.Graph.issued`) is judged as it is handed to the drone
@@ -24,29 +26,20 @@ from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, audit_outcome, not_flown
+from drone.supervisor.alarms import Alarm
 from server.dialog import assist, clarify, confirm, replies
 from server.dialog.addressing import parse_address, recipients
-from server.dialog.autonomic import (
-    Alarm,
-    AltitudeMonitor,
-    Autonomic,
-    BatteryMonitor,
-    LinkMonitor,
-    MarkersLostMonitor,
-)
 from server.dialog.defaults import fill_defaults
 from server.dialog.errors import IllegalTransition
-from server.dialog.monitors import extra_monitors
 from server.dialog.ports import (
     DescribePort,
+    DroneView,
     FleetPort,
     TaskEvent,
     TaskPort,
     VehiclePort,
-    VehicleSnapshot,
 )
 from server.dialog.preflight import EMERGENCY_DOWN, DroneFacts, refusal
-from server.dialog.safety_monitors import EstimatorMonitor, JogLimitMonitor, ans_ceiling_m
 from server.dialog.states import MOTION, STATELESS, State, next_state
 from server.language.nlu import NLU, Interpretation, default_nlu
 from server.msgs import header
@@ -56,6 +49,7 @@ REPLY = "/console/reply"
 STATE = "/console/state"
 INTERPRET = "/console/interpret"
 PREEMPTING = ("emergency", "land", "hover")
+RECONCILE_PERIOD_S = 0.25  # how soon the dialog follows a change it did not make
 # the whole fleet's (server/fleet/central.py), not this drone's state
 FLEET_ACTIONS = ("patrol_start", "patrol_stop", "patrol_pause", "patrol_resume")
 # Task-manager notices the operator hears (issue 13 item 8) and their levels; "failed" covers
@@ -97,11 +91,7 @@ class DialogParams:
 
     confidence_threshold: float = 0.5
     confirm_floor: float = 0.3  # speech from here up to the threshold: "Did you say …?"
-    battery_low_pct: float = 25.0
-    battery_critical_pct: float = 12.0
-    altitude_ceiling_m: float | None = None  # None: the world's (VehiclePort.ceiling_m)
-    ans_period_s: float = 0.5
-    search_after_s: float = 1.5
+    battery_low_pct: float = 25.0  # a take-off below it is refused (the supervisor's low)
     command_deadline_s: float = DEFAULT_DEADLINE_S
 
     @classmethod
@@ -170,20 +160,6 @@ class DialogManager:
         self._asked: dict[str, Any] | None = None
         self._pending: set[asyncio.Task[Any]] = set()
         self.replies: list[dict[str, Any]] = []  # every reply published (newest last), bounded
-        p = self.params
-        self.ans = Autonomic(
-            [
-                BatteryMonitor(p.battery_low_pct, p.battery_critical_pct, period_s=p.ans_period_s),
-                AltitudeMonitor(
-                    ans_ceiling_m(p.altitude_ceiling_m, vehicle_port), period_s=p.ans_period_s
-                ),
-                LinkMonitor(period_s=min(p.ans_period_s, 0.25)),
-                MarkersLostMonitor(p.search_after_s, period_s=p.ans_period_s),
-                *extra_monitors(vehicle_port, p.ans_period_s),
-                EstimatorMonitor(period_s=min(p.ans_period_s, 0.25)),
-                JogLimitMonitor(period_s=min(p.ans_period_s, 0.25)),
-            ]
-        )
         task_port.on_event(self._on_task_event)
         if graph is not None:
             graph.advertise(REPLY, "uav_console/Reply")
@@ -606,28 +582,27 @@ class DialogManager:
             return
         self._event(kind)
 
-    # -- ANS ----------------------------------------------------------------------------------
-    def step(self, now: float) -> list[Alarm]:
-        """Run the monitors due at ``now`` (lockstep); alarms are spoken and may preempt."""
-        snap = self.vehicle.snapshot()
-        self._reconcile(snap)
-        alarms = self.ans.step(snap, self._state, now)
-        for alarm in alarms:
-            if alarm.action is not None:
-                self.tasks.preempt(alarm.action, by=f"{alarm.monitor} monitor")
-                self._event(str(alarm.action["action"]))
-            self._reply(alarm.text, alarm.level, alarm=alarm.monitor)
-            self._log(
-                utterance="",
-                commands=[dict(alarm.action)] if alarm.action else [],
-                action=f"ans:{alarm.monitor}",
-                outcome=alarm.text,
-                role="system",
-                source="ans",
-            )
-        return alarms
+    # -- following the drone, speaking its alarms ---------------------------------------------
+    def step(self, now: float) -> None:
+        """Follow the drone where it changed without the dialog (lockstep: every tick)."""
+        self._reconcile(self.vehicle.snapshot())
 
-    def _reconcile(self, snap: VehicleSnapshot) -> None:
+    def hear(self, alarm: Alarm) -> None:
+        """An alarm of the drone's supervisor: it already acted; follow the state its action
+        puts the drone in, say it, and audit it."""
+        if alarm.action is not None:
+            self._event(alarm.action.event)
+        self._reply(alarm.text, alarm.severity.value, alarm=alarm.monitor)
+        self._log(
+            utterance="",
+            commands=[alarm.action.command()] if alarm.action else [],
+            action=f"ans:{alarm.monitor}",
+            outcome=alarm.text,
+            role="system",
+            source="ans",
+        )
+
+    def _reconcile(self, snap: DroneView) -> None:
         """Follow the drone where it changed without the dialog.
 
         Buttons, ``/ardrone/*`` topics, other clients and the drone itself (its own landing,
@@ -670,9 +645,9 @@ class DialogManager:
             self._event(action)
 
     async def run(self, period_s: float | None = None) -> None:
-        """Real-time ANS runner: step on absolute deadlines until cancelled."""
+        """Real time: follow the drone (:meth:`step`) on absolute deadlines until cancelled."""
         loop = asyncio.get_running_loop()
-        period = period_s or min(m.period_s for m in self.ans.monitors)
+        period = period_s or RECONCILE_PERIOD_S
         deadline = loop.time()
         while True:
             self.step(self.clock())

@@ -14,8 +14,9 @@ Command = Mapping[str, Any]
 
 
 @dataclass(frozen=True)
-class VehicleSnapshot:
-    """What the dialog and the ANS read about the drone at one instant."""
+class DroneView:
+    """What the dialog reads about the drone at one instant (the supervisor reads the vehicle's
+    own :class:`drone.vehicle.VehicleSnapshot`)."""
 
     battery_pct: float
     altitude_m: float
@@ -26,18 +27,9 @@ class VehicleSnapshot:
     yaw_deg: float = 0.0
     visible_markers: tuple[int, ...] = ()
     ctrl_state: str = ""
-    # An autopilot's (MAVLink, issue 16): its flight mode, and what its failsafe does on link loss.
-    flight_mode: str = ""
-    failsafe: str = ""
     emergency: bool = False  # navdata state bit 31: motors cut until a reset
-    localised: bool = True  # the EKF has had a marker fix
-    position_sigma_m: float = 0.0  # EKF 1-sigma position error
     battery_known: bool = True  # False until navdata carries a battery reading
-    estimator_disagreement: tuple[str, ...] = ()  # navdata parts the EKF keeps rejecting
-    estimator_reinits: int = 0  # parts of the EKF state restarted from navdata so far
-    jog_limit: str = ""  # why the manual jog is being slowed or stopped ("" when it is not)
     navdata_doubt: str = ""  # why the driver doubts the navdata ("" while it trusts it)
-    gps: bool = False  # a GPS fix keeps the position (fused within the last GPS_FRESH_S)
 
 
 @dataclass(frozen=True)
@@ -79,7 +71,7 @@ class TaskPort(Protocol):
 
 
 class VehiclePort(Protocol):
-    def snapshot(self) -> VehicleSnapshot: ...
+    def snapshot(self) -> DroneView: ...
 
     def marker_ids(self) -> frozenset[int]:
         """Ids of the markers of the world (empty when unknown: then any id is accepted)."""

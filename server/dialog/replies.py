@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from server.dialog.ports import VehicleSnapshot
+from server.dialog.ports import DroneView
 from server.dialog.states import State, describe_state
 
 LOW_CONFIDENCE = "Sorry, I am not sure I heard that right. Could you repeat or rephrase?"
@@ -125,7 +125,7 @@ def join_and(items: Sequence[str]) -> str:
     return ", ".join(items[:-1]) + " and " + items[-1]
 
 
-def answer(item: str, snap: VehicleSnapshot, state: State) -> str:
+def answer(item: str, snap: DroneView, state: State) -> str:
     """A status answer with numbers ("Battery is at 76 percent")."""
     if item == "battery":
         return f"Battery is at {snap.battery_pct:.0f} percent."

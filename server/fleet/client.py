@@ -209,10 +209,10 @@ async def _vehicle(
     tls: tuple[Path | None, str | None] = (None, None),
 ) -> None:
     from drone.ardrone.driver import ARDroneDriver
+    from drone.ardrone.vehicle import ARDroneVehicle
     from drone.control.clock import MonotonicClock
     from drone.sim.server import SimServer, sim_endpoint
     from drone.sim.world import load_world
-    from drone.vehicle import Vehicle
     from server.fleet.geo import Enu, origin_of
     from server.tasks.manager import TaskManager
 
@@ -244,7 +244,7 @@ async def _vehicle(
         driver = ARDroneDriver(drone)
     await driver.start()
     clock = MonotonicClock()
-    vehicle = Vehicle(name, world, clock=clock)
+    vehicle = ARDroneVehicle(name, world, clock=clock)
     vehicle.ekf.reset(clock.now(), station.x, station.y, 0.0, world.start.yaw_rad)
     await vehicle.start(driver)
     tm = TaskManager(vehicle, world, clock)

@@ -29,6 +29,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from drone.vehicle import Vehicle
 from server.fleet.accuracy import GPS_SIGMA_M
 from server.fleet.geo import Enu, Geo, to_enu, to_geo
 from server.fleet.messages import FlightPlan, LtmStatus, PlanKind
@@ -36,7 +37,7 @@ from server.fleet.planner import FlightModel, reserve_pct
 
 ALTITUDE_MAX_MM = 20000  # control:altitude_max for outdoor flight (firmware default 3000 mm)
 # general:navdata_options: demo (tag 0) + raw pressure (tag 21, the barometer the console shows)
-# + GPS (tag 27, firmware 2.4 flight recorder); drone.vehicle.navdata_options asks the same
+# + GPS (tag 27, firmware 2.4 flight recorder); drone.ardrone.vehicle.navdata_options asks the same
 NAVDATA_OPTIONS = (1 << 0) | (1 << 21) | (1 << 27)
 GPS_PERIOD_S = 1.0  # fuse one GPS fix a second (the flight recorder's rate)
 SENT_HOME = "sent home"  # ``autonomous``: someone sent it home (return_home) off its patrol
@@ -86,7 +87,7 @@ class LocalTaskManager:
     def __init__(
         self,
         name: str,
-        vehicle: Any,
+        vehicle: Vehicle,
         tasks: Any,
         station: Enu,
         *,
@@ -133,7 +134,8 @@ class LocalTaskManager:
 
     def configure_drone(self) -> None:
         """Raise ``control:altitude_max`` so outdoor routes above 3 m can be flown."""
-        config = getattr(self.vehicle.commander, "config", None)
+        # an AR.Drone's driver takes AT*CONFIG; an autopilot (MAVLink) has no such commander
+        config = getattr(getattr(self.vehicle, "commander", None), "config", None)
         if config is not None and not self._configured:
             config("control:altitude_max", str(ALTITUDE_MAX_MM))
             if self.origin is not None:
@@ -154,12 +156,15 @@ class LocalTaskManager:
 
         from drone.perception.ekf import MarkerFix
 
+        ekf = getattr(self.vehicle, "ekf", None)  # the AR.Drone's own estimator (navdata)
+        if ekf is None:
+            return
         p = to_enu(Geo(gps.latitude_deg, gps.longitude_deg, gps.elevation_m), self.origin)
-        est = self.vehicle.ekf.latest
+        est = ekf.latest
         sig = GPS_SIGMA_M * max(float(gps.hdop), 1.0)
         R = np.diag([sig**2, sig**2, 25.0, 1e4])  # height: the ultrasound rules; yaw: unknown
         fix = MarkerFix(now, p.x, p.y, p.z, est.yaw_rad, R, marker_id=-27)
-        if self.vehicle.ekf.update_marker(fix):
+        if ekf.update_marker(fix):
             self.gps_fixes += 1
 
     def apply_plan(self, plan: FlightPlan, now: float) -> tuple[bool, str]:

@@ -24,6 +24,7 @@ from typing import Any
 
 from fastapi import APIRouter, Depends, params
 
+from drone.vehicle import Vehicle
 from server.fleet.central import CentralPatrol, make_patrol_router
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.failover import CentralRole, standby_guard
@@ -81,7 +82,7 @@ class FleetService:
         await self.role.start()
         return self.role
 
-    def add_local(self, name: str, vehicle: Any, tasks: Any) -> LocalTaskManager:
+    def add_local(self, name: str, vehicle: Vehicle, tasks: Any) -> LocalTaskManager:
         """An in-process drone joins the fleet (its station: the world's n-th station)."""
         pad = station_positions(self.world, len(self.ltm_nodes) + 1)[-1]
         ltm = LocalTaskManager(name, vehicle, tasks, pad, origin=origin_of(self.world))

@@ -57,9 +57,10 @@ from typing import Any
 from drone.control.clock import Clock
 from drone.control.pid import Setpoint
 from drone.limits import limits_of
-from drone.vehicle import VehicleSnapshot
+from drone.supervisor.people import KeepAway
+from drone.vehicle import Vehicle, VehicleSnapshot
 from server.tasks.build import build_task
-from server.tasks.errors import CommandError, IllegalTransition
+from server.tasks.errors import CommandError, IllegalTransition, RefusedError
 from server.tasks.states import TaskEvent, TaskState, transition
 from server.tasks.types import (
     SEARCH_MAX_TURNS,
@@ -128,7 +129,7 @@ class TaskManager(Context):
 
     def __init__(
         self,
-        vehicle: Any,
+        vehicle: Vehicle,
         world: Any,
         clock: Clock,
         *,
@@ -138,8 +139,12 @@ class TaskManager(Context):
         margin_m: float | None = None,
         ceiling_m: float | None = None,
         idle_search: bool = False,
+        keep_away: KeepAway | None = None,
     ) -> None:
         self.vehicle = vehicle
+        # where people are and how far to keep from them (drone/supervisor/people.py): a
+        # target too close is refused when planned, a leg passing too close is re-routed
+        self.keep_away = keep_away
         self.world = world
         self.clock = clock
         self.search_after_s = search_after_s
@@ -250,7 +255,8 @@ class TaskManager(Context):
                 continue
             try:
                 task = build_task(cmd)
-                p = task.plan(p, self)
+                before, p = p, task.plan(p, self)
+                self._check_people(before, p)
             except CommandError as exc:
                 ask = bool(getattr(exc, "question", False))
                 decisions.append(Decision(cmd, False, exc.reason, question=ask))
@@ -259,6 +265,15 @@ class TaskManager(Context):
             decisions.append(Decision(cmd, True, f"queued: {task.describe()}", task.id))
             tasks.append(task)
         return decisions, tasks
+
+    def _check_people(self, before: PlanState, after: PlanState) -> None:
+        """Refuse a flight whose target lies too close to a person (keep_away)."""
+        moved = (after.x, after.y) != (before.x, before.y)
+        if self.keep_away is None or not (after.flying and after.located and moved):
+            return
+        why = self.keep_away.target_refusal(after.x, after.y)
+        if why is not None:
+            raise RefusedError(why[:1].upper() + why[1:] + ".")
 
     def _predicted(self, s: VehicleSnapshot, flying: bool) -> PlanState:
         """The state the next queued task will start from (after the running and queued ones)."""

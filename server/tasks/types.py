@@ -19,7 +19,7 @@ from typing import Any
 
 from drone.control.pid import Setpoint, wrap_angle
 from drone.limits import FlightLimits
-from drone.vehicle import VehicleSnapshot
+from drone.vehicle import Vehicle, VehicleSnapshot
 from server.tasks.errors import CommandError, RefusedError
 from server.tasks.states import TaskState
 
@@ -66,7 +66,7 @@ class Outcome:
 class Context:
     """What tasks use from the manager (the manager implements it)."""
 
-    vehicle: Any
+    vehicle: Vehicle
     world: Any
     arrival: ArrivalRule
     margin_m: float
@@ -199,6 +199,7 @@ class LegsTask(Task):
         super().__init__(command)
         self._legs: list[Setpoint] = []
         self._labels: list[str] = []
+        self._own: list[int | None] = []  # each leg's index among the task's own (None: detour)
         self._i = 0
         self._leg: _Leg | None = None
         self.lap = 0
@@ -228,6 +229,18 @@ class LegsTask(Task):
         why = self.check_legs(ctx, self._legs)
         if why is not None:
             return Outcome(False, why)
+        self._own = list(range(len(self._legs)))
+        keep = getattr(ctx, "keep_away", None)  # round the people a leg passes too close to
+        if keep is not None:
+            way = keep.reroute((s.x, s.y), self._legs, loop=self.loop)
+            if isinstance(way, str):
+                return Outcome(False, way)
+            labels = self._labels
+            self._labels = [
+                labels[i] if i is not None else f"going round {who}"
+                for i, who in zip(way.origin, way.around, strict=True)
+            ]
+            self._legs, self._own = way.legs, way.origin
         self._begin_leg(ctx, s, now)
         return None
 
@@ -259,7 +272,9 @@ class LegsTask(Task):
             return Outcome(False, f"timed out {d:.1f} m from {self._labels[self._i]}{off}")
         if not leg.arrived(s, now):
             return None
-        self.on_leg_done(ctx, self._i)
+        own = self._own[self._i] if self._i < len(self._own) else self._i
+        if own is not None:  # a detour round a person is no leg of the task's own
+            self.on_leg_done(ctx, own)
         self._i += 1
         if self._i >= n:
             if not self.loop:

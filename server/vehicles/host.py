@@ -71,6 +71,7 @@ from server.vehicles.relay import dialog_out
 from server.vehicles.watch import CentralWatch, LossAction
 
 if TYPE_CHECKING:
+    from drone.supervisor import Alarm
     from server.direct_actions import DirectOutcome
     from server.vehicles.stops import StopVerdict
 
@@ -148,6 +149,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         TopicSpec(f"/{name}/{STATUS_TOPIC}", STATUS_TYPE),
         TopicSpec(names.info_topic(name), names.STRING, latch=True),
         TopicSpec(names.telemetry_topic(name), names.STRING),
+        TopicSpec(names.alarm_topic(name), names.STRING),
     )
     inn = (
         TopicSpec(f"{p}/cmd_vel", TWIST),
@@ -228,7 +230,7 @@ class VehicleHost:
 
     async def start(self) -> None:
         from drone.sim.world import load_world
-        from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+        from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehicleAdapter
         from server.dialog.manager import DialogManager
         from server.fleet.bus_ltm import BusLtmNode
         from server.fleet.geo import origin_of
@@ -289,7 +291,7 @@ class VehicleHost:
             self.graph,
             s,
             TaskManagerPort(tasks),
-            VehiclePort(vehicle, self.world),
+            VehicleAdapter(vehicle, self.world),
             CallableDescriber(self._describe),
             self.audit,
             vehicle.clock.now,
@@ -356,10 +358,22 @@ class VehicleHost:
         if self.bus is not None and self.bus.session is not None:  # plans from any central
             self.ltm.join_bus(self.bus.session, s.fleet_name)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
+        supervisor = self.stack.supervisor
+        assert supervisor is not None
+        supervisor.on_alarm(self.dialog.hear)
+        self.graph.advertise(names.alarm_topic(self.name), names.STRING)
+        supervisor.on_alarm(self._publish_alarm)
         self._tasks = [
+            asyncio.create_task(supervisor.run(vehicle.clock.now), name=f"ans:{self.name}"),
             asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]
+
+    def _publish_alarm(self, alarm: Alarm) -> None:
+        """Every alarm on ``/NAME/vehicle/alarm`` too: the console, its clients and the flight
+        recording see what the supervisor did and why."""
+        msg = {"data": json.dumps(alarm.as_message(self.name))}
+        self.graph.publish(names.alarm_topic(self.name), msg)
 
     def info(self) -> dict[str, Any]:
         return {

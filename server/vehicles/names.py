@@ -49,6 +49,11 @@ def telemetry_topic(name: str) -> str:
     return f"/{name}/vehicle/telemetry"
 
 
+def alarm_topic(name: str) -> str:
+    """The supervisor's alarms (``std_msgs/String``, JSON of ``drone.supervisor.Alarm``)."""
+    return f"/{name}/vehicle/alarm"
+
+
 def control_service(name: str) -> str:
     return f"/{name}/vehicle/control"
 

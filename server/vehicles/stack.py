@@ -12,14 +12,15 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drone.ardrone.driver import ARDroneDriver, DriverConfig
+from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World
+from drone.supervisor import Supervisor, keep_away_of, supervise
 from drone.vehicle import Vehicle
-from server.captioner.grounding import SeenMarker, seen_markers
 from server.graph import Graph
 from server.mavlink_stack import is_mavlink, start_mavlink
 from server.mavros_node import MavrosNode
@@ -27,6 +28,9 @@ from server.settings import Settings
 from server.tasks.manager import TaskManager
 from server.vehicle_node import VehicleNode
 from server.vehicles.stops import StopLedger
+
+if TYPE_CHECKING:  # the captioner is the console's: a vehicle process never loads it
+    from server.captioner.grounding import SeenMarker
 
 
 @dataclass
@@ -40,6 +44,7 @@ class DroneStack:
     sim: SimServer | None = None
     tasks: TaskManager | None = None
     node: VehicleNode | None = None
+    supervisor: Supervisor | None = None  # the safety monitors (ANS), acting on this drone
     # stop ids run and superseded: each stop runs once, whichever road brings it first
     stops: StopLedger = field(default_factory=StopLedger)
 
@@ -67,6 +72,8 @@ class DroneStack:
 
     def seen_markers(self) -> list[SeenMarker]:
         """The markers the detector sees now (grounding a caption's "marker N on the left")."""
+        from server.captioner.grounding import seen_markers
+
         return seen_markers(self.vehicle.snapshot())
 
     def latest_jpeg(self) -> tuple[int, bytes | None]:
@@ -106,7 +113,8 @@ async def build_drone_stack(
 ) -> DroneStack:
     """One drone's flight stack, built alike in the web process (inline) and in a vehicle
     process: its simulator for ``sim`` / ``sim-mavlink`` (started) or its link, the driver and
-    vehicle (started), the task manager and its graph node (not yet started). ``kind`` is the
+    vehicle (started), the task manager, its supervisor and its graph node (not yet started;
+    the supervisor is stepped by whoever runs the drone: ``supervisor.run``). ``kind`` is the
     drone's ``--drone`` entry; ``audit`` (an AuditLog) gets the node's jog and topic rows;
     ``own_process``: built by a vehicle process (the AR.Drone's control thread then holds the
     GIL while it spins and asks for ``control_rt_priority``).
@@ -118,7 +126,7 @@ async def build_drone_stack(
     node_class: type[VehicleNode]
     if is_mavlink(kind):
         parts = await start_mavlink(name, kind, index, world, s)
-        vehicle: Any = parts.vehicle
+        vehicle: Vehicle = parts.vehicle
         driver: Any = parts.driver
         sim: Any = parts.sim
         node_class, idle_search = MavrosNode, False  # the autopilot flies; no camera to search
@@ -138,15 +146,24 @@ async def build_drone_stack(
         else:
             driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
         await driver.start()
-        vehicle = Vehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
-        await vehicle.start(
+        ardrone = ARDroneVehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
+        await ardrone.start(
             driver,
             own_process=own_process,
             realtime_priority=s.control_rt_priority if own_process else 0,
         )
+        vehicle = ardrone
         node_class, idle_search = VehicleNode, True
+    # People: where the simulator has them (its person tracker); a real drone has no tracker
+    # here, so only its own sensors and the operator keep it from people.
+    keep = keep_away_of(world, sim.sim.people) if isinstance(sim, SimServer) else None
     tasks = TaskManager(
-        vehicle, world, vehicle.clock, search_after_s=s.search_after_s, idle_search=idle_search
+        vehicle,
+        world,
+        vehicle.clock,
+        search_after_s=s.search_after_s,
+        idle_search=idle_search,
+        keep_away=keep,
     )
     node = node_class(
         graph,
@@ -158,7 +175,8 @@ async def build_drone_stack(
         audit=audit,
         command_deadline_s=s.command_deadline_s,
     )
-    return DroneStack(name, prefix, vehicle, driver, sim, tasks, node)
+    supervisor = supervise(vehicle, tasks, world, s, keep_away=keep)
+    return DroneStack(name, prefix, vehicle, driver, sim, tasks, node, supervisor=supervisor)
 
 
 def to_json_ready(value: Any) -> Any:

@@ -8,8 +8,8 @@ altitude while the estimate sank 0.4 m below it, and re-initialised both: the AN
 monitor told the operator after every emergency stop, inline or in a vehicle process alike.
 Now navdata flagged EMERGENCY is fused ungated and the estimate follows the fall.
 
-In lockstep (virtual clock, no sockets): the drone's own :class:`Vehicle`, the dialog's
-:class:`VehiclePort` snapshot and the ANS :class:`EstimatorMonitor`, as ``serve`` wires them.
+In lockstep (virtual clock, no sockets): the drone's own :class:`Vehicle` and its supervisor's
+:class:`SensorAgreementMonitor`, as ``serve`` wires them.
 """
 
 from __future__ import annotations
@@ -17,9 +17,8 @@ from __future__ import annotations
 import pytest
 
 from drone.sim.world import load_world
-from server.dialog.adapters import VehiclePort
-from server.dialog.safety_monitors import EstimatorMonitor
-from server.dialog.states import State
+from drone.supervisor import Phase
+from drone.supervisor.estimator import SensorAgreementMonitor
 
 from .flight import Flight
 
@@ -35,13 +34,13 @@ def test_an_emergency_stop_raises_no_estimator_alarm(seed: int, climb_m: float) 
     vehicle, sim, ekf = f.rig.vehicle, f.rig.sim, f.rig.vehicle.ekf
     high = sim.truth.z
     assert high > 0.6 + climb_m
-    port, monitor = VehiclePort(vehicle, world), EstimatorMonitor()
+    monitor = SensorAgreementMonitor()
     alarms, worst = [], 0.0
     vehicle.emergency()
     end = f.rig.clock.now() + 3.0
     while f.rig.clock.now() < end:
         f.rig.step()
-        alarm = monitor.check(port.snapshot(), State.EMERGENCY, f.rig.clock.now())
+        alarm = monitor.check(vehicle.snapshot(), Phase.EMERGENCY, f.rig.clock.now())
         if alarm is not None:
             alarms.append(alarm.text)
         est, tr = ekf.latest, sim.truth

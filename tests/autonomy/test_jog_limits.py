@@ -10,11 +10,12 @@ import pytest
 from drone.limits import JOG_STOP_M, FlightLimits, limits_of
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
-from server.dialog.adapters import TaskManagerPort, VehiclePort
+from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.graph import Graph
 from server.settings import Settings
 from server.tasks import TaskManager
+from tests.supervisor.snaps import supervised
 
 
 def _rig(start: tuple[float, float, float]) -> tuple[LockstepRig, DialogManager]:
@@ -23,10 +24,11 @@ def _rig(start: tuple[float, float, float]) -> tuple[LockstepRig, DialogManager]
     tm = TaskManager(rig.vehicle, world, rig.clock)
     rig.add_stepper(lambda now, dt: tm.step(now))
     dm = DialogManager(
-        Graph(), Settings(), TaskManagerPort(tm), VehiclePort(rig.vehicle, world), None, None,
+        Graph(), Settings(), TaskManagerPort(tm), VehicleAdapter(rig.vehicle, world), None, None,
         rig.clock.now,
     )  # fmt: skip
     rig.add_stepper(lambda now, dt: dm.step(now))
+    supervised(rig, tm, world, dm, None)
     assert rig.takeoff_all()
     return rig, dm
 

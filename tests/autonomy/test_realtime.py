@@ -12,10 +12,10 @@ import pytest
 
 from drone.ardrone.driver import ARDroneDriver
 from drone.ardrone.navdata import CtrlState
+from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
 from drone.sim.server import SimServer
 from drone.sim.world import load_world
-from drone.vehicle import Vehicle
 from server.tasks import TaskManager, TaskNotice
 
 # It asserts the control thread never stalled: a second test run sharing the 2 cores starved it
@@ -37,7 +37,7 @@ async def test_real_time_flight_to_a_marker_with_the_100_hz_control_thread() -> 
     srv = SimServer(ADDR, world, seed=3)
     await srv.start()
     drv = ARDroneDriver(ADDR, video=True)
-    vehicle = Vehicle("uav1", world, camera=CameraModel())  # localises from markers only
+    vehicle = ARDroneVehicle("uav1", world, camera=CameraModel())  # localises from markers only
     tm = TaskManager(vehicle, world, vehicle.clock)
     events: list[TaskNotice] = []
     tm.on_event(events.append)

@@ -10,13 +10,14 @@ import pytest
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
 from server.captioner import Captioner, describe_frame, describe_frame_sync
-from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehiclePort
+from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.graph import Graph
 from server.language.nlu import NLU
 from server.settings import ROOT, Settings
 from server.store import AuditLog
 from server.tasks import TaskManager
+from tests.supervisor.snaps import supervised
 
 
 @pytest.mark.timeout(120)
@@ -41,13 +42,14 @@ async def test_what_do_you_see_is_answered_by_the_captioner_from_the_camera() ->
         graph,
         Settings(),
         TaskManagerPort(tm),
-        VehiclePort(rig.vehicle, world),
+        VehicleAdapter(rig.vehicle, world),
         CallableDescriber(lambda: describe_frame(captioner, frames[-1])),
         AuditLog(":memory:", clock=rig.clock.now),
         rig.clock.now,
         nlu=NLU(),
     )
     rig.add_stepper(lambda now, dt: dm.step(now))
+    supervised(rig, tm, world, dm, None)
     assert rig.wait_link()
     assert (await dm.handle_utterance("take off")).accepted
     assert rig.takeoff_all()

@@ -10,7 +10,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from server.dialog.ports import TaskDecision, TaskEvent, VehicleSnapshot
+from server.dialog.ports import DroneView, TaskDecision, TaskEvent
 
 
 @dataclass
@@ -19,7 +19,7 @@ class FakeFlight:
     battery_pct: float = 80.0
     drain_pct_per_s: float = 0.0
     task_s: float = 2.0
-    snap: VehicleSnapshot = field(default_factory=lambda: VehicleSnapshot(80.0, 0.0, False))
+    snap: DroneView = field(default_factory=lambda: DroneView(80.0, 0.0, False))
     queue: list[dict[str, Any]] = field(default_factory=list)
     running: dict[str, Any] | None = None
     started: float = 0.0
@@ -61,7 +61,7 @@ class FakeFlight:
             cb(TaskEvent(kind, dict(cmd or {})))
 
     # VehiclePort
-    def snapshot(self) -> VehicleSnapshot:
+    def snapshot(self) -> DroneView:
         return replace(self.snap, battery_pct=self.battery_pct)
 
     def marker_ids(self) -> frozenset[int]:

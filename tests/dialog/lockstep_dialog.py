@@ -7,14 +7,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drone.lockstep import LockstepRig
-from drone.sim.world import load_world
-from server.dialog.adapters import TaskManagerPort, VehiclePort
+from drone.sim.world import World, load_world
+from drone.supervisor import keep_away_of
+from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.graph import Graph
 from server.language.nlu import NLU
 from server.settings import Settings
 from server.store import AuditLog
 from server.tasks import TaskManager
+from tests.supervisor.snaps import supervised
 
 
 @dataclass
@@ -36,11 +38,13 @@ def dialog_rig(
     known_start: bool = True,
     drone: str = "uav1",
     drones: tuple[str, ...] = ("uav1",),
+    world: World | None = None,
+    people: bool = False,
 ) -> DialogRig:
     """``world_name`` (indoor by default) with the drone landed at ``start`` (None: the world's
     first station); every part stepped by the rig. ``drone``/``drones``: this dialog's name and
     the fleet's (for sentences that name their drone)."""
-    world = load_world(world_name)
+    world = world or load_world(world_name)
     rig = LockstepRig(
         world,
         seed=seed,
@@ -48,7 +52,9 @@ def dialog_rig(
         starts=None if start is None else [start],
         known_start=known_start,
     )
-    tm = TaskManager(rig.vehicle, world, rig.clock)
+    # ``people``: the simulator tracks the world's people for the drone, as ``serve`` does
+    keep = keep_away_of(world, rig.sim.people) if people else None
+    tm = TaskManager(rig.vehicle, world, rig.clock, keep_away=keep)
     rig.add_stepper(lambda now, dt: tm.step(now))
     graph = Graph()
     replies: list[dict[str, Any]] = []
@@ -58,7 +64,7 @@ def dialog_rig(
         graph,
         settings or Settings(),
         TaskManagerPort(tm),
-        VehiclePort(rig.vehicle, world),
+        VehicleAdapter(rig.vehicle, world),
         None,
         audit,
         rig.clock.now,
@@ -67,4 +73,5 @@ def dialog_rig(
         drones=lambda: list(drones),
     )
     rig.add_stepper(lambda now, dt: dm.step(now))
+    supervised(rig, tm, world, dm, settings or Settings(), keep_away=keep)
     return DialogRig(rig, tm, dm, audit, replies)

@@ -11,6 +11,7 @@ from server.graph import Graph
 from server.language.nlu import NLU
 from server.settings import Settings
 from tests.dialog.fakes import FakeDescriber, FakeFlight, FakeStore
+from tests.supervisor.snaps import fake_flight_supervisor
 
 NLU_ = NLU()
 WALL = 1_800_000_000.0
@@ -36,12 +37,15 @@ class Rig:
             wall_clock=lambda: self.wall,
         )
         self.graph.subscribe("/console/reply", self.replies.append)
+        self.supervisor = fake_flight_supervisor(self.flight)
+        self.supervisor.on_alarm(self.dm.hear)
 
     def run(self, seconds: float, dt: float = 0.1) -> None:
         for _ in range(round(seconds / dt)):
             self.t = round(self.t + dt, 6)
             self.flight.step(self.t)
             self.dm.step(self.t)
+            self.supervisor.step(self.t)
 
 
 async def test_a_late_take_off_is_not_flown_said_and_audited() -> None:

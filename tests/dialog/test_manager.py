@@ -14,6 +14,7 @@ from server.graph import Graph
 from server.language.nlu import NLU
 from server.settings import Settings, SettingsError
 from tests.dialog.fakes import FakeDescriber, FakeFlight, FakeStore
+from tests.supervisor.snaps import fake_flight_supervisor
 
 NLU_ = NLU()
 
@@ -39,12 +40,16 @@ class Rig:
         )
         self.graph.subscribe("/console/reply", self.replies.append)
         self.graph.subscribe("/console/state", self.states.append)
+        # the vehicle's safety monitors, whose alarms the dialog speaks
+        self.supervisor = fake_flight_supervisor(self.flight)
+        self.supervisor.on_alarm(self.dm.hear)
 
     def run(self, seconds: float, dt: float = 0.1) -> None:
         for _ in range(round(seconds / dt)):
             self.t = round(self.t + dt, 6)
             self.flight.step(self.t)
             self.dm.step(self.t)
+            self.supervisor.step(self.t)
 
 
 async def test_move_while_landed_is_refused_with_reason() -> None:

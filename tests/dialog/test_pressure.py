@@ -231,47 +231,6 @@ def test_marker_ids_come_from_the_detector() -> None:
     )
 
 
-# ---- alerts: geofence and estimator trouble -----------------------------------------------
-def test_geofence_alerts_and_hovers_once_then_clears() -> None:
-    from server.dialog.monitors import GeofenceMonitor
-    from server.dialog.ports import VehicleSnapshot
-
-    fence = GeofenceMonitor(0.0, 8.0, 0.0, 6.0)
-    inside = VehicleSnapshot(80.0, 1.0, True, x_m=4.0, y_m=3.0)
-    outside = replace(inside, x_m=8.4)
-    assert fence.check(inside, State.EXECUTING, 0.0) is None
-    alarm = fence.check(outside, State.EXECUTING, 0.5)
-    assert alarm is not None and alarm.level == "alert" and alarm.action == {"action": "hover"}
-    assert "Geofence" in alarm.text and "8.4" in alarm.text
-    assert fence.check(outside, State.AIRBORNE_IDLE, 1.0) is None  # latched: told once
-    back = fence.check(inside, State.AIRBORNE_IDLE, 1.5)
-    assert back is not None and back.level == "info"
-    # No fix, no fence: an unlocalised estimate is not a position.
-    assert fence.check(replace(outside, localised=False), State.EXECUTING, 2.0) is None
-    assert fence.check(outside, State.LANDED, 2.5) is None
-
-
-def test_estimator_trouble_is_told_after_a_while_and_when_it_is_over() -> None:
-    from server.dialog.monitors import EstimatorMonitor
-    from server.dialog.ports import VehicleSnapshot
-
-    mon = EstimatorMonitor(lost_after_s=5.0)
-    lost = VehicleSnapshot(80.0, 1.0, True, localised=False)
-    assert mon.check(lost, State.AIRBORNE_IDLE, 0.0) is None
-    assert mon.check(lost, State.AIRBORNE_IDLE, 4.9) is None
-    alarm = mon.check(lost, State.AIRBORNE_IDLE, 5.0)
-    assert alarm is not None and alarm.level == "warn" and "no position fix" in alarm.text
-    assert mon.check(lost, State.AIRBORNE_IDLE, 6.0) is None
-    fixed = replace(lost, localised=True, position_sigma_m=0.05)
-    again = mon.check(fixed, State.AIRBORNE_IDLE, 6.5)
-    assert again is not None and again.level == "info"
-    vague = replace(fixed, position_sigma_m=1.4)
-    mon.check(vague, State.EXECUTING, 10.0)
-    alarm = mon.check(vague, State.EXECUTING, 15.0)
-    assert alarm is not None and "1.4 meters" in alarm.text
-    assert EstimatorMonitor().check(lost, State.LANDED, 99.0) is None
-
-
 async def test_ans_alarms_name_their_monitor_on_the_reply() -> None:
     rig = Rig()
     assert (await rig.dm.handle_utterance("take off")).accepted

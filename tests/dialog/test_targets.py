@@ -13,7 +13,7 @@ import pytest
 
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
-from server.dialog.adapters import TaskManagerPort, VehiclePort
+from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.dialog.states import State
 from server.graph import Graph
@@ -21,6 +21,7 @@ from server.language.nlu import NLU
 from server.settings import Settings
 from server.tasks import TaskManager
 from server.tasks.objects import STANDOFF_M
+from tests.supervisor.snaps import supervised
 
 
 @dataclass
@@ -55,13 +56,14 @@ def flying() -> Iterator[Rig]:
         graph,
         Settings(),
         TaskManagerPort(tm),
-        VehiclePort(rig.vehicle, world),
+        VehicleAdapter(rig.vehicle, world),
         None,
         None,
         rig.clock.now,
         nlu=NLU(),
     )
     rig.add_stepper(lambda now, dt: dm.step(now))
+    supervised(rig, tm, world, dm, None)
     assert rig.wait_link()
     r = Rig(rig, tm, dm, replies, world)
     yield r

@@ -17,7 +17,8 @@ from typing import Any
 
 import pytest
 
-from server.dialog.adapters import TaskManagerPort, VehiclePort
+from drone.supervisor import supervise
+from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.fleet.central import CentralPatrol
 from server.fleet.errors import IllegalTransition, MessageError
@@ -119,15 +120,15 @@ def _index(name: str) -> int:
 
 
 def _dialogs(exp: PatrolExperiment) -> dict[str, DialogManager]:
-    """Each drone's dialog manager (with its safety monitors), stepped with the rig as the
-    console steps it."""
+    """Each drone's dialog manager and the vehicle's safety monitors (its supervisor, whose
+    alarms the dialog speaks), stepped with the rig as the console and the vehicle step them."""
     out = {}
     for i, v in enumerate(exp.rig.vehicles):
         dm = DialogManager(
             Graph(),
             Settings(),
             TaskManagerPort(exp.tasks[i]),
-            VehiclePort(v, exp.world),
+            VehicleAdapter(v, exp.world),
             None,
             None,
             exp.rig.clock.now,
@@ -135,6 +136,9 @@ def _dialogs(exp: PatrolExperiment) -> dict[str, DialogManager]:
             fleet=CentralPatrol(exp.ctm, exp.world, clock=exp.rig.clock.now),
         )
         exp.hooks.append(dm.step)
+        sup = supervise(v, exp.tasks[i], exp.world)
+        sup.on_alarm(dm.hear)
+        exp.hooks.append(sup.step)
         out[v.name] = dm
     return out
 
@@ -317,7 +321,7 @@ def test_a_monitor_that_holds_the_drone_for_the_operator_pauses_the_mission() ->
     is not the CTM's to override: the mission waits for the operator."""
     exp = PatrolExperiment(PatrolConfig(drones=2, duration_s=45.0, **FAST))
 
-    def doubt(name: str, now: float) -> None:  # as the dialog's ANS preempts for an alarm
+    def doubt(name: str, now: float) -> None:  # as the supervisor preempts for an alarm
         TaskManagerPort(exp.tasks[_index(name)]).preempt({"action": "hover"}, by="navdata monitor")
 
     pilot = Pilot(exp, doubt)

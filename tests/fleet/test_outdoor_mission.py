@@ -13,7 +13,8 @@ from fastapi import FastAPI
 
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
-from server.dialog.adapters import TaskManagerPort, VehiclePort
+from drone.supervisor import supervise
+from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.fleet.messages import PlanKind
 from server.fleet.service import FleetService
@@ -36,7 +37,7 @@ async def test_outdoor_fleet_of_two_patrols_at_the_default_5_m() -> None:
             graph,
             Settings(),
             TaskManagerPort(tm),
-            VehiclePort(v, world),
+            VehicleAdapter(v, world),
             None,
             None,
             rig.clock.now,
@@ -45,6 +46,9 @@ async def test_outdoor_fleet_of_two_patrols_at_the_default_5_m() -> None:
         )
         rig.add_stepper(lambda now, dt, tm=tm: tm.step(now))
         rig.add_stepper(lambda now, dt, dm=dm: dm.step(now))
+        sup = supervise(v, tm, world)
+        sup.on_alarm(dm.hear)
+        rig.add_stepper(lambda now, dt, sup=sup: sup.step(now))
         fleet.add_local(v.name, v, tm)
         tms.append(tm)
         dms.append(dm)

@@ -1,6 +1,6 @@
-"""Issue 13 §1, §2, §3, §4 on the ANS side: no battery alarm before a battery reading, the
-world's ceiling (not a global number), the estimator disagreeing with the sensors, the jog
-limited near a wall — each told to the operator once, with the reason."""
+"""The supervisor in lockstep with a dialog that speaks it: no battery alarm before a battery
+reading, the world's ceiling (not a global number), the estimator disagreeing with the sensors,
+the jog limited near a wall — each told to the operator once, with the reason."""
 
 from __future__ import annotations
 
@@ -8,14 +8,16 @@ import pytest
 
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
-from server.dialog.adapters import TaskManagerPort, VehiclePort
+from drone.supervisor import Phase
+from drone.supervisor.altitude import ceiling_of
+from drone.supervisor.estimator import SensorAgreementMonitor
+from drone.supervisor.jog import JogLimitMonitor
+from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
-from server.dialog.ports import VehicleSnapshot
-from server.dialog.safety_monitors import EstimatorMonitor, JogLimitMonitor, ans_ceiling_m
-from server.dialog.states import State
 from server.graph import Graph
 from server.settings import Settings
 from server.tasks import TaskManager
+from tests.supervisor.snaps import snap, supervised
 
 
 def _dialog(world_name: str, **rig_kw: object) -> tuple[LockstepRig, TaskManager, DialogManager]:
@@ -27,12 +29,13 @@ def _dialog(world_name: str, **rig_kw: object) -> tuple[LockstepRig, TaskManager
         Graph(),
         Settings(),
         TaskManagerPort(tm),
-        VehiclePort(rig.vehicle, world),
+        VehicleAdapter(rig.vehicle, world),
         None,
         None,
         rig.clock.now,
     )
     rig.add_stepper(lambda now, dt: dm.step(now))
+    supervised(rig, tm, world, dm)
     return rig, tm, dm
 
 
@@ -56,14 +59,12 @@ def test_a_real_low_battery_is_still_told() -> None:
     assert texts == ["Battery critical at 10 percent. Do not take off."]
 
 
-def test_the_ans_watches_the_world_ceiling() -> None:
-    indoor = VehiclePort(None, load_world("indoor"))
-    outdoor = VehiclePort(None, load_world("outdoor"))
-    assert indoor.ceiling_m == pytest.approx(2.7)  # the room's 3 m less the clearance
-    assert outdoor.ceiling_m == pytest.approx(20.0)  # the field's own limit
-    assert ans_ceiling_m(None, outdoor) == pytest.approx(20.0)
-    assert ans_ceiling_m(4.0, outdoor) == pytest.approx(4.0)  # a setting may only lower it
-    assert ans_ceiling_m(40.0, outdoor) == pytest.approx(20.0)
+def test_the_supervisor_watches_the_world_ceiling() -> None:
+    indoor, outdoor = load_world("indoor"), load_world("outdoor")
+    assert ceiling_of(None, indoor) == pytest.approx(2.7)  # the room's 3 m less the clearance
+    assert ceiling_of(None, outdoor) == pytest.approx(20.0)  # the field's own limit
+    assert ceiling_of(4.0, outdoor) == pytest.approx(4.0)  # a setting may only lower it
+    assert ceiling_of(40.0, outdoor) == pytest.approx(20.0)
 
 
 def test_outdoor_cruise_at_5_m_is_not_replaced_by_move_down() -> None:
@@ -81,29 +82,29 @@ def test_outdoor_cruise_at_5_m_is_not_replaced_by_move_down() -> None:
 
 
 def test_estimator_monitor_tells_once_per_episode() -> None:
-    m = EstimatorMonitor()
-    ok = VehicleSnapshot(50.0, 1.0, True)
-    bad = VehicleSnapshot(50.0, 1.0, True, estimator_disagreement=("altitude",))
-    reset = VehicleSnapshot(50.0, 1.0, True, estimator_reinits=1)
-    assert m.check(ok, State.EXECUTING, 0.0) is None
-    alarm = m.check(bad, State.EXECUTING, 0.25)
-    assert alarm is not None and alarm.level == "alert" and "(altitude)" in alarm.text
-    assert m.check(bad, State.EXECUTING, 0.5) is None  # latched
-    alarm = m.check(reset, State.EXECUTING, 0.75)
+    m = SensorAgreementMonitor()
+    ok = snap(battery_pct=50.0)
+    bad = snap(battery_pct=50.0, estimator_disagreement=("altitude",))
+    reset = snap(battery_pct=50.0, estimator_reinits=1)
+    assert m.check(ok, Phase.EXECUTING, 0.0) is None
+    alarm = m.check(bad, Phase.EXECUTING, 0.25)
+    assert alarm is not None and alarm.severity == "alert" and "(altitude)" in alarm.text
+    assert m.check(bad, Phase.EXECUTING, 0.5) is None  # latched
+    alarm = m.check(reset, Phase.EXECUTING, 0.75)
     assert alarm is not None and "reset it" in alarm.text
-    assert m.check(reset, State.EXECUTING, 1.0) is None
+    assert m.check(reset, Phase.EXECUTING, 1.0) is None
 
 
 def test_jog_limit_monitor_says_why() -> None:
     m = JogLimitMonitor()
-    slowed = VehicleSnapshot(50.0, 1.0, True, jog_limit="slowed 0.6 m from the wall")
-    stopped = VehicleSnapshot(50.0, 1.0, True, jog_limit="stopped 0.1 m from the wall")
-    a = m.check(slowed, State.AIRBORNE_IDLE, 0.0)
+    slowed = snap(battery_pct=50.0, jog_limit="slowed 0.6 m from the wall")
+    stopped = snap(battery_pct=50.0, jog_limit="stopped 0.1 m from the wall")
+    a = m.check(slowed, Phase.AIRBORNE, 0.0)
     assert a is not None and a.text == "Jog limited: slowed 0.6 m from the wall."
-    assert m.check(slowed, State.AIRBORNE_IDLE, 0.25) is None
-    b = m.check(stopped, State.AIRBORNE_IDLE, 0.5)
+    assert m.check(slowed, Phase.AIRBORNE, 0.25) is None
+    b = m.check(stopped, Phase.AIRBORNE, 0.5)
     assert b is not None and "stopped" in b.text
-    assert m.check(VehicleSnapshot(50.0, 1.0, True), State.AIRBORNE_IDLE, 0.75) is None
+    assert m.check(snap(battery_pct=50.0), Phase.AIRBORNE, 0.75) is None
 
 
 def test_the_operator_is_alerted_when_the_estimate_disagrees_with_the_sensors() -> None:
