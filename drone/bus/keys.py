@@ -4,7 +4,9 @@
 |---|---|
 | ``uavc/<fleet>/<drone>/telemetry`` | :class:`~drone.bus.payloads.Telemetry`, JSON, ≥ 5 Hz |
 | ``uavc/<fleet>/<drone>/alive`` | liveliness token of the vehicle process |
-| ``uavc/<fleet>/<drone>/cmd`` | commands: queries answered by the vehicle |
+| ``uavc/<fleet>/<drone>/cmd`` | commands: queries answered by the vehicle (:mod:`.commands`) |
+| ``uavc/<fleet>/<drone>/status`` | :class:`~drone.bus.payloads.Status`, JSON, 1 Hz |
+| ``uavc/<fleet>/<drone>/camera`` | JPEG frames, dropped rather than queued |
 | ``uavc/<fleet>/central/alive`` | liveliness of the console holding the central role |
 | ``uavc/<fleet>/central/missions`` | the JSON of ``GET /api/v1/patrol`` |
 """
@@ -49,6 +51,22 @@ def alive(fleet: str, drone: str) -> str:
 
 def command(fleet: str, drone: str) -> str:
     return drone_key(fleet, drone, "cmd")
+
+
+def status(fleet: str, drone: str) -> str:
+    return drone_key(fleet, drone, "status")
+
+
+def camera(fleet: str, drone: str) -> str:
+    return drone_key(fleet, drone, "camera")
+
+
+def all_status(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/*/status"
+
+
+def all_camera(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/*/camera"
 
 
 def all_telemetry(fleet: str) -> str:

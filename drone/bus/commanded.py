@@ -1,0 +1,204 @@
+"""A vehicle's commanded side of the bus: it answers ``…/cmd`` queries and publishes its status
+(1 Hz) and camera (JPEG, dropped rather than queued).
+
+Each query is decoded (:mod:`drone.bus.commands`), judged by the vehicle's own pilot lease
+(:mod:`drone.bus.lease`) and answered exactly once: accepted with the op's result, or refused
+with the reason (malformed, unknown op, the lease, the handler's own refusal: a deadline
+passed, a drone that cannot take off). Refusals are logged with their reason.
+
+Order: commands run one at a time in the order they came, on the vehicle's event loop. Stops
+(land, hover, emergency) and reads never wait in that queue: they run as they arrive, and a
+stop answers every command still queued behind it "superseded", so nothing queued before a
+stop flies after it.
+
+Zenoh calls back on its own threads; everything here past the decode runs on the loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+import zenoh
+
+from drone.bus import keys
+from drone.bus.commands import (
+    READ_OPS,
+    Command,
+    CommandReply,
+    decode_command,
+    encode_reply,
+    id_of,
+    refusal,
+)
+from drone.bus.errors import PayloadError
+from drone.bus.lease import VehicleLease
+from drone.bus.payloads import Status, encode
+
+log = logging.getLogger(__name__)
+
+
+class CommandRefused(Exception):
+    """Raised by a command handler: the vehicle will not do it; the message says why."""
+
+
+Handler = Callable[[Command], Awaitable[dict[str, Any]]]
+
+
+class CommandedVehicle:
+    """See the module docstring.
+
+    Args:
+        session: the vehicle's Zenoh session (user ``vehicle-NAME``).
+        fleet, name: its keys' segments.
+        handler: runs one command, returns its result (raises :class:`CommandRefused`).
+        lease: the vehicle's pilot lease.
+        loop: the event loop the handler runs on.
+        clock: Unix seconds (lease times).
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        fleet: str,
+        name: str,
+        handler: Handler,
+        lease: VehicleLease,
+        loop: asyncio.AbstractEventLoop,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.session = session
+        self.fleet = keys.segment(fleet)
+        self.name = keys.segment(name)
+        self.handler = handler
+        self.lease = lease
+        self.loop = loop
+        self.clock = clock
+        self.refused: list[str] = []  # reasons, newest last (at most 50)
+        self.answered = 0
+        self._queue: collections.deque[tuple[zenoh.Query, Command]] = collections.deque()
+        self._wake = asyncio.Event()
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._worker: asyncio.Task[None] | None = None
+        self._queryable: Any = None
+        self._status: zenoh.Publisher | None = None
+        self._camera: zenoh.Publisher | None = None
+
+    def start(self) -> None:
+        """Declare the queryable and the publishers; start the command worker (on the loop)."""
+        self._worker = self.loop.create_task(self._work(), name=f"bus-commands:{self.name}")
+        self._queryable = self.session.declare_queryable(
+            keys.command(self.fleet, self.name), self._on_query
+        )
+        self._status = self.session.declare_publisher(
+            keys.status(self.fleet, self.name), congestion_control=zenoh.CongestionControl.DROP
+        )
+        self._camera = self.session.declare_publisher(
+            keys.camera(self.fleet, self.name),
+            congestion_control=zenoh.CongestionControl.DROP,
+            express=True,
+            priority=zenoh.Priority.DATA_LOW,
+        )
+
+    # ------------------------------------------------------------------ publications
+    def publish_status(self, status: Status) -> None:
+        if self._status is not None:
+            self._status.put(encode(status))
+
+    def publish_camera(self, jpeg: bytes) -> None:
+        if self._camera is not None:
+            self._camera.put(jpeg)
+
+    # ------------------------------------------------------------------ queries (Zenoh thread)
+    def _on_query(self, query: zenoh.Query) -> None:
+        data = query.payload.to_bytes() if query.payload is not None else b""
+        try:
+            command = decode_command(data)
+        except PayloadError as exc:
+            self._refuse(query, id_of(data), f"malformed command: {exc}")
+            return
+        self.loop.call_soon_threadsafe(self._accept, query, command)
+
+    # ------------------------------------------------------------------ the loop
+    def _accept(self, query: zenoh.Query, command: Command) -> None:
+        verdict = self.lease.judge(command, self.clock())
+        if not verdict.allowed:
+            self._refuse(query, command.id, verdict.reason, command)
+            return
+        if command.is_stop:
+            for queued_query, queued in self._queue:
+                self._refuse(
+                    queued_query,
+                    queued.id,
+                    f"superseded by {command.action} before it ran",
+                    queued,
+                )
+            self._queue.clear()
+        if command.is_stop or command.op in READ_OPS or command.op == "lease":
+            task = self.loop.create_task(self._run(query, command))
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+            return
+        self._queue.append((query, command))
+        self._wake.set()
+
+    async def _work(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            while self._queue:
+                query, command = self._queue.popleft()
+                await self._run(query, command)
+
+    async def _run(self, query: zenoh.Query, command: Command) -> None:
+        try:
+            if command.op == "lease":
+                result: dict[str, Any] = {"holder": self.lease.current(self.clock())}
+            else:
+                result = await self.handler(command)
+        except CommandRefused as exc:
+            self._refuse(query, command.id, str(exc), command)
+            return
+        except Exception as exc:  # the handler failed: said to the sender, never a hang
+            log.exception("%s: %s %s failed", self.name, command.op, command.id)
+            self._refuse(query, command.id, f"{command.op} failed: {exc}", command)
+            return
+        self._reply(
+            query, CommandReply(id=command.id, drone=self.name, accepted=True, result=result)
+        )
+
+    def _refuse(
+        self, query: zenoh.Query, command_id: str, reason: str, command: Command | None = None
+    ) -> None:
+        who = f" from {command.holder}" if command is not None else ""
+        what = f"{command.op} {command.action or ''}".strip() if command is not None else "command"
+        log.warning("%s: %s%s refused: %s", self.name, what, who, reason)
+        self.refused.append(reason)
+        del self.refused[:-50]
+        self._reply(query, refusal(command_id, self.name, reason))
+
+    def _reply(self, query: zenoh.Query, reply: CommandReply) -> None:
+        try:
+            query.reply(keys.command(self.fleet, self.name), encode_reply(reply))
+            self.answered += 1
+        except zenoh.ZError as exc:  # the querier gave up (timeout) or the session closed
+            log.warning("%s: reply to %s not sent: %s", self.name, reply.id, exc)
+        finally:
+            query.drop()  # type: ignore[no-untyped-call]
+
+    def close(self) -> None:
+        if self._worker is not None:
+            self._worker.cancel()
+        for task in list(self._tasks):
+            task.cancel()
+        for query, command in self._queue:
+            self._refuse(query, command.id, "the vehicle is stopping", command)
+        self._queue.clear()
+        for decl in (self._queryable, self._status, self._camera):
+            if decl is not None:
+                decl.undeclare()
+        self._queryable = self._status = self._camera = None
