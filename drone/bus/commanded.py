@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import logging
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -43,7 +44,12 @@ log = logging.getLogger(__name__)
 
 
 class CommandRefused(Exception):
-    """Raised by a command handler: the vehicle will not do it; the message says why."""
+    """Raised by a command handler: the vehicle will not do it; the message says why, and
+    ``result`` carries what the op found (an expired command's age and deadline)."""
+
+    def __init__(self, reason: str, result: dict[str, Any] | None = None) -> None:
+        super().__init__(reason)
+        self.result = dict(result or {})
 
 
 Handler = Callable[[Command], Awaitable[dict[str, Any]]]
@@ -161,7 +167,7 @@ class CommandedVehicle:
             else:
                 result = await self.handler(command)
         except CommandRefused as exc:
-            self._refuse(query, command.id, str(exc), command)
+            self._refuse(query, command.id, str(exc), command, exc.result)
             return
         except Exception as exc:  # the handler failed: said to the sender, never a hang
             log.exception("%s: %s %s failed", self.name, command.op, command.id)
@@ -172,14 +178,19 @@ class CommandedVehicle:
         )
 
     def _refuse(
-        self, query: zenoh.Query, command_id: str, reason: str, command: Command | None = None
+        self,
+        query: zenoh.Query,
+        command_id: str,
+        reason: str,
+        command: Command | None = None,
+        result: dict[str, Any] | None = None,
     ) -> None:
         who = f" from {command.holder}" if command is not None else ""
         what = f"{command.op} {command.action or ''}".strip() if command is not None else "command"
         log.warning("%s: %s%s refused: %s", self.name, what, who, reason)
         self.refused.append(reason)
         del self.refused[:-50]
-        self._reply(query, refusal(command_id, self.name, reason))
+        self._reply(query, refusal(command_id, self.name, reason, result))
 
     def _reply(self, query: zenoh.Query, reply: CommandReply) -> None:
         try:
@@ -202,3 +213,38 @@ class CommandedVehicle:
             if decl is not None:
                 decl.undeclare()
         self._queryable = self._status = self._camera = None
+
+
+class ConsolePresence:
+    """Which consoles are on the bus now (their liveliness), for a vehicle's watch: while one
+    is, the vehicle counts its consoles as heard."""
+
+    def __init__(self, session: zenoh.Session, fleet: str, clock: Callable[[], float]) -> None:
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._consoles: set[str] = set()
+        self._last = clock()  # joined: counts as heard from now
+        self._sub = session.liveliness().declare_subscriber(
+            keys.all_consoles_alive(fleet), self._on_alive, history=True
+        )
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        name = str(sample.key_expr).split("/")[3]
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._consoles.add(name)
+            else:
+                self._consoles.discard(name)
+            self._last = self.clock()
+
+    def consoles(self) -> list[str]:
+        with self._lock:
+            return sorted(self._consoles)
+
+    def last_heard(self) -> float:
+        """Now while a console is on the bus, else when the last one left."""
+        with self._lock:
+            return self.clock() if self._consoles else self._last
+
+    def close(self) -> None:
+        self._sub.undeclare()  # type: ignore[no-untyped-call]

@@ -28,7 +28,8 @@ COMMAND_TIMEOUT_S = 10.0
 
 
 class BusCommander:
-    """See the module docstring. ``console``: this console's name (the lease holder's half)."""
+    """See the module docstring. ``console``: this console's name, one key segment (the lease
+    holder's half); its liveliness ``uavc/<fleet>/console/<console>/alive`` lasts as long."""
 
     def __init__(self, session: zenoh.Session, fleet: str, console: str) -> None:
         self.session = session
@@ -40,6 +41,8 @@ class BusCommander:
         self._status: dict[str, Status] = {}
         self._camera: dict[str, tuple[int, bytes]] = {}
         self.refused = 0  # status payloads that did not decode
+        # this console on the bus, for the vehicles' watch (any role, central or not)
+        self._token = session.liveliness().declare_token(keys.console_alive(self.fleet, console))
         self._subs: list[Any] = [
             session.declare_subscriber(keys.all_status(self.fleet), self._on_status),
             session.declare_subscriber(keys.all_camera(self.fleet), self._on_camera),
@@ -173,6 +176,7 @@ class BusCommander:
             self._camera[drone] = (count, jpeg)
 
     def close(self) -> None:
+        self._token.undeclare()  # type: ignore[no-untyped-call]
         for sub in self._subs:
             sub.undeclare()
         self._subs = []

@@ -147,8 +147,12 @@ def decode_reply(data: bytes) -> CommandReply:
         raise _why("reply", exc) from exc
 
 
-def refusal(command_id: str, drone: str, reason: str) -> CommandReply:
-    return CommandReply(id=command_id, drone=drone, accepted=False, reason=reason)
+def refusal(
+    command_id: str, drone: str, reason: str, result: dict[str, Any] | None = None
+) -> CommandReply:
+    return CommandReply(
+        id=command_id, drone=drone, accepted=False, reason=reason, result=result or {}
+    )
 
 
 def id_of(data: bytes) -> str:

@@ -7,6 +7,7 @@
 | ``uavc/<fleet>/<drone>/cmd`` | commands: queries answered by the vehicle (:mod:`.commands`) |
 | ``uavc/<fleet>/<drone>/status`` | :class:`~drone.bus.payloads.Status`, JSON, 1 Hz |
 | ``uavc/<fleet>/<drone>/camera`` | JPEG frames, dropped rather than queued |
+| ``uavc/<fleet>/console/<name>/alive`` | liveliness of each console on the bus |
 | ``uavc/<fleet>/central/alive`` | liveliness of the console holding the central role |
 | ``uavc/<fleet>/central/missions`` | the JSON of ``GET /api/v1/patrol`` |
 """
@@ -20,6 +21,7 @@ from drone.bus.errors import KeySegmentError
 ROOT = "uavc"
 DEFAULT_FLEET = "default"
 CENTRAL = "central"  # not a drone name: the central role's own keys
+CONSOLE = "console"  # not a drone name: every console's liveliness
 SEGMENT = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 
@@ -36,8 +38,8 @@ def segment(name: str) -> str:
 
 
 def drone_key(fleet: str, drone: str, topic: str) -> str:
-    if drone == CENTRAL:
-        raise KeySegmentError(f"{CENTRAL!r} is the central role's, not a drone's name")
+    if drone in (CENTRAL, CONSOLE):
+        raise KeySegmentError(f"{drone!r} is a key of the consoles', not a drone's name")
     return f"{ROOT}/{segment(fleet)}/{segment(drone)}/{topic}"
 
 
@@ -77,6 +79,15 @@ def all_alive(fleet: str) -> str:
     return f"{ROOT}/{segment(fleet)}/*/alive"
 
 
+def console_alive(fleet: str, console: str) -> str:
+    """Liveliness of one console on the bus (any role): a vehicle hears its consoles by it."""
+    return f"{ROOT}/{segment(fleet)}/{CONSOLE}/{segment(console)}/alive"
+
+
+def all_consoles_alive(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/{CONSOLE}/*/alive"
+
+
 def central_alive(fleet: str) -> str:
     return f"{ROOT}/{segment(fleet)}/{CENTRAL}/alive"
 
@@ -88,6 +99,6 @@ def central_missions(fleet: str) -> str:
 def drone_of(key: str) -> str | None:
     """The drone a ``uavc/<fleet>/<drone>/…`` key names (None for other keys)."""
     parts = key.split("/")
-    if len(parts) < 4 or parts[0] != ROOT or parts[2] == CENTRAL:
+    if len(parts) < 4 or parts[0] != ROOT or parts[2] in (CENTRAL, CONSOLE):
         return None
     return parts[2]

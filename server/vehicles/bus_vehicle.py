@@ -1,0 +1,121 @@
+"""A vehicle process's commanded side on the bus (docs/bus.md): its ``cmd`` queryable answered by
+the vehicle's own control ops, its status at 1 Hz and its camera, and the consoles it hears.
+
+The ops are those of the vehicle's control service (:meth:`VehicleHost._control`): ``direct``,
+``utterance``, ``telemetry``, ``truth``, ``fault``; each command is judged first by the vehicle's
+own pilot lease (:class:`~drone.bus.lease.VehicleLease`), one lease for every console.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections import deque
+from typing import TYPE_CHECKING, Any
+
+from drone.bus.commanded import CommandedVehicle, CommandRefused, ConsolePresence
+from drone.bus.commands import Command
+from drone.bus.lease import VehicleLease
+from drone.bus.payloads import Status
+from server.vehicles.errors import VehicleError
+
+if TYPE_CHECKING:
+    from drone.bus.vehicle import VehicleBus
+    from server.vehicles.host import VehicleHost
+
+log = logging.getLogger("uav_console.vehicle")
+
+STATUS_PERIOD_S = 1.0
+ALARM_HOLD_S = 10.0  # an alarm stays in the status this long after the supervisor said it
+
+
+class BusVehicleSide:
+    """See the module docstring; ``step(now)`` from the host's periodic loop."""
+
+    def __init__(self, host: VehicleHost, bus: VehicleBus) -> None:
+        from server.dialog.manager import REPLY
+
+        assert bus.session is not None
+        self.host = host
+        self.name = host.name
+        self.lease = VehicleLease(actions_of=self._actions_of)
+        self.commanded = CommandedVehicle(
+            bus.session,
+            bus.fleet,
+            bus.name,
+            self._command,
+            self.lease,
+            asyncio.get_running_loop(),
+        )
+        self.presence = ConsolePresence(bus.session, bus.fleet, time.monotonic)
+        self._alarms: deque[tuple[float, str]] = deque(maxlen=20)
+        self._reply_sub = host.graph.subscribe(REPLY, self._on_reply, type="uav_console/Reply")
+        self._next_status = 0.0
+        self._camera_sent = -1
+        self.commanded.start()
+
+    def _actions_of(self, text: str) -> set[str]:
+        nlu = getattr(self.host.dialog, "nlu", None)
+        if nlu is None:
+            return set()
+        return {str(c.get("action")) for c in nlu.interpret(text, None)}
+
+    def _on_reply(self, msg: dict[str, Any]) -> None:
+        if msg.get("alarm"):
+            self._alarms.append((time.monotonic(), str(msg.get("text", ""))))
+
+    async def _command(self, command: Command) -> dict[str, Any]:
+        """One command, through the vehicle's control ops; refusals with their reason."""
+        args: dict[str, Any] = {**command.args, "op": command.op}
+        if command.issued is not None:
+            args["issued"] = command.issued
+        if command.op == "direct" and command.is_stop and args.get("id") is None:
+            args["id"] = command.id  # a stop runs once per id, whichever road brings it
+        if command.op == "utterance":
+            args.setdefault("role", "pilot")
+        try:
+            out = await self.host._control(args)
+        except VehicleError as exc:
+            raise CommandRefused(str(exc)) from exc
+        if command.op == "direct" and isinstance(out.get("expired"), dict):
+            late = out["expired"]
+            raise CommandRefused(
+                f"{command.action} expired: issued {late.get('age_s')} s ago, "
+                f"deadline {late.get('deadline_s')} s; not flown",
+                out,
+            )
+        return out
+
+    def step(self, now: float) -> None:
+        """Publish the status when due and the camera's newest frame, if new."""
+        count, jpeg = self.host.stack.latest_jpeg()
+        if jpeg is not None and count != self._camera_sent:
+            self._camera_sent = count
+            self.commanded.publish_camera(jpeg)
+        if now >= self._next_status:
+            self._next_status = now + STATUS_PERIOD_S
+            self.commanded.publish_status(self.status(now))
+
+    def status(self, now: float) -> Status:
+        detail = self.host.telemetry()
+        detail.pop("truth", None)
+        task = detail.get("task")
+        task_name = ""
+        if isinstance(task, dict):
+            task_name = str(task.get("name") or "")
+        return Status(
+            drone=self.name,
+            stamp=time.time(),
+            mode=str(detail.get("ctrl_state", "")),
+            task=task_name,
+            alarms=[text for t, text in self._alarms if now - t <= ALARM_HOLD_S],
+            lease=self.lease.current(time.time()),
+            simulated=self.host.stack.sim is not None,
+            detail=detail,
+        )
+
+    def close(self) -> None:
+        self._reply_sub.close()
+        self.presence.close()
+        self.commanded.close()
