@@ -7,7 +7,8 @@ with the reason (malformed, unknown op, the lease, the handler's own refusal: a 
 passed, a drone that cannot take off). Refusals are logged with their reason.
 
 Order: commands run one at a time in the order they came, on the vehicle's event loop. Stops
-(land, hover, emergency) and reads never wait in that queue: they run as they arrive, and a
+(land, hover, emergency), jogs (a stream of velocities, the newest wins) and reads never wait in
+that queue: they run as they arrive, and a
 stop answers every command still queued behind it "superseded", so nothing queued before a
 stop flies after it.
 
@@ -144,7 +145,7 @@ class CommandedVehicle:
                     queued,
                 )
             self._queue.clear()
-        if command.is_stop or command.op in READ_OPS or command.op == "lease":
+        if command.is_stop or command.op in READ_OPS or command.op in ("lease", "jog"):
             task = self.loop.create_task(self._run(query, command))
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)

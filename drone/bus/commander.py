@@ -12,6 +12,7 @@ import itertools
 import logging
 import secrets
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import zenoh
@@ -20,11 +21,14 @@ import zenoh.handlers
 from drone.bus import keys
 from drone.bus.commands import Command, CommandReply, decode_reply, encode_command
 from drone.bus.errors import NoReply, PayloadError
-from drone.bus.payloads import Status, decode_status
+from drone.bus.payloads import Status, Telemetry, decode_status, decode_telemetry
 
 log = logging.getLogger(__name__)
 
 COMMAND_TIMEOUT_S = 10.0
+
+StatusCallback = Callable[[Status], None]
+TelemetryCallback = Callable[[Telemetry], None]
 
 
 class BusCommander:
@@ -43,9 +47,11 @@ class BusCommander:
         self.refused = 0  # status payloads that did not decode
         # this console on the bus, for the vehicles' watch (any role, central or not)
         self._token = session.liveliness().declare_token(keys.console_alive(self.fleet, console))
+        self._watchers: dict[str, tuple[StatusCallback, TelemetryCallback]] = {}
         self._subs: list[Any] = [
             session.declare_subscriber(keys.all_status(self.fleet), self._on_status),
             session.declare_subscriber(keys.all_camera(self.fleet), self._on_camera),
+            session.declare_subscriber(keys.all_telemetry(self.fleet), self._on_telemetry),
         ]
 
     # ------------------------------------------------------------------ commands
@@ -142,6 +148,29 @@ class BusCommander:
         with self._lock:
             return self._camera.get(drone, (-1, None))
 
+    def watch(self, drone: str, on_status: StatusCallback, on_telemetry: TelemetryCallback) -> None:
+        """Call these (on a Zenoh thread) with each status and telemetry ``drone`` publishes."""
+        with self._lock:
+            self._watchers[drone] = (on_status, on_telemetry)
+
+    def unwatch(self, drone: str) -> None:
+        with self._lock:
+            self._watchers.pop(drone, None)
+
+    def _on_telemetry(self, sample: zenoh.Sample) -> None:
+        """Telemetry for the watched drones (the console's bus already counts bad ones)."""
+        drone = keys.drone_of(str(sample.key_expr))
+        with self._lock:
+            watcher = self._watchers.get(drone or "")
+        if watcher is None:
+            return
+        try:
+            telemetry = decode_telemetry(sample.payload.to_bytes())
+        except PayloadError:
+            return
+        if telemetry.drone == drone:
+            watcher[1](telemetry)
+
     def forget(self, drone: str) -> None:
         with self._lock:
             self._status.pop(drone, None)
@@ -161,6 +190,9 @@ class BusCommander:
             return
         with self._lock:
             self._status[drone] = status
+            watcher = self._watchers.get(drone)
+        if watcher is not None:
+            watcher[0](status)
 
     def _on_camera(self, sample: zenoh.Sample) -> None:
         drone = keys.drone_of(str(sample.key_expr))

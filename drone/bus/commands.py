@@ -23,14 +23,16 @@ from drone.bus.errors import PayloadError
 
 MAX_COMMAND_BYTES = 16 * 1024
 # What a vehicle answers: direct actions, the dialog, reads, simulator faults, its lease.
-OPS = ("direct", "utterance", "telemetry", "truth", "fault", "lease")
+OPS = ("direct", "utterance", "telemetry", "truth", "fault", "lease", "jog")
 # Actions any pilot may send, lease or not; they never wait behind anything (DESIGN §5).
 STOP_ACTIONS = frozenset({"land", "hover", "emergency"})
 DIRECT_ACTIONS = frozenset({"takeoff", "reset"}) | STOP_ACTIONS
 # Ops that change nothing: any pilot may ask them, lease or not.
 READ_OPS = frozenset({"telemetry", "truth"})
+# A jog's velocity (``geometry_msgs/Twist`` as ``/cmd_vel`` carries it): these axes only.
+JOG_AXES = {"linear": ("x", "y", "z"), "angular": ("z",)}
 
-Op = Literal["direct", "utterance", "telemetry", "truth", "fault", "lease"]
+Op = Literal["direct", "utterance", "telemetry", "truth", "fault", "lease", "jog"]
 
 
 class Command(BaseModel):
@@ -68,7 +70,10 @@ class Command(BaseModel):
 
     @property
     def is_stop(self) -> bool:
-        """Land, hover or emergency: any pilot's, ahead of anything queued."""
+        """Land, hover or emergency (a jog of zeros is a hover): any pilot's, ahead of
+        anything queued."""
+        if self.op == "jog":
+            return all(v == 0 for v in _jog_values(self.args))
         return self.action in STOP_ACTIONS
 
 
@@ -130,7 +135,30 @@ def decode_command(data: bytes) -> Command:
         )
     if command.op == "utterance" and not isinstance(command.args.get("text"), str):
         raise PayloadError("command args.text: an utterance needs its text")
+    if command.op == "jog":
+        _check_jog(command.args)
     return command
+
+
+def _jog_values(args: dict[str, Any]) -> list[float]:
+    out = []
+    for part, axes in JOG_AXES.items():
+        vec = args.get(part) or {}
+        out += [float(vec.get(a, 0.0)) for a in axes] if isinstance(vec, dict) else [math.nan]
+    return out
+
+
+def _check_jog(args: dict[str, Any]) -> None:
+    for part in JOG_AXES:
+        vec = args.get(part, {})
+        if not isinstance(vec, dict):
+            raise PayloadError(f"command args.{part}: a jog's {part} is an object of axes")
+        for axis, value in vec.items():
+            if axis not in ("x", "y", "z"):
+                raise PayloadError(f"command args.{part}.{axis}: not an axis")
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+            if not ok or not math.isfinite(value):
+                raise PayloadError(f"command args.{part}.{axis}: must be a finite number")
 
 
 def decode_reply(data: bytes) -> CommandReply:

@@ -1,7 +1,9 @@
 """The pilot lease as a vehicle holds it (sans-I/O; time passed in).
 
 Each vehicle keeps its own lease, so there is one lease per drone across every console on the
-bus. The holder is ``pilot@console`` (:attr:`~drone.bus.commands.Command.holder`). Stops (land,
+bus. It is held by a console (its pilots take turns under that console's own pilot lease); the
+status shows the holder as ``pilot@console`` (:attr:`~drone.bus.commands.Command.holder`), the
+pilot who last commanded under it. Stops (land,
 hover, emergency), reads and an utterance that asks only stops need no lease (DESIGN §5: any
 pilot may land); any other command takes a free lease, renews its holder's, and is refused
 while another holder's is live. A lease its holder has not used for ``idle_s`` lapses, so a
@@ -36,15 +38,19 @@ class VehicleLease:
     ) -> None:
         self.actions_of = actions_of
         self.idle_s = idle_s
-        self.holder: str | None = None
+        self.holder: str | None = None  # pilot@console, for people to read
+        self.console: str | None = None  # who holds it
         self.since: float | None = None
         self.used: float | None = None
 
     def current(self, now: float) -> str | None:
         """The live holder (None: free, or lapsed)."""
         if self.holder is not None and self.used is not None and now - self.used > self.idle_s:
-            self.holder = self.since = self.used = None
+            self._free()
         return self.holder
+
+    def _free(self) -> None:
+        self.holder = self.console = self.since = self.used = None
 
     def exempt(self, command: Command) -> bool:
         """Whether ``command`` needs no lease (stops, reads, an utterance of stops only)."""
@@ -66,14 +72,19 @@ class VehicleLease:
         if self.exempt(command):
             return LeaseVerdict(True)
         holder = self.current(now)
-        if holder in (None, command.holder) or command.args.get("take_over") is True:
-            self._hold(command.holder, now)
+        if self._may_take(command):
+            self._hold(command, now)
             return LeaseVerdict(True)
         return LeaseVerdict(False, self._held_by(holder, now))
 
-    def _hold(self, holder: str, now: float) -> None:
-        if self.holder != holder:
-            self.holder, self.since = holder, now
+    def _may_take(self, command: Command) -> bool:
+        free = self.console in (None, command.console)
+        return free or command.args.get("take_over") is True
+
+    def _hold(self, command: Command, now: float) -> None:
+        if self.console != command.console:
+            self.console, self.since = command.console, now
+        self.holder = command.holder
         self.used = now
 
     def _held_by(self, holder: str | None, now: float) -> str:
@@ -89,12 +100,12 @@ class VehicleLease:
         if action == "status":
             return LeaseVerdict(True)
         if action == "acquire":
-            if holder in (None, command.holder) or command.args.get("take_over") is True:
-                self._hold(command.holder, now)
+            if self._may_take(command):
+                self._hold(command, now)
                 return LeaseVerdict(True)
             return LeaseVerdict(False, self._held_by(holder, now))
         if action == "release":
-            if holder == command.holder:
-                self.holder = self.since = self.used = None
+            if holder is not None and self.console == command.console:
+                self._free()
             return LeaseVerdict(True)
         return LeaseVerdict(False, f"lease action {action!r} is not status, acquire or release")

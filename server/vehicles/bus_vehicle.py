@@ -2,8 +2,9 @@
 the vehicle's own control ops, its status at 1 Hz and its camera, and the consoles it hears.
 
 The ops are those of the vehicle's control service (:meth:`VehicleHost._control`): ``direct``,
-``utterance``, ``telemetry``, ``truth``, ``fault``; each command is judged first by the vehicle's
-own pilot lease (:class:`~drone.bus.lease.VehicleLease`), one lease for every console.
+``utterance``, ``telemetry``, ``truth``, ``fault``, and ``jog`` (its ``/cmd_vel``); each
+command is judged first by the vehicle's own pilot lease
+(:class:`~drone.bus.lease.VehicleLease`), one lease for every console.
 """
 
 from __future__ import annotations
@@ -67,6 +68,8 @@ class BusVehicleSide:
 
     async def _command(self, command: Command) -> dict[str, Any]:
         """One command, through the vehicle's control ops; refusals with their reason."""
+        if command.op == "jog":
+            return self._jog(command)
         args: dict[str, Any] = {**command.args, "op": command.op}
         if command.issued is not None:
             args["issued"] = command.issued
@@ -86,6 +89,17 @@ class BusVehicleSide:
                 out,
             )
         return out
+
+    def _jog(self, command: Command) -> dict[str, Any]:
+        """A velocity for the vehicle node's ``/cmd_vel`` (jog limits, the operator watchdog
+        and the deadline are its own), as a page's jog over rosbridge is."""
+        twist = {
+            part: {axis: float(command.args.get(part, {}).get(axis, 0.0)) for axis in "xyz"}
+            for part in ("linear", "angular")
+        }
+        issued = self.host._issued_arg({"issued": command.issued})
+        self.host.graph.publish(f"{self.host.options.prefix}/cmd_vel", twist, issued=issued)
+        return {"accepted": True, "detail": "jog sent"}
 
     def step(self, now: float) -> None:
         """Publish the status when due and the camera's newest frame, if new."""

@@ -141,6 +141,8 @@ def test_motion_takes_the_free_lease_and_others_are_refused() -> None:
     refused = lease.judge(command(console="b"), 1.0)
     assert not refused.allowed and "held by pilot@a" in refused.reason
     assert lease.judge(command(console="a", action="reset"), 2.0).allowed
+    assert lease.judge(command(console="a", pilot="other", action="reset"), 3.0).allowed
+    assert lease.current(3.0) == "other@a"  # its console's own lease chose the pilot
 
 
 @pytest.mark.parametrize("action", ["land", "hover", "emergency"])
