@@ -43,8 +43,15 @@ def vehicle_user(name: str) -> str:
     return VEHICLE_PREFIX + keys.segment(name)
 
 
-def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
-    """The router's ACL for ``fleet`` and these vehicle names (ACLs are fixed at start)."""
+def access_control(
+    fleet: str, vehicles: Iterable[str], routers: Iterable[str] = ()
+) -> dict[str, Any]:
+    """The router's ACL for ``fleet`` and these vehicle names (ACLs are fixed at start).
+
+    ``routers``: the Zenoh ids of the consoles' routers this one joins. What comes from a
+    router this one dialled carries no user name here (user/password authenticates the dialling
+    side only), so those routers are trusted by their id, as consoles: they judged it at their
+    own ingress."""
     root = f"{keys.ROOT}/{keys.segment(fleet)}"
     rules: list[dict[str, Any]] = [
         _rule("deliver", ["egress"], _EVERYTHING, [f"{keys.ROOT}/**"]),
@@ -62,6 +69,10 @@ def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
         {"id": "pilots-command", "rules": ["command"], "subjects": ["commanders"]},
         {"id": "consoles-all", "rules": ["console"], "subjects": ["consoles"]},
     ]
+    joined = sorted(set(routers))
+    if joined:
+        subjects.append({"id": "joined-routers", "zids": joined})
+        policies.append({"id": "routers-all", "rules": ["console"], "subjects": ["joined-routers"]})
     for name in sorted(set(vehicles)):
         rid = f"own-{name}"
         rules.append(_rule(rid, ["ingress"], _OWN, [f"{root}/{keys.segment(name)}/**"]))
@@ -93,10 +104,13 @@ def router_config(
     password: str,
     dictionary_file: str,
     acl: dict[str, Any],
+    zid: str | None = None,
 ) -> dict[str, Any]:
     """The console's embedded router: listens where told, joins only the routers named (no
-    multicast scouting: a second console on the same machine must not join this fleet)."""
+    multicast scouting: a second console on the same machine must not join this fleet).
+    ``zid``: its Zenoh id, the same at every start (other consoles trust it by its id)."""
     return {
+        **({"id": zid} if zid else {}),
         "mode": "router",
         "listen": {"endpoints": listen},
         "connect": {"endpoints": connect},
@@ -122,3 +136,12 @@ def client_config(*, connect: list[str], user: str, password: str) -> dict[str, 
         "scouting": {"multicast": {"enabled": False}},
         "transport": {"auth": {"usrpwd": {"user": user, "password": password}}},
     }
+
+
+def router_zid(password: str, listen: str) -> str:
+    """A console router's Zenoh id: the same for the same console (its bus password) listening
+    on the same endpoint, so a router that joined it trusts it again after it restarts."""
+    import hashlib
+
+    digest = hashlib.sha256(f"{password}\n{listen}".encode()).hexdigest()[:32]
+    return digest.lstrip("0") or "1"

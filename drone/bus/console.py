@@ -20,10 +20,11 @@ from drone.bus.config import (
     access_control,
     client_config,
     router_config,
+    router_zid,
     vehicle_user,
 )
 from drone.bus.credentials import Credentials, write_private
-from drone.bus.errors import PayloadError
+from drone.bus.errors import BusError, PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry
 from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session
 
@@ -90,14 +91,17 @@ class ConsoleBus:
             self.directory, self.vehicle_names, self.vehicle_passwords
         )
         self.credentials = creds
-        acl = access_control(self.fleet, creds.vehicles())
+        password = creds.password(CONSOLE_USER)
+        routers = [z for z in (self._router_id(e, password) for e in self.connect) if z]
+        acl = access_control(self.fleet, creds.vehicles(), routers)
         self.session = open_session(
             router_config(
                 listen=self.listen,
                 connect=self.connect,
-                password=creds.password(CONSOLE_USER),
+                password=password,
                 dictionary_file=str(creds.path),
                 acl=acl,
+                zid=router_zid(password, self.listen[0]),
             )
         )
         self._write_client(CLIENT_FILE, OBSERVER_USER)
@@ -109,6 +113,24 @@ class ConsoleBus:
         self._subs.append(
             self.session.declare_subscriber(keys.all_telemetry(self.fleet), self._on_telemetry)
         )
+
+    def _router_id(self, endpoint: str, password: str) -> str | None:
+        """The Zenoh id of the console router at ``endpoint`` (asked once, at start: its id
+        stays the same across its restarts); None, said in the log, when it cannot be asked."""
+        config = client_config(connect=[endpoint], user=CONSOLE_USER, password=password)
+        config["connect"]["timeout_ms"] = 3000
+        try:
+            session = open_session(config)
+        except BusError as exc:
+            log.warning(
+                "bus: %s not asked for its id (%s): what it sends is refused", endpoint, exc
+            )
+            return None
+        try:
+            zids = [str(z) for z in session.info.routers_zid()]
+        finally:
+            session.close()  # type: ignore[no-untyped-call]
+        return zids[0] if zids else None
 
     @property
     def client_endpoints(self) -> list[str]:

@@ -19,7 +19,8 @@ from typing import Any
 import pytest
 from websockets.sync.client import connect as ws_connect
 
-from tests.isolation.conftest import HOST, PILOT, ROOT, Served, serve, wait_for
+from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
+from tests.isolation.conftest import serve as serve_quick
 from tests.loopback import for_worker, free_port
 
 NAME = "uav7"
@@ -36,12 +37,18 @@ class Rig:
     def wait_joined(self, srv: Served | None = None) -> dict[str, Any]:
         srv = srv or self.srv
 
+        seen: list[str] = []
+
         def joined() -> dict[str, Any] | None:
             r = srv.http.get(f"/api/v1/drones/{NAME}")
+            seen.append(f"{r.status_code} {r.text[:300]}")
             ok = r.status_code == 200 and r.json()["vehicle"]["connected"] and r.json()["link_ok"]
             return dict(r.json()) if ok else None
 
-        return dict(wait_for(joined, f"{NAME} on the bus and its drone link up", 60))
+        try:
+            return dict(wait_for(joined, f"{NAME} on the bus and its drone link up", 90))
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}; last answer: {seen[-1:]}") from None
 
     def flying(self, srv: Served | None = None) -> bool:
         return bool((srv or self.srv).drone(NAME)["flying"])
@@ -53,6 +60,15 @@ class Rig:
 
     def vlog(self) -> str:
         return self.vehicle_log.read_text(errors="replace")
+
+
+@contextlib.contextmanager
+def serve(
+    tmp: Path, drone: str, *, extra: tuple[str, ...], port: int | None = None
+) -> Iterator[Served]:
+    """``serve`` (tests/isolation), given as long as a busy machine needs to start it."""
+    with serve_quick(tmp, drone, extra=extra, port=port, start_s=120) as srv:
+        yield srv
 
 
 def vehicle_key(data: Path, name: str) -> str:
@@ -68,7 +84,9 @@ def vehicle_key(data: Path, name: str) -> str:
 
 
 @contextlib.contextmanager
-def bus_vehicle(tmp: Path, endpoint: str, key: str) -> Iterator[tuple[subprocess.Popen[bytes], Path]]:
+def bus_vehicle(
+    tmp: Path, endpoint: str, key: str
+) -> Iterator[tuple[subprocess.Popen[bytes], Path]]:
     log_path = tmp / f"{NAME}.log"
     env = {
         **os.environ,
@@ -139,7 +157,9 @@ class Ros:
     def call(self, service: str, args: dict[str, Any]) -> dict[str, Any]:
         self.n += 1
         cid = f"c{self.n}"
-        self.ws.send(json.dumps({"op": "call_service", "id": cid, "service": service, "args": args}))
+        self.ws.send(
+            json.dumps({"op": "call_service", "id": cid, "service": service, "args": args})
+        )
         while True:
             frame = json.loads(self.ws.recv(timeout=10))
             if frame.get("op") == "service_response" and frame.get("id") == cid:
@@ -193,7 +213,9 @@ def test_bad_parties_are_refused_and_nothing_flies(rig: Rig) -> None:
     assert reply["reason"].startswith("malformed command: command args.action: 'loop'")
     wait_for(lambda: "refused: malformed command" in rig.vlog(), "the refusal in the log", 10)
     # an unknown vehicle: nobody answers on the bus, REST says 404
-    nobody = run_script(QUERY, str(bus / "pilot.json5"), "uavc/default/uav9/cmd", command("telemetry"))
+    nobody = run_script(
+        QUERY, str(bus / "pilot.json5"), "uavc/default/uav9/cmd", command("telemetry")
+    )
     assert nobody["replies"] == []
     assert rig.srv.http.post("/api/v1/drones/uav9/takeoff").status_code == 404
     time.sleep(1.0)  # anything that would fly has had its chance: still on the ground

@@ -280,3 +280,46 @@ def test_a_vehicle_cannot_answer_or_publish_as_another(console: ConsoleBus) -> N
             session.close()
 
     asyncio.run(main())
+
+
+def test_a_console_that_joins_another_router_commands_its_vehicles(tmp_path: Path) -> None:
+    """Two consoles' routers, the second joined to the first: the vehicle on the first is
+    alive on the second, and the second's commands reach it and are answered (what the first
+    sends carries no user name on the second: it is trusted by its router id)."""
+
+    async def main() -> None:
+        west = ConsoleBus(
+            tmp_path / "bus", "default", ["uav1"], listen=[f"tcp/127.0.0.1:{free_port()}"]
+        )
+        west.start()
+        east = ConsoleBus(
+            tmp_path / "bus",
+            "default",
+            ["uav1"],
+            listen=[f"tcp/127.0.0.1:{free_port()}"],
+            connect=west.listen,
+        )
+        east.start()
+        drone = FakeDrone()
+        session, cv = await vehicle(west, "uav1", drone)
+        token = session.liveliness().declare_token(keys.alive("default", "uav1"))
+        assert east.session is not None
+        c = BusCommander(east.session, "default", "east")
+        try:
+            await until_answered(c, "uav1")
+            for _ in range(100):
+                if east.alive() == ["uav1"]:
+                    break
+                await asyncio.sleep(0.05)
+            assert east.alive() == ["uav1"]
+            reply = await c.command("uav1", c.new_command("uav1", "direct", {"action": "takeoff"}))
+            assert reply.accepted and drone.done == ["takeoff"]
+        finally:
+            token.undeclare()  # type: ignore[no-untyped-call]
+            c.close()
+            cv.close()
+            session.close()
+            east.close()
+            west.close()
+
+    asyncio.run(main())
