@@ -29,6 +29,7 @@ COMMAND_TIMEOUT_S = 10.0
 
 StatusCallback = Callable[[Status], None]
 TelemetryCallback = Callable[[Telemetry], None]
+CameraCallback = Callable[[int, bytes], None]
 
 
 class BusCommander:
@@ -47,7 +48,7 @@ class BusCommander:
         self.refused = 0  # status payloads that did not decode
         # this console on the bus, for the vehicles' watch (any role, central or not)
         self._token = session.liveliness().declare_token(keys.console_alive(self.fleet, console))
-        self._watchers: dict[str, tuple[StatusCallback, TelemetryCallback]] = {}
+        self._watchers: dict[str, tuple[StatusCallback, TelemetryCallback, CameraCallback]] = {}
         self._subs: list[Any] = [
             session.declare_subscriber(keys.all_status(self.fleet), self._on_status),
             session.declare_subscriber(keys.all_camera(self.fleet), self._on_camera),
@@ -148,10 +149,17 @@ class BusCommander:
         with self._lock:
             return self._camera.get(drone, (-1, None))
 
-    def watch(self, drone: str, on_status: StatusCallback, on_telemetry: TelemetryCallback) -> None:
-        """Call these (on a Zenoh thread) with each status and telemetry ``drone`` publishes."""
+    def watch(
+        self,
+        drone: str,
+        on_status: StatusCallback,
+        on_telemetry: TelemetryCallback,
+        on_camera: CameraCallback,
+    ) -> None:
+        """Call these (on a Zenoh thread) with each status, telemetry and camera frame (its
+        counter and JPEG) ``drone`` publishes."""
         with self._lock:
-            self._watchers[drone] = (on_status, on_telemetry)
+            self._watchers[drone] = (on_status, on_telemetry, on_camera)
 
     def unwatch(self, drone: str) -> None:
         with self._lock:
@@ -206,6 +214,9 @@ class BusCommander:
         with self._lock:
             count = self._camera.get(drone, (-1, b""))[0] + 1
             self._camera[drone] = (count, jpeg)
+            watcher = self._watchers.get(drone)
+        if watcher is not None:
+            watcher[2](count, jpeg)
 
     def close(self) -> None:
         self._token.undeclare()  # type: ignore[no-untyped-call]

@@ -7,6 +7,7 @@
 | ``uavc/<fleet>/<drone>/cmd`` | commands: queries answered by the vehicle (:mod:`.commands`) |
 | ``uavc/<fleet>/<drone>/status`` | :class:`~drone.bus.payloads.Status`, JSON, 1 Hz |
 | ``uavc/<fleet>/<drone>/camera`` | JPEG frames, dropped rather than queued |
+| ``uavc/<fleet>/<drone>/graph/<topic>`` | its own graph topics, JSON (what a console shows) |
 | ``uavc/<fleet>/console/<name>/alive`` | liveliness of each console on the bus |
 | ``uavc/<fleet>/central/alive`` | liveliness of the console holding the central role |
 | ``uavc/<fleet>/central/missions`` | the JSON of ``GET /api/v1/patrol`` |
@@ -61,6 +62,24 @@ def status(fleet: str, drone: str) -> str:
 
 def camera(fleet: str, drone: str) -> str:
     return drone_key(fleet, drone, "camera")
+
+
+def graph(fleet: str, drone: str, topic: str) -> str:
+    """A vehicle's graph topic on the bus: ``/uav7/ardrone/navdata`` →
+    ``uavc/<fleet>/uav7/graph/uav7/ardrone/navdata``."""
+    return f"{drone_key(fleet, drone, 'graph')}/{topic.strip('/')}"
+
+
+def all_graph(fleet: str, drone: str) -> str:
+    return f"{drone_key(fleet, drone, 'graph')}/**"
+
+
+def topic_of_graph(key: str) -> str | None:
+    """The graph topic a ``…/<drone>/graph/<topic>`` key carries (None for other keys)."""
+    parts = key.split("/")
+    if len(parts) < 5 or parts[0] != ROOT or parts[3] != "graph":
+        return None
+    return "/" + "/".join(parts[4:])
 
 
 def all_status(fleet: str) -> str:

@@ -13,17 +13,25 @@ deadline passed) comes back as the op's answer: ``accepted`` false and the vehic
 from __future__ import annotations
 
 import asyncio
+import base64
+import json
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+import zenoh
+
+from drone.bus import keys
 from drone.bus.errors import BusError, NoReply
 from drone.bus.payloads import Status, Telemetry
+from server.dialog.manager import UTTERANCE
 from server.graph import GraphError, ServiceError
-from server.vehicle_node import EMPTY, TWIST
+from server.msgs import header
+from server.vehicle_node import EMPTY, IMAGE, TWIST
 from server.vehicles import names
 from server.vehicles.errors import RemoteCallError
+from server.vehicles.link_core import TopicSpec
 from server.vehicles.remote import CALL_TIMEOUT_S, RemoteDroneStack
 
 if TYPE_CHECKING:
@@ -31,6 +39,8 @@ if TYPE_CHECKING:
     from server.graph import Graph
 
 log = logging.getLogger(__name__)
+
+CAMERA_TOPIC = "/ardrone/image_raw/compressed"
 
 
 class BusDroneStack(RemoteDroneStack):
@@ -50,6 +60,7 @@ class BusDroneStack(RemoteDroneStack):
         alive: Callable[[], list[str]],
         pilot: Callable[[], str],
         *,
+        topics: Mapping[str, TopicSpec] | None = None,
         simulated: bool = True,
     ) -> None:
         super().__init__(graph, name, prefix, simulated=simulated)
@@ -57,7 +68,17 @@ class BusDroneStack(RemoteDroneStack):
         self._alive = alive
         self._pilot = pilot
         self._status: Status | None = None
-        commander.watch(name, self._on_status, self._on_bus_telemetry)
+        self.topics = dict(topics or {})  # what of its graph the vehicle may show here
+        self.refused_topics: set[str] = set()
+        self._advertised: set[str] = set()
+        self._owner = f"bus:{name}"
+        commander.watch(name, self._on_status, self._on_bus_telemetry, self._on_camera)
+        self._mirror_sub = commander.session.declare_subscriber(
+            keys.all_graph(commander.fleet, name), self._on_graph
+        )
+        self._utterances = graph.subscribe(
+            UTTERANCE, self._on_utterance, type="uav_console/Utterance", owner=self._owner
+        )
         self._pending_topics: set[asyncio.Task[Any]] = set()
         owner = f"bus:{name}"
         self._topic_subs = [
@@ -76,7 +97,7 @@ class BusDroneStack(RemoteDroneStack):
         the bus, when no vehicle link carries the topic to the vehicle."""
 
         def forward(msg: dict[str, Any]) -> None:
-            if self.graph.service_type(names.control_service(self.name)) is not None:
+            if self.linked:
                 return  # its vehicle link delivers the topic itself
             issued = self.graph.issued
             args = dict(fixed)
@@ -84,9 +105,7 @@ class BusDroneStack(RemoteDroneStack):
                 args = {k: msg.get(k, {}) for k in ("linear", "angular")}
             if issued is not None:
                 args["issued"] = issued
-            task = asyncio.get_running_loop().create_task(self._topic_command(op, args))
-            self._pending_topics.add(task)
-            task.add_done_callback(self._pending_topics.discard)
+            self._spawn_command(op, args)
 
         return forward
 
@@ -122,6 +141,65 @@ class BusDroneStack(RemoteDroneStack):
         )
         self.last = base
         self.last_t = time.monotonic()
+
+    @property
+    def linked(self) -> bool:
+        """Whether a vehicle link (``/vehicle-link``) carries this drone's graph itself."""
+        return self.graph.service_type(names.control_service(self.name)) is not None
+
+    def _on_graph(self, sample: zenoh.Sample) -> None:
+        """One of the vehicle's graph topics (Zenoh thread): onto this graph, if it is one the
+        vehicle may publish (the router already made sure the vehicle is who it says)."""
+        topic = keys.topic_of_graph(str(sample.key_expr))
+        spec = self.topics.get(topic or "")
+        if spec is None:
+            if topic not in self.refused_topics:
+                self.refused_topics.add(str(topic))
+                log.warning(
+                    "%s: its topic %s is not shown here (not one of its own)", self.name, topic
+                )
+            return
+        try:
+            msg = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            log.warning("%s: %s is not JSON", self.name, topic)
+            return
+        if isinstance(msg, dict) and self.graph.loop is not None:
+            self.graph.loop.call_soon_threadsafe(self._show, spec, msg)
+
+    def _show(self, spec: TopicSpec, msg: dict[str, Any]) -> None:
+        if self.linked:
+            return
+        if spec.name not in self._advertised:
+            self.graph.advertise(spec.name, spec.type, latch=spec.latch, owner=self._owner)
+            self._advertised.add(spec.name)
+        self.graph.publish(spec.name, msg)
+
+    def _on_camera(self, count: int, jpeg: bytes) -> None:
+        """A camera frame (Zenoh thread): the drone's image topic here, as its node sends it."""
+        msg = {
+            "header": header("ardrone_base_frontcam", time.time()),
+            "format": "jpeg",
+            "data": base64.b64encode(jpeg).decode("ascii"),
+        }
+        spec = TopicSpec(f"{self.prefix}{CAMERA_TOPIC}", IMAGE)
+        if self.graph.loop is not None:
+            self.graph.loop.call_soon_threadsafe(self._show, spec, msg)
+
+    def _on_utterance(self, msg: dict[str, Any]) -> None:
+        """A sentence typed or said in a console (rosbridge): the vehicle's dialog hears it,
+        as the vehicle link makes it (a door that answered it itself marks it answered)."""
+        if msg.get("answered") or self.linked or not self.joined:
+            return
+        keep = ("text", "confidence", "source", "drone", "asked_by")
+        args = {k: msg[k] for k in keep if k in msg}
+        issued = self.graph.issued
+        self._spawn_command("utterance", {**args, "heard": True, "issued": issued})
+
+    def _spawn_command(self, op: str, args: dict[str, Any]) -> None:
+        task = asyncio.get_running_loop().create_task(self._topic_command(op, args))
+        self._pending_topics.add(task)
+        task.add_done_callback(self._pending_topics.discard)
 
     @property
     def lease_holder(self) -> str | None:
@@ -197,8 +275,12 @@ class BusDroneStack(RemoteDroneStack):
         return await self._unless_silent(coro, silent_s)
 
     def close(self) -> None:
+        self._mirror_sub.undeclare()  # type: ignore[no-untyped-call]
+        self._utterances.close()
         for sub in self._topic_subs:
             sub.close()
+        for topic in self._advertised:
+            self.graph.unadvertise(topic, self._owner)
         self.commander.unwatch(self.name)
         super().close()
 

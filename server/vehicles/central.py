@@ -406,6 +406,7 @@ class VehicleCentral:
                 self.commander,
                 self.bus.alive,
                 self.pilot,
+                topics=bus_topics(name, prefix),
                 simulated=simulated,
             )
         else:
@@ -531,6 +532,20 @@ class VehicleCentral:
                 self.alert(f"{vp.name}'s flight process cannot be started: {exc}")
                 continue
             log.warning("%s: vehicle process restarted (pid %s)", vp.name, vp.pid)
+
+
+def bus_topics(name: str, prefix: str) -> dict[str, Any]:
+    """The graph topics vehicle ``name`` may show on this console over the bus: its drone's
+    (AR.Drone, with GPS navdata, or MAVLink) under its prefix, and its own ``/NAME/vehicle/*``
+    (the camera comes on its own key)."""
+    from server.vehicles.host import link_spec
+
+    out: dict[str, Any] = {}
+    for mavlink in (False, True):
+        for topic in link_spec(name, prefix, mavlink=mavlink, gps=True).out_topics:
+            if not topic.name.endswith("/image_raw/compressed"):
+                out[topic.name] = topic
+    return out
 
 
 def console_name(port: int) -> str:

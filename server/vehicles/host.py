@@ -354,7 +354,7 @@ class VehicleHost:
             await self.door.start()
         self.bus = join_bus(s, self.name, self.key)
         if self.bus is not None:
-            self.bus_side = BusVehicleSide(self, self.bus)
+            self.bus_side = BusVehicleSide(self, self.bus, spec)
         elif self.link is None:
             raise VehicleError(f"{self.name}: the bus cannot be reached and there is no --central")
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})

@@ -11,7 +11,7 @@ import subprocess
 import sys
 import textwrap
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -115,9 +115,11 @@ def rig(tmp_path: Path) -> Iterator[Rig]:
     key = vehicle_key(data, NAME)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     extra = ("--fleet", "0", "--bus-listen", endpoint)
-    with serve(tmp_path, "sim", extra=extra) as srv:
-        with bus_vehicle(tmp_path, endpoint, key) as (proc, log_path):
-            yield Rig(srv, endpoint, data, proc, log_path)
+    with (
+        serve(tmp_path, "sim", extra=extra) as srv,
+        bus_vehicle(tmp_path, endpoint, key) as (proc, log_path),
+    ):
+        yield Rig(srv, endpoint, data, proc, log_path)
 
 
 def run_script(script: str, *args: str) -> dict[str, Any]:
@@ -153,6 +155,25 @@ class Ros:
     def __init__(self, ws: Any) -> None:
         self.ws = ws
         self.n = 0
+        self.seen: dict[str, list[dict[str, Any]]] = {}
+
+    def _recv(self) -> dict[str, Any]:
+        frame = dict(json.loads(self.ws.recv(timeout=10)))
+        if frame.get("op") == "publish":
+            self.seen.setdefault(str(frame["topic"]), []).append(frame["msg"])
+        return frame
+
+    def subscribe(self, topic: str, typ: str) -> None:
+        self.ws.send(json.dumps({"op": "subscribe", "topic": topic, "type": typ}))
+
+    def wait_topic(
+        self, topic: str, what: str, pred: Callable[[list[dict[str, Any]]], bool] = bool
+    ) -> list[dict[str, Any]]:
+        deadline = time.monotonic() + 30
+        while not pred(self.seen.get(topic, [])):
+            assert time.monotonic() < deadline, f"{what}: not on {topic} ({self.seen.get(topic)})"
+            self._recv()
+        return self.seen[topic]
 
     def call(self, service: str, args: dict[str, Any]) -> dict[str, Any]:
         self.n += 1
@@ -161,9 +182,9 @@ class Ros:
             json.dumps({"op": "call_service", "id": cid, "service": service, "args": args})
         )
         while True:
-            frame = json.loads(self.ws.recv(timeout=10))
+            frame = self._recv()
             if frame.get("op") == "service_response" and frame.get("id") == cid:
-                return dict(frame)
+                return frame
 
     def publish(self, topic: str, msg: dict[str, Any]) -> None:
         self.ws.send(json.dumps({"op": "publish", "topic": topic, "msg": msg}))
@@ -188,6 +209,20 @@ def test_a_bus_vehicle_flies_by_rest_text_and_rosbridge(rig: Rig) -> None:
         ros = Ros(ws)
         lease = ros.call("/console/lease", {"action": "acquire"})
         assert lease["result"], lease
+        # the vehicle's graph and camera, shown on the console's over the bus
+        ros.subscribe(f"/{NAME}/ardrone/navdata", "ardrone_autonomy/Navdata")
+        ros.subscribe(f"/{NAME}/ardrone/image_raw/compressed", "sensor_msgs/CompressedImage")
+        ros.subscribe("/console/reply", "uav_console/Reply")
+        ros.wait_topic(f"/{NAME}/ardrone/navdata", "navdata", lambda seen: len(seen) >= 3)
+        [image, *_] = ros.wait_topic(f"/{NAME}/ardrone/image_raw/compressed", "the camera")
+        assert image["format"] == "jpeg" and image["data"]
+        # a sentence typed in a page (rosbridge): the vehicle's dialog hears and answers it
+        ros.publish("/console/utterance", {"text": f"{NAME} go up 0.3 meters", "source": "text"})
+        ros.wait_topic(
+            "/console/reply",
+            "the vehicle's spoken reply",
+            lambda seen: any("Climbing" in r["text"] for r in seen),
+        )
         ros.publish(f"/{NAME}/ardrone/land", {})
         wait_for(lambda: not rig.flying(), "the rosbridge landing", 40)
         ros.publish(f"/{NAME}/ardrone/takeoff", {})
