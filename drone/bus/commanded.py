@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import json
 import logging
 import threading
 import time
@@ -217,17 +218,38 @@ class CommandedVehicle:
 
 
 class ConsolePresence:
-    """Which consoles are on the bus now (their liveliness), for a vehicle's watch: while one
-    is, the vehicle counts its consoles as heard."""
+    """The consoles a vehicle hears on the bus: their liveliness (which are there) and their
+    10 Hz heartbeat (when one was last heard: a stalled console stops beating at once, its
+    liveliness lasts until Zenoh's lease on its link runs out).
 
-    def __init__(self, session: zenoh.Session, fleet: str, clock: Callable[[], float]) -> None:
+    ``on_beat(console_time)`` is called (on a Zenoh thread) with each beat's Unix time."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        fleet: str,
+        clock: Callable[[], float],
+        on_beat: Callable[[float], object] | None = None,
+    ) -> None:
         self.clock = clock
+        self.on_beat = on_beat
         self._lock = threading.Lock()
         self._consoles: set[str] = set()
         self._last = clock()  # joined: counts as heard from now
         self._sub = session.liveliness().declare_subscriber(
             keys.all_consoles_alive(fleet), self._on_alive, history=True
         )
+        self._beats = session.declare_subscriber(keys.all_console_heartbeats(fleet), self._on_beat)
+
+    def _on_beat(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self._last = self.clock()
+        try:
+            sent = json.loads(sample.payload.to_bytes())["t"]
+        except (ValueError, KeyError, TypeError):
+            return
+        if self.on_beat is not None and isinstance(sent, int | float):
+            self.on_beat(float(sent))
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         name = str(sample.key_expr).split("/")[3]
@@ -236,16 +258,16 @@ class ConsolePresence:
                 self._consoles.add(name)
             else:
                 self._consoles.discard(name)
-            self._last = self.clock()
 
     def consoles(self) -> list[str]:
         with self._lock:
             return sorted(self._consoles)
 
     def last_heard(self) -> float:
-        """Now while a console is on the bus, else when the last one left."""
+        """When a console's heartbeat last came (the start, before any)."""
         with self._lock:
-            return self.clock() if self._consoles else self._last
+            return self._last
 
     def close(self) -> None:
         self._sub.undeclare()  # type: ignore[no-untyped-call]
+        self._beats.undeclare()  # type: ignore[no-untyped-call]

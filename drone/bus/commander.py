@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import json
 import logging
 import secrets
 import threading
@@ -48,6 +49,12 @@ class BusCommander:
         self.refused = 0  # status payloads that did not decode
         # this console on the bus, for the vehicles' watch (any role, central or not)
         self._token = session.liveliness().declare_token(keys.console_alive(self.fleet, console))
+        self._beat = session.declare_publisher(
+            keys.console_heartbeat(self.fleet, console),
+            congestion_control=zenoh.CongestionControl.DROP,
+            priority=zenoh.Priority.INTERACTIVE_HIGH,
+            express=True,
+        )
         self._watchers: dict[str, tuple[StatusCallback, TelemetryCallback, CameraCallback]] = {}
         self._subs: list[Any] = [
             session.declare_subscriber(keys.all_status(self.fleet), self._on_status),
@@ -139,6 +146,11 @@ class BusCommander:
         except TimeoutError as exc:
             raise NoReply(f"{drone} did not answer {command.op} in {timeout_s} s") from exc
 
+    def beat(self, now: float) -> None:
+        """This console's heartbeat (call at 10 Hz): ``now`` is its Unix time, from which a
+        vehicle learns the console's clock (command deadlines)."""
+        self._beat.put(json.dumps({"t": now}))
+
     # ------------------------------------------------------------------ publications
     def status(self, drone: str) -> Status | None:
         with self._lock:
@@ -220,6 +232,7 @@ class BusCommander:
 
     def close(self) -> None:
         self._token.undeclare()  # type: ignore[no-untyped-call]
+        self._beat.undeclare()  # type: ignore[no-untyped-call]
         for sub in self._subs:
             sub.undeclare()
         self._subs = []

@@ -9,6 +9,7 @@
 | ``uavc/<fleet>/<drone>/camera`` | JPEG frames, dropped rather than queued |
 | ``uavc/<fleet>/<drone>/graph/<topic>`` | its own graph topics, JSON (what a console shows) |
 | ``uavc/<fleet>/console/<name>/alive`` | liveliness of each console on the bus |
+| ``uavc/<fleet>/console/<name>/heartbeat`` | ``{"t": Unix s}`` at 10 Hz from each console |
 | ``uavc/<fleet>/central/alive`` | liveliness of the console holding the central role |
 | ``uavc/<fleet>/central/missions`` | the JSON of ``GET /api/v1/patrol`` |
 """
@@ -105,6 +106,15 @@ def console_alive(fleet: str, console: str) -> str:
 
 def all_consoles_alive(fleet: str) -> str:
     return f"{ROOT}/{segment(fleet)}/{CONSOLE}/*/alive"
+
+
+def console_heartbeat(fleet: str, console: str) -> str:
+    """One console's heartbeat (10 Hz, its clock): a vehicle hovers when none comes."""
+    return f"{ROOT}/{segment(fleet)}/{CONSOLE}/{segment(console)}/heartbeat"
+
+
+def all_console_heartbeats(fleet: str) -> str:
+    return f"{ROOT}/{segment(fleet)}/{CONSOLE}/*/heartbeat"
 
 
 def central_alive(fleet: str) -> str:

@@ -57,7 +57,16 @@ class BusVehicleSide:
             self.lease,
             asyncio.get_running_loop(),
         )
-        self.presence = ConsolePresence(bus.session, bus.fleet, time.monotonic)
+        loop = asyncio.get_running_loop()
+        self.presence = ConsolePresence(
+            bus.session,
+            bus.fleet,
+            time.monotonic,
+            # a console's clock, sampled as the link's heartbeat does (command deadlines)
+            on_beat=lambda sent: loop.call_soon_threadsafe(
+                host.clock_offset.sample, sent, time.time()
+            ),
+        )
         self._alarms: deque[tuple[float, str]] = deque(maxlen=20)
         self._reply_sub = host.graph.subscribe(REPLY, self._on_reply, type="uav_console/Reply")
         self._next_status = 0.0

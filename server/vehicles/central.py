@@ -479,8 +479,11 @@ class VehicleCentral:
         n = 0
         while True:
             # Our clock in each beat: a vehicle learns its offset from it (command deadlines).
-            beat = json.dumps({"n": n, "t": time.time()})
+            now = time.time()
+            beat = json.dumps({"n": n, "t": now})
             self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
+            if self.commander is not None:
+                self.commander.beat(now)
             self._publish_recording(self.runtime.recording_id() or "")
             if n % DISCOVER_EVERY == 0:
                 try:

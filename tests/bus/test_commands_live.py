@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -14,7 +15,7 @@ import pytest
 import zenoh
 
 from drone.bus import keys
-from drone.bus.commanded import CommandedVehicle, CommandRefused
+from drone.bus.commanded import CommandedVehicle, CommandRefused, ConsolePresence
 from drone.bus.commander import BusCommander
 from drone.bus.commands import Command, decode_reply
 from drone.bus.config import OBSERVER_USER, PILOT_USER, client_config
@@ -24,6 +25,7 @@ from drone.bus.lease import VehicleLease
 from drone.bus.payloads import Status
 from drone.bus.session import open_session
 from tests.loopback import free_port
+from tests.polling import wait_for
 
 
 @pytest.fixture
@@ -323,3 +325,33 @@ def test_a_console_that_joins_another_router_commands_its_vehicles(tmp_path: Pat
             west.close()
 
     asyncio.run(main())
+
+
+def test_a_vehicle_hears_its_consoles_heartbeat_and_clock(console: ConsoleBus) -> None:
+    """The console beats at 10 Hz with its clock; a console that stops beating (stalled) is
+    silent at once, however long its liveliness lasts."""
+    assert console.session is not None
+    cred = console.vehicle_credential("uav1")
+    session = open_session(
+        client_config(connect=list(cred.connect), user=cred.user, password=cred.password)
+    )
+    now = [100.0]
+    clocks: list[float] = []
+    presence = ConsolePresence(session, "default", lambda: now[0], on_beat=clocks.append)
+    c = BusCommander(console.session, "default", "west")
+    try:
+        assert presence.last_heard() == 100.0  # joined: heard from now
+        now[0] = 101.0
+        wait_for(presence.consoles, lambda cs: cs == ["west"], 10, "west's liveliness")
+        for _ in range(200):
+            c.beat(1_700_000_000.0)
+            if clocks:
+                break
+            time.sleep(0.02)
+        assert clocks[0] == 1_700_000_000.0 and presence.last_heard() == 101.0
+        now[0] = 105.0  # no beat since: silent 4 s, though its liveliness is still there
+        assert presence.last_heard() == 101.0 and presence.consoles() == ["west"]
+    finally:
+        c.close()
+        presence.close()
+        session.close()  # type: ignore[no-untyped-call]
