@@ -189,7 +189,7 @@ class BusDroneStack(RemoteDroneStack):
     def _on_utterance(self, msg: dict[str, Any]) -> None:
         """A sentence typed or said in a console (rosbridge): the vehicle's dialog hears it,
         as the vehicle link makes it (a door that answered it itself marks it answered)."""
-        if msg.get("answered") or self.linked or not self.joined:
+        if msg.get("answered") or self.linked or not self.on_bus:
             return
         keep = ("text", "confidence", "source", "drone", "asked_by")
         args = {k: msg[k] for k in keep if k in msg}
@@ -214,9 +214,14 @@ class BusDroneStack(RemoteDroneStack):
 
     # ------------------------------------------------------------------ calls
     @property
-    def joined(self) -> bool:
+    def on_bus(self) -> bool:
         """Whether the vehicle is on the bus now (its liveliness token)."""
         return self.name in self._alive()
+
+    @property
+    def joined(self) -> bool:
+        """Whether the vehicle can be commanded now: on the bus, or over its vehicle link."""
+        return self.on_bus or self.linked
 
     async def _call_now(self, args: dict[str, Any], timeout_s: float) -> Any:
         rest = dict(args)
@@ -235,7 +240,7 @@ class BusDroneStack(RemoteDroneStack):
         try:
             reply = await self.commander.command(self.name, command, timeout_s)
         except NoReply as exc:
-            if not self.joined:
+            if not self.on_bus:
                 raise self._unavailable("is not on the bus") from exc
             raise RemoteCallError(str(exc)) from exc
         if reply.accepted:
@@ -265,6 +270,8 @@ class BusDroneStack(RemoteDroneStack):
             GraphError: the vehicle refused a read or fault, or did not answer in time.
         """
         await self.wait_joined(join_wait_s)
+        if not self.on_bus:  # a vehicle whose bus did not come up: its link carries it
+            return await super().call(args, timeout_s, join_wait_s=join_wait_s, silent_s=silent_s)
         if silent_s is not None and self.silent_for() > silent_s:
             raise self._unavailable(
                 f"is not answering (silent for {self.silent_for():.1f} s); nothing was sent"
