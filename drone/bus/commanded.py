@@ -10,7 +10,8 @@ Order: commands run one at a time in the order they came, on the vehicle's event
 (land, hover, emergency), jogs (a stream of velocities, the newest wins) and reads never wait in
 that queue: they run as they arrive, and a
 stop answers every command still queued behind it "superseded", so nothing queued before a
-stop flies after it.
+stop flies after it; nor does a command its console issued before the stop that arrives after
+it (a stop travels at a higher priority and may overtake it).
 
 Zenoh calls back on its own threads; everything here past the decode runs on the loop.
 """
@@ -89,6 +90,9 @@ class CommandedVehicle:
         self.refused: list[str] = []  # reasons, newest last (at most 50)
         self.answered = 0
         self._queue: collections.deque[tuple[zenoh.Query, Command]] = collections.deque()
+        # console → the ``issued`` of its latest stop (its clock): what it issued before that
+        # and arrives after (a stop goes at a higher priority and may overtake) is not done
+        self._stopped: dict[str, float] = {}
         self._wake = asyncio.Event()
         self._tasks: set[asyncio.Task[None]] = set()
         self._worker: asyncio.Task[None] | None = None
@@ -137,6 +141,12 @@ class CommandedVehicle:
         if not verdict.allowed:
             self._refuse(query, command.id, verdict.reason, command)
             return
+        if command.is_stop and command.issued is not None:
+            last = self._stopped.get(command.console, command.issued)
+            self._stopped[command.console] = max(last, command.issued)
+        elif self._before_stop(command):
+            self._refuse(query, command.id, "superseded by a stop issued after it", command)
+            return
         if command.is_stop:
             for queued_query, queued in self._queue:
                 self._refuse(
@@ -153,6 +163,13 @@ class CommandedVehicle:
             return
         self._queue.append((query, command))
         self._wake.set()
+
+    def _before_stop(self, command: Command) -> bool:
+        """A command that moves the drone, issued before its console's latest stop."""
+        if command.op in READ_OPS or command.op == "lease" or command.issued is None:
+            return False
+        stopped = self._stopped.get(command.console)
+        return stopped is not None and command.issued <= stopped
 
     async def _work(self) -> None:
         while True:

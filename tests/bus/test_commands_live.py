@@ -355,3 +355,37 @@ def test_a_vehicle_hears_its_consoles_heartbeat_and_clock(console: ConsoleBus) -
         c.close()
         presence.close()
         session.close()  # type: ignore[no-untyped-call]
+
+
+def test_a_command_issued_before_a_stop_that_arrives_after_it_is_not_done(
+    console: ConsoleBus,
+) -> None:
+    """A stop travels at real-time priority and may overtake what its console sent before."""
+
+    async def main() -> None:
+        assert console.session is not None
+        drone = FakeDrone()
+        session, cv = await vehicle(console, "uav1", drone)
+        c = BusCommander(console.session, "default", "west")
+        try:
+            await until_answered(c, "uav1")
+            land = c.new_command("uav1", "direct", {"action": "land"}, issued=1000.0)
+            assert (await c.command("uav1", land)).accepted
+            late = c.new_command("uav1", "direct", {"action": "takeoff"}, issued=999.5)
+            reply = await c.command("uav1", late)
+            assert not reply.accepted and reply.reason == "superseded by a stop issued after it"
+            other = BusCommander(console.session, "default", "east")  # its own clock
+            try:
+                east = other.new_command("uav1", "lease", {"action": "status"}, issued=999.0)
+                assert (await other.command("uav1", east)).accepted
+            finally:
+                other.close()
+            after = c.new_command("uav1", "direct", {"action": "takeoff"}, issued=1000.5)
+            assert (await c.command("uav1", after)).accepted
+            assert drone.done == ["land", "takeoff"]
+        finally:
+            c.close()
+            cv.close()
+            session.close()
+
+    asyncio.run(main())
