@@ -124,12 +124,7 @@ class BusVehicleSide:
         except VehicleError as exc:
             raise CommandRefused(str(exc)) from exc
         if command.op == "direct" and isinstance(out.get("expired"), dict):
-            late = out["expired"]
-            raise CommandRefused(
-                f"{command.action} expired: issued {late.get('age_s')} s ago, "
-                f"deadline {late.get('deadline_s')} s; not flown",
-                out,
-            )
+            raise CommandRefused(str(out.get("detail") or f"{command.action} expired"), out)
         return out
 
     def _jog(self, command: Command) -> dict[str, Any]:
