@@ -314,3 +314,13 @@ def test_one_lease_across_two_consoles(tmp_path: Path) -> None:
         wait_for(lambda: not rig.flying(west), "east's landing", 40)
         assert "takeoff from pilot@" in log_path.read_text()  # the refusal, in the vehicle's log
     assert PILOT
+
+
+def test_a_vehicle_needs_a_bus_or_a_central(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from server.cli import main as cli_main
+
+    monkeypatch.delenv("UAVC_BUS_CONNECT", raising=False)
+    assert cli_main(["vehicle", "--name", NAME]) == 2
+    assert "--bus-connect ENDPOINT (or --central URL) is needed" in capsys.readouterr().err
