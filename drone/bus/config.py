@@ -35,6 +35,11 @@ _EVERYTHING = [
     "declare_liveliness_subscriber",
     "liveliness_query",
 ]
+# Zenoh's shared-memory transport between processes on one host: off. Its watchdog threads run
+# at SCHED_FIFO 1 (seen in /proc/<pid>/task of a vehicle process), above every normal thread,
+# which a vehicle keeps for its 100 Hz control thread alone; the bus's messages are small.
+NO_SHARED_MEMORY: dict[str, Any] = {"shared_memory": {"enabled": False}}
+
 _WATCH = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
 _OWN = ["put", "delete", "liveliness_token", "declare_queryable", "reply"]
 
@@ -122,7 +127,8 @@ def router_config(
                     "password": password,
                     "dictionary_file": dictionary_file,
                 }
-            }
+            },
+            **NO_SHARED_MEMORY,
         },
         "access_control": acl,
     }
@@ -134,7 +140,7 @@ def client_config(*, connect: list[str], user: str, password: str) -> dict[str, 
         "mode": "client",
         "connect": {"endpoints": connect},
         "scouting": {"multicast": {"enabled": False}},
-        "transport": {"auth": {"usrpwd": {"user": user, "password": password}}},
+        "transport": {"auth": {"usrpwd": {"user": user, "password": password}}, **NO_SHARED_MEMORY},
     }
 
 
