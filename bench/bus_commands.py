@@ -12,7 +12,7 @@ command (a stand-in for the vehicle's checks) and none for a stop. Figures:
   when the queue's last reply comes (the stop runs first and the queue behind it is answered
   "superseded").
 
-Usage: ``python bench/bus_commands.py [--n 300] [--queue 50] [--work-ms 20]``.
+Usage: ``python bench/bus_commands.py [--quick] [--n 300] [--queue 50] [--work-ms 20]``.
 """
 
 from __future__ import annotations
@@ -143,6 +143,8 @@ async def measure(n: int, queue: int) -> dict[str, Any]:
 
 
 def main() -> int:
+    if ARGS.quick:
+        ARGS.n = min(ARGS.n, 100)
     r = asyncio.run(measure(ARGS.n, ARGS.queue))
     print(
         f"commands on the bus, one vehicle process, {ARGS.n} each (handler {ARGS.work_ms} ms "
@@ -168,6 +170,7 @@ parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--n", type=int, default=300)
 parser.add_argument("--queue", type=int, default=50)
 parser.add_argument("--work-ms", type=float, default=20.0)
+parser.add_argument("--quick", action="store_true", help="100 of each (make bench --quick)")
 ARGS = parser.parse_args() if __name__ == "__main__" else parser.parse_args([])
 
 if __name__ == "__main__":
