@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -85,7 +86,7 @@ def vehicle_key(data: Path, name: str) -> str:
 
 @contextlib.contextmanager
 def bus_vehicle(
-    tmp: Path, endpoint: str, key: str
+    tmp: Path, endpoint: str, key: str, extra_env: dict[str, str] | None = None
 ) -> Iterator[tuple[subprocess.Popen[bytes], Path]]:
     log_path = tmp / f"{NAME}.log"
     env = {
@@ -93,6 +94,7 @@ def bus_vehicle(
         "UAVC_VEHICLE_KEY": key,
         "UAVC_DATA_DIR": str(tmp / "drone-computer"),
         "UAVC_SIM_BASE_ADDR": for_worker("127.0.44.2"),
+        **(extra_env or {}),
     }
     env.pop("UAVC_TOKEN", None)
     argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", NAME]
@@ -324,3 +326,29 @@ def test_a_vehicle_needs_a_bus_or_a_central(
     monkeypatch.delenv("UAVC_BUS_CONNECT", raising=False)
     assert cli_main(["vehicle", "--name", NAME]) == 2
     assert "--bus-connect ENDPOINT (or --central URL) is needed" in capsys.readouterr().err
+
+
+def test_a_bus_vehicle_hovers_then_lands_when_its_console_stalls(tmp_path: Path) -> None:
+    """Its console's heartbeat stops (``serve`` stopped, SIGSTOP): the vehicle on the bus hovers
+    after ``heartbeat_timeout_s`` and lands after ``central_loss_land_s``, on its own."""
+    data = tmp_path / "data"
+    key = vehicle_key(data, NAME)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    extra = ("--fleet", "0", "--bus-listen", endpoint)
+    land_after = {"UAVC_CENTRAL_LOSS_LAND_S": "4"}
+    with (
+        serve(tmp_path, "sim", extra=extra) as srv,
+        bus_vehicle(tmp_path, endpoint, key, land_after) as (proc, log_path),
+    ):
+        rig = Rig(srv, endpoint, data, proc, log_path)
+        rig.wait_joined()
+        assert rig.act("takeoff")["accepted"]
+        wait_for(lambda: rig.flying(), "the take-off", 40)
+        srv.pause()
+        try:
+            wait_for(lambda: re.search(r"silent for [\d.]+ s: land", rig.vlog()), "the land", 30)
+            assert re.search(r"silent for [\d.]+ s: hover", rig.vlog())
+        finally:
+            srv.resume()
+        wait_for(lambda: not rig.flying(), "the drone on the ground", 40)
+        assert srv.drone(NAME)["central_loss"]["actions"][-2:] == ["hover", "land"]
