@@ -97,7 +97,12 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--data-dir", type=Path, default=None, help="mavlink: where the key lives")
 
     v = sub.add_parser("vehicle", help="one drone's stack joining a central server")
-    v.add_argument("--central", required=True, help="ws://HOST:8000/rosbridge")
+    v.add_argument(
+        "--central",
+        default=None,
+        help="ws://HOST:8000/rosbridge (a rosbridge central); without it the vehicle joins the "
+        "bus (--bus-connect)",
+    )
     v.add_argument("--name", required=True)
     v.add_argument("--drone", default="sim")
     v.add_argument(
@@ -178,7 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             asyncio.run(run_sim(args.addr or "127.0.0.2", args.world, args.speed))
             return 0
         if args.command == "vehicle":
-            if args.central.rstrip("/").endswith("/vehicle-link"):
+            if args.central is None or args.central.rstrip("/").endswith("/vehicle-link"):
                 from server.vehicles.main import whole_vehicle_main
 
                 return whole_vehicle_main(args)

@@ -35,6 +35,11 @@ _EVERYTHING = [
     "declare_liveliness_subscriber",
     "liveliness_query",
 ]
+# Zenoh's shared-memory transport between processes on one host: off. Its watchdog threads run
+# at SCHED_FIFO 1 (seen in /proc/<pid>/task of a vehicle process), above every normal thread,
+# which a vehicle keeps for its 100 Hz control thread alone; the bus's messages are small.
+NO_SHARED_MEMORY: dict[str, Any] = {"shared_memory": {"enabled": False}}
+
 _WATCH = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
 _OWN = ["put", "delete", "liveliness_token", "declare_queryable", "reply"]
 
@@ -102,10 +107,13 @@ def router_config(
     password: str,
     dictionary_file: str,
     acl: dict[str, Any],
+    zid: str | None = None,
 ) -> dict[str, Any]:
     """The console's embedded router: listens where told, joins only the routers named (no
-    multicast scouting: a second console on the same machine must not join this fleet)."""
+    multicast scouting: a second console on the same machine must not join this fleet).
+    ``zid``: its Zenoh id, the same at every start (other consoles trust it by its id)."""
     return {
+        **({"id": zid} if zid else {}),
         "mode": "router",
         "listen": {"endpoints": listen},
         "connect": {"endpoints": connect},
@@ -117,7 +125,8 @@ def router_config(
                     "password": password,
                     "dictionary_file": dictionary_file,
                 }
-            }
+            },
+            **NO_SHARED_MEMORY,
         },
         "access_control": acl,
     }
@@ -129,5 +138,14 @@ def client_config(*, connect: list[str], user: str, password: str) -> dict[str, 
         "mode": "client",
         "connect": {"endpoints": connect},
         "scouting": {"multicast": {"enabled": False}},
-        "transport": {"auth": {"usrpwd": {"user": user, "password": password}}},
+        "transport": {"auth": {"usrpwd": {"user": user, "password": password}}, **NO_SHARED_MEMORY},
     }
+
+
+def router_zid(password: str, listen: str) -> str:
+    """A console router's Zenoh id: the same for the same console (its bus password) listening
+    on the same endpoint, so a router that joined it trusts it again after it restarts."""
+    import hashlib
+
+    digest = hashlib.sha256(f"{password}\n{listen}".encode()).hexdigest()[:32]
+    return digest.lstrip("0") or "1"

@@ -21,6 +21,7 @@ from drone.bus.config import (
     access_control,
     client_config,
     router_config,
+    router_zid,
     vehicle_user,
 )
 from drone.bus.credentials import Credentials, write_private
@@ -96,16 +97,21 @@ class ConsoleBus:
         # the routers we join, known by their ids (drone.bus.session.router_ids)
         peers = router_ids(self.connect, CONSOLE_USER, creds.password(CONSOLE_USER))
         acl = access_control(self.fleet, creds.vehicles(), peers)
-        config = router_config(
-            listen=self.listen,
-            connect=self.connect,
-            password=creds.password(CONSOLE_USER),
-            dictionary_file=str(creds.path),
-            acl=acl,
+        self.session = open_session(
+            router_config(
+                listen=self.listen,
+                connect=self.connect,
+                password=creds.password(CONSOLE_USER),
+                dictionary_file=str(creds.path),
+                acl=acl,
+                # the same id across restarts: the routers that joined it name it in their ACL
+                zid=(
+                    router_id(self.fleet, self.name)
+                    if self.name is not None
+                    else router_zid(creds.password(CONSOLE_USER), self.listen[0])
+                ),
+            )
         )
-        if self.name is not None:  # the same across restarts: peers' access control names it
-            config["id"] = router_id(self.fleet, self.name)
-        self.session = open_session(config)
         self._write_client(CLIENT_FILE, OBSERVER_USER)
         self._write_client(PILOT_FILE, PILOT_USER)
         liveliness = self.session.liveliness()

@@ -3,7 +3,8 @@
 BusError
 ├── KeySegmentError  a fleet or drone name that cannot be one segment of a key
 ├── PayloadError     bytes that are not a valid payload of the key's schema
-└── BusConfigError   an endpoint or credential that cannot be used
+├── BusConfigError   an endpoint or credential that cannot be used
+└── NoReply          a command nobody answered
 """
 
 from __future__ import annotations
@@ -23,3 +24,8 @@ class PayloadError(BusError, ValueError):
 
 class BusConfigError(BusError, ValueError):
     """An endpoint or credential that cannot be used; the message names it."""
+
+
+class NoReply(BusError):
+    """A command no vehicle answered: none on the bus by that name, the router refused the
+    query (not a pilot), or the answer did not come in time. Nothing was done."""

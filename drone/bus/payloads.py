@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Literal
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from drone.bus.errors import PayloadError
 
@@ -38,6 +38,31 @@ class Telemetry(BaseModel):
         return value
 
 
+class Status(BaseModel):
+    """``uavc/<fleet>/<drone>/status`` (schema 1, 1 Hz): what a drone is doing and who
+    commands it."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    v: Literal[1] = 1
+    drone: str
+    stamp: float  # Unix seconds, the vehicle's clock
+    mode: str  # the flight state (LANDED, FLYING, HOVERING, …)
+    task: str = ""  # the task it runs ("" when idle)
+    alarms: list[str] = Field(default_factory=list)  # the supervisor's live alarms
+    lease: str | None = None  # the pilot lease's holder (pilot@console), None when free
+    simulated: bool = True
+    # the JSON of ``GET /api/v1/drones/{id}`` as the vehicle answers it
+    detail: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("stamp")
+    @classmethod
+    def _finite_stamp(cls, value: float) -> float:
+        if not math.isfinite(value):
+            raise ValueError("must be a finite number")
+        return value
+
+
 def encode(message: BaseModel) -> bytes:
     return message.model_dump_json().encode()
 
@@ -60,3 +85,23 @@ def decode_telemetry(data: bytes) -> Telemetry:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "payload"
         raise PayloadError(f"telemetry {where}: {first['msg']}") from exc
+
+
+def decode_status(data: bytes) -> Status:
+    """Decode one status payload.
+
+    Raises:
+        PayloadError: over 64 KB, not JSON, or not the schema.
+    """
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise PayloadError(f"status payload of {len(data)} bytes (at most {MAX_PAYLOAD_BYTES})")
+    try:
+        raw = json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PayloadError(f"status is not JSON: {exc}") from exc
+    try:
+        return Status.model_validate(raw)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "payload"
+        raise PayloadError(f"status {where}: {first['msg']}") from exc

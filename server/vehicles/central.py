@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 from fastapi import APIRouter, WebSocket
 
+from drone.bus.commander import BusCommander
 from drone.bus.console import ConsoleBus
 from drone.bus.errors import BusError
 from server.mavlink_stack import SIM_MAVLINK, drone_kind
@@ -187,6 +188,7 @@ class VehicleCentral:
         self._misnamed: set[str] = set()
         self._utterances: Any = None
         self.bus: ConsoleBus | None = None
+        self.commander: BusCommander | None = None
         self.door_secrets = DoorSecrets(pid_dir_of(s))
         self.door_ports: dict[str, int] = {}  # spawned vehicles' door ports
 
@@ -274,6 +276,8 @@ class VehicleCentral:
             log.error("the bus did not start: %s", exc)
             self.alerts.append(f"the bus did not start: {exc}")
             return None
+        assert bus.session is not None
+        self.commander = BusCommander(bus.session, s.fleet_name, console_name(s))
         return bus
 
     def _bus_env(self, name: str) -> dict[str, str]:
@@ -374,6 +378,9 @@ class VehicleCentral:
                 await t
         for vp in self.processes.values():
             await _terminate(vp)
+        if self.commander is not None:
+            self.commander.close()
+            self.commander = None
         if self.bus is not None:
             self.bus.close()
             self.bus = None
@@ -388,12 +395,25 @@ class VehicleCentral:
 
     # ------------------------------------------------------------------ drones
     def _register(self, name: str, prefix: str, *, simulated: bool) -> None:
+        from server.vehicles.bus_remote import BusDroneStack
         from server.vehicles.remote import RemoteDialog, RemoteDroneStack
 
         rt = self.runtime
         if name in rt.drones:
             return
-        stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
+        if self.commander is not None and self.bus is not None:
+            stack: RemoteDroneStack = BusDroneStack(
+                rt.graph,
+                name,
+                prefix,
+                self.commander,
+                self.bus.alive,
+                self.pilot,
+                topics=bus_topics(name, prefix),
+                simulated=simulated,
+            )
+        else:
+            stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
         stack.touch_recording = self.touch_recording
         rt.drones[name] = stack
         self.relays[name] = DialogRelay(rt.graph, name, prefix)
@@ -414,8 +434,21 @@ class VehicleCentral:
         if isinstance(stack, RemoteDroneStack):
             stack.expect()
 
+    def pilot(self) -> str:
+        """Who commands at this console now, for the vehicles' lease: the holder of this
+        console's pilot lease (a page's session, ``rest``), else any pilot of it."""
+        holder = self.runtime.security.lease.state.holder
+        return holder[:128] if holder else "pilot"
+
     def discover(self) -> None:
-        """Register every vehicle that announced itself on the graph and is not a drone yet."""
+        """Register every vehicle alive on the bus or announced on the graph that is not a
+        drone yet."""
+        if self.bus is not None and self.commander is not None:
+            for name in self.bus.alive():
+                if name not in self.runtime.drones:
+                    status = self.commander.status(name)
+                    simulated = status.simulated if status is not None else True
+                    self._register(name, self.prefix_of(name), simulated=simulated)
         for topic in self.runtime.graph.topics():
             if not topic.endswith("/vehicle/info"):
                 continue
@@ -449,8 +482,11 @@ class VehicleCentral:
         n = 0
         while True:
             # Our clock in each beat: a vehicle learns its offset from it (command deadlines).
-            beat = json.dumps({"n": n, "t": time.time()})
+            now = time.time()
+            beat = json.dumps({"n": n, "t": now})
             self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
+            if self.commander is not None:
+                self.commander.beat(now)
             self._publish_recording(self.runtime.recording_id() or "")
             if n % DISCOVER_EVERY == 0:
                 try:
@@ -502,6 +538,20 @@ class VehicleCentral:
                 self.alert(f"{vp.name}'s flight process cannot be started: {exc}")
                 continue
             log.warning("%s: vehicle process restarted (pid %s)", vp.name, vp.pid)
+
+
+def bus_topics(name: str, prefix: str) -> dict[str, Any]:
+    """The graph topics vehicle ``name`` may show on this console over the bus: its drone's
+    (AR.Drone, with GPS navdata, or MAVLink) under its prefix, and its own ``/NAME/vehicle/*``
+    (the camera comes on its own key)."""
+    from server.vehicles.host import link_spec
+
+    out: dict[str, Any] = {}
+    for mavlink in (False, True):
+        for topic in link_spec(name, prefix, mavlink=mavlink, gps=True).out_topics:
+            if not topic.name.endswith("/image_raw/compressed"):
+                out[topic.name] = topic
+    return out
 
 
 def console_name(settings: Settings) -> str:

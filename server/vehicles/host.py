@@ -50,6 +50,7 @@ from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
 from server.tls import TLSError, server_context
 from server.vehicles import names
+from server.vehicles.bus_vehicle import BusVehicleSide
 from server.vehicles.door import SafetyDoor, door_authenticator, loopback_origin, page_origin
 from server.vehicles.door_protocol import (
     STOP_ACTIONS,
@@ -93,7 +94,7 @@ ORPHAN_EXIT_S = 60.0
 class VehicleOptions:
     """What one vehicle process is (the rest comes from :class:`Settings`)."""
 
-    central: str
+    central: str | None  # the console's /vehicle-link URL; None: on the bus only
     name: str
     prefix: str  # "" for a single drone, "/uav2" in a fleet
     index: int = 0  # which simulator address and station
@@ -223,6 +224,8 @@ class VehicleHost:
         )
         self.loss_actions: list[str] = []
         self.bus: VehicleBus | None = None
+        self.bus_side: BusVehicleSide | None = None
+        self.link: GraphLink | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self._started = time.monotonic()
         self.stop_requested = asyncio.Event()
@@ -271,14 +274,15 @@ class VehicleHost:
         self._heartbeat_sub = self.graph.subscribe(
             names.HEARTBEAT, self._on_heartbeat, type=names.STRING
         )
-        self.link = GraphLink(
-            o.central,
-            self.core,
-            token=self.key,
-            name=self.name,
-            ca_file=o.ca_file,
-            fingerprint=o.fingerprint,
-        )
+        if o.central is not None:
+            self.link = GraphLink(
+                o.central,
+                self.core,
+                token=self.key,
+                name=self.name,
+                ca_file=o.ca_file,
+                fingerprint=o.fingerprint,
+            )
         # audit rows carry the central server's flight recording id (names.RECORDING)
         self.recording_id = ""
         self.audit.recording = lambda: self.recording_id
@@ -355,8 +359,12 @@ class VehicleHost:
             self.door.port = 0
             await self.door.start()
         self.bus = join_bus(s, self.name, self.key)
-        if self.bus is not None and self.bus.session is not None:  # plans from any central
-            self.ltm.join_bus(self.bus.session, s.fleet_name)
+        if self.bus is not None:
+            self.bus_side = BusVehicleSide(self, self.bus, spec)
+            if self.bus.session is not None:  # plans from any central
+                self.ltm.join_bus(self.bus.session, s.fleet_name)
+        elif self.link is None:
+            raise VehicleError(f"{self.name}: the bus cannot be reached and there is no --central")
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         supervisor = self.stack.supervisor
         assert supervisor is not None
@@ -560,7 +568,7 @@ class VehicleHost:
         while True:
             now = time.monotonic()
             try:
-                heard = self.link.last_heard if self.link.last_heard is not None else self._started
+                heard = self.heard()
                 if self.ltm.flying_a_plan():  # the LTM's grace keeps it, not the console watch
                     heard = max(heard, now - self.settings.heartbeat_timeout_s / 2)
                 action = self.watch.step(now, heard, bool(self.stack.vehicle.snapshot().flying))
@@ -570,6 +578,8 @@ class VehicleHost:
                     next_telemetry = now + TELEMETRY_PERIOD_S
                     if self.bus is not None:
                         self.bus.publish(self.stack.vehicle.snapshot())
+                    if self.bus_side is not None:
+                        self.bus_side.step(now)
                     self.graph.publish(
                         names.telemetry_topic(self.name), {"data": json.dumps(self.telemetry())}
                     )
@@ -580,6 +590,16 @@ class VehicleHost:
             except Exception:  # one bad round must not stop the watch
                 log.exception("%s: periodic step failed", self.name)
             await asyncio.sleep(WATCH_PERIOD_S)
+
+    def heard(self) -> float:
+        """When a console was last heard from (monotonic): over the link (its heartbeat) or
+        on the bus (a console's liveliness); the start counts as heard."""
+        times = [self._started]
+        if self.link is not None and self.link.last_heard is not None:
+            times.append(self.link.last_heard)
+        if self.bus_side is not None:
+            times.append(self.bus_side.presence.last_heard())
+        return max(times)
 
     def telemetry(self) -> dict[str, Any]:
         from server.vehicles.stack import to_json_ready
@@ -614,7 +634,10 @@ class VehicleHost:
 
         relay_task = asyncio.create_task(relay())
         try:
-            await self.link.run(stop)
+            if self.link is not None:
+                await self.link.run(stop)
+            else:
+                await stop.wait()
         finally:
             relay_task.cancel()
 
@@ -624,6 +647,8 @@ class VehicleHost:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await t
         await self.door.stop()
+        if self.bus_side is not None:
+            self.bus_side.close()
         if self.bus is not None:
             self.bus.close()
         self._heartbeat_sub.close()

@@ -28,6 +28,12 @@ log = logging.getLogger("uav_console.vehicle")
 
 def whole_vehicle_main(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    if args.central is None and not (args.bus_connect or os.environ.get("UAVC_BUS_CONNECT")):
+        print(
+            "uav-console vehicle: --bus-connect ENDPOINT (or --central URL) is needed",
+            file=sys.stderr,
+        )
+        return 2
     try:
         check_name(args.name)
         key = key_from(args.key_file, os.environ)

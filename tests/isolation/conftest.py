@@ -103,6 +103,7 @@ def serve(
     env: dict[str, str] | None = None,
     port: int | None = None,
     host: str = HOST,
+    start_s: float = 30,
 ) -> Iterator[Served]:
     port = port or free_port(host)
     log_path = tmp / f"serve-{port}.log"
@@ -116,7 +117,7 @@ def serve(
     )
     served = Served(port, proc, http, log_path, host)
     try:
-        wait_for(lambda: http.get("/api/v1/health").status_code == 200, "serve to start", 30)
+        wait_for(lambda: http.get("/api/v1/health").status_code == 200, "serve to start", start_s)
         yield served
     finally:
         with contextlib.suppress(ProcessLookupError):

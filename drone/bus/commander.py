@@ -1,0 +1,238 @@
+"""A console's commanding side of the bus: commands as queries on ``…/cmd`` (one reply each),
+and what the vehicles publish for it to show (status, camera).
+
+I/O over a Zenoh session the console already has (its router's). Zenoh answers on its own
+threads; :meth:`BusCommander.command` hands each reply to the caller's event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import json
+import logging
+import secrets
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+import zenoh.handlers
+
+from drone.bus import keys
+from drone.bus.commands import Command, CommandReply, decode_reply, encode_command
+from drone.bus.errors import NoReply, PayloadError
+from drone.bus.payloads import Status, Telemetry, decode_status, decode_telemetry
+
+log = logging.getLogger(__name__)
+
+COMMAND_TIMEOUT_S = 10.0
+
+StatusCallback = Callable[[Status], None]
+TelemetryCallback = Callable[[Telemetry], None]
+CameraCallback = Callable[[int, bytes], None]
+
+
+class BusCommander:
+    """See the module docstring. ``console``: this console's name, one key segment (the lease
+    holder's half); its liveliness ``uavc/<fleet>/console/<console>/alive`` lasts as long."""
+
+    def __init__(self, session: zenoh.Session, fleet: str, console: str) -> None:
+        self.session = session
+        self.fleet = keys.segment(fleet)
+        self.console = console
+        self._ids = itertools.count(1)
+        self._prefix = secrets.token_hex(4)
+        self._lock = threading.Lock()
+        self._status: dict[str, Status] = {}
+        self._camera: dict[str, tuple[int, bytes]] = {}
+        self.refused = 0  # status payloads that did not decode
+        # this console on the bus, for the vehicles' watch (any role, central or not)
+        self._token = session.liveliness().declare_token(keys.console_alive(self.fleet, console))
+        self._beat = session.declare_publisher(
+            keys.console_heartbeat(self.fleet, console),
+            congestion_control=zenoh.CongestionControl.DROP,
+            priority=zenoh.Priority.INTERACTIVE_HIGH,
+            express=True,
+        )
+        self._watchers: dict[str, tuple[StatusCallback, TelemetryCallback, CameraCallback]] = {}
+        self._subs: list[Any] = [
+            session.declare_subscriber(keys.all_status(self.fleet), self._on_status),
+            session.declare_subscriber(keys.all_camera(self.fleet), self._on_camera),
+            session.declare_subscriber(keys.all_telemetry(self.fleet), self._on_telemetry),
+        ]
+
+    # ------------------------------------------------------------------ commands
+    def new_command(
+        self,
+        drone: str,
+        op: str,
+        args: dict[str, Any] | None = None,
+        *,
+        pilot: str = "pilot",
+        issued: float | None = None,
+    ) -> Command:
+        keys.command(self.fleet, drone)  # a name that cannot be a key is refused here
+        return Command.model_validate(
+            {
+                "id": f"{self.console}:{self._prefix}:{next(self._ids)}",
+                "op": op,
+                "args": args or {},
+                "issued": issued,
+                "console": self.console,
+                "pilot": pilot,
+            }
+        )
+
+    async def command(
+        self, drone: str, command: Command, timeout_s: float = COMMAND_TIMEOUT_S
+    ) -> CommandReply:
+        """Send ``command`` to ``drone`` and await its reply (accepted or refused).
+
+        Stops go at real-time priority, express (never batched behind other messages).
+
+        Raises:
+            NoReply: no vehicle answered (none by that name, the router refused the query,
+                or no answer within ``timeout_s``).
+        """
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[CommandReply] = loop.create_future()
+
+        def settle(result: CommandReply | Exception) -> None:
+            if done.done():
+                return
+            if isinstance(result, Exception):
+                done.set_exception(result)
+            else:
+                done.set_result(result)
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            ok = reply.ok
+            if ok is None:
+                err = reply.err
+                why = err.payload.to_string() if err is not None else "an error"
+                loop.call_soon_threadsafe(settle, NoReply(f"{drone} answered {why}"))
+                return
+            try:
+                answer = decode_reply(ok.payload.to_bytes())
+            except PayloadError as exc:
+                log.warning("bus: a reply from %s refused: %s", ok.key_expr, exc)
+                return
+            if answer.id == command.id and answer.drone == drone:
+                loop.call_soon_threadsafe(settle, answer)
+
+        def on_end() -> None:
+            loop.call_soon_threadsafe(
+                settle,
+                NoReply(
+                    f"{drone} did not answer {command.op} (not on the bus, not allowed to "
+                    "command it, or no answer in time); nothing was done"
+                ),
+            )
+
+        stop = command.is_stop
+        self.session.get(
+            keys.command(self.fleet, drone),
+            zenoh.handlers.Callback(on_reply, on_end),
+            payload=encode_command(command),
+            timeout=timeout_s,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+            priority=zenoh.Priority.REAL_TIME if stop else zenoh.Priority.INTERACTIVE_HIGH,
+            express=stop,
+        )
+        try:
+            return await asyncio.wait_for(done, timeout_s + 1.0)
+        except TimeoutError as exc:
+            raise NoReply(f"{drone} did not answer {command.op} in {timeout_s} s") from exc
+
+    def beat(self, now: float) -> None:
+        """This console's heartbeat (call at 10 Hz): ``now`` is its Unix time, from which a
+        vehicle learns the console's clock (command deadlines)."""
+        self._beat.put(json.dumps({"t": now}))
+
+    # ------------------------------------------------------------------ publications
+    def status(self, drone: str) -> Status | None:
+        with self._lock:
+            return self._status.get(drone)
+
+    def camera(self, drone: str) -> tuple[int, bytes | None]:
+        """(frame counter, the latest JPEG) of ``drone``'s camera, (-1, None) before one."""
+        with self._lock:
+            return self._camera.get(drone, (-1, None))
+
+    def watch(
+        self,
+        drone: str,
+        on_status: StatusCallback,
+        on_telemetry: TelemetryCallback,
+        on_camera: CameraCallback,
+    ) -> None:
+        """Call these (on a Zenoh thread) with each status, telemetry and camera frame (its
+        counter and JPEG) ``drone`` publishes."""
+        with self._lock:
+            self._watchers[drone] = (on_status, on_telemetry, on_camera)
+
+    def unwatch(self, drone: str) -> None:
+        with self._lock:
+            self._watchers.pop(drone, None)
+
+    def _on_telemetry(self, sample: zenoh.Sample) -> None:
+        """Telemetry for the watched drones (the console's bus already counts bad ones)."""
+        drone = keys.drone_of(str(sample.key_expr))
+        with self._lock:
+            watcher = self._watchers.get(drone or "")
+        if watcher is None:
+            return
+        try:
+            telemetry = decode_telemetry(sample.payload.to_bytes())
+        except PayloadError:
+            return
+        if telemetry.drone == drone:
+            watcher[1](telemetry)
+
+    def forget(self, drone: str) -> None:
+        with self._lock:
+            self._status.pop(drone, None)
+            self._camera.pop(drone, None)
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        drone = keys.drone_of(str(sample.key_expr))
+        try:
+            status = decode_status(sample.payload.to_bytes())
+        except PayloadError as exc:
+            self.refused += 1
+            log.warning("bus: status on %s refused: %s", sample.key_expr, exc)
+            return
+        if drone is None or status.drone != drone:
+            self.refused += 1
+            log.warning("bus: status on %s names drone %r", sample.key_expr, status.drone)
+            return
+        with self._lock:
+            self._status[drone] = status
+            watcher = self._watchers.get(drone)
+        if watcher is not None:
+            watcher[0](status)
+
+    def _on_camera(self, sample: zenoh.Sample) -> None:
+        drone = keys.drone_of(str(sample.key_expr))
+        if drone is None:
+            return
+        jpeg = sample.payload.to_bytes()
+        if not jpeg.startswith(b"\xff\xd8"):
+            self.refused += 1
+            log.warning("bus: camera frame on %s is not a JPEG", sample.key_expr)
+            return
+        with self._lock:
+            count = self._camera.get(drone, (-1, b""))[0] + 1
+            self._camera[drone] = (count, jpeg)
+            watcher = self._watchers.get(drone)
+        if watcher is not None:
+            watcher[2](count, jpeg)
+
+    def close(self) -> None:
+        self._token.undeclare()  # type: ignore[no-untyped-call]
+        self._beat.undeclare()  # type: ignore[no-untyped-call]
+        for sub in self._subs:
+            sub.undeclare()
+        self._subs = []

@@ -1,0 +1,194 @@
+"""A vehicle process's commanded side on the bus (docs/bus.md): its ``cmd`` queryable answered by
+the vehicle's own control ops, its status at 1 Hz and its camera, and the consoles it hears.
+
+The ops are those of the vehicle's control service (:meth:`VehicleHost._control`): ``direct``,
+``utterance``, ``telemetry``, ``truth``, ``fault``, and ``jog`` (its ``/cmd_vel``); each
+command is judged first by the vehicle's own pilot lease
+(:class:`~drone.bus.lease.VehicleLease`), one lease for every console.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import zenoh
+
+from drone.bus import keys
+from drone.bus.commanded import CommandedVehicle, CommandRefused, ConsolePresence
+from drone.bus.commands import Command
+from drone.bus.lease import VehicleLease
+from drone.bus.payloads import Status
+from server.rosbridge.values import to_json_text
+from server.vehicles.errors import VehicleError
+
+if TYPE_CHECKING:
+    from drone.bus.vehicle import VehicleBus
+    from server.vehicles.host import VehicleHost
+    from server.vehicles.link_core import LinkSpec
+
+log = logging.getLogger("uav_console.vehicle")
+
+STATUS_PERIOD_S = 1.0
+LATCHED_AGAIN_S = 2.0
+CAMERA_TOPIC = "/ardrone/image_raw/compressed"
+ALARM_HOLD_S = 10.0  # an alarm stays in the status this long after the supervisor said it
+
+
+class BusVehicleSide:
+    """See the module docstring; ``step(now)`` from the host's periodic loop."""
+
+    def __init__(self, host: VehicleHost, bus: VehicleBus, spec: LinkSpec) -> None:
+        from server.dialog.manager import REPLY
+
+        assert bus.session is not None
+        self.host = host
+        self.name = host.name
+        self.lease = VehicleLease(actions_of=self._actions_of)
+        self.commanded = CommandedVehicle(
+            bus.session,
+            bus.fleet,
+            bus.name,
+            self._command,
+            self.lease,
+            asyncio.get_running_loop(),
+        )
+        loop = asyncio.get_running_loop()
+        self.presence = ConsolePresence(
+            bus.session,
+            bus.fleet,
+            time.monotonic,
+            # a console's clock, sampled as the link's heartbeat does (command deadlines)
+            on_beat=lambda sent: loop.call_soon_threadsafe(
+                host.clock_offset.sample, sent, time.time()
+            ),
+        )
+        self._alarms: deque[tuple[float, str]] = deque(maxlen=20)
+        self._reply_sub = host.graph.subscribe(REPLY, self._on_reply, type="uav_console/Reply")
+        self._next_status = 0.0
+        self._next_latched = 0.0
+        self._camera_sent = -1
+        self.commanded.start()
+        # the vehicle's own topics, for the consoles' graphs (the camera has its own key)
+        self._mirrored = [t for t in spec.out_topics if not t.name.endswith(CAMERA_TOPIC)]
+        self._graph_pubs: dict[str, zenoh.Publisher] = {}
+        self._graph_subs = []
+        for topic in self._mirrored:
+            self._graph_pubs[topic.name] = bus.session.declare_publisher(
+                keys.graph(bus.fleet, bus.name, topic.name),
+                congestion_control=zenoh.CongestionControl.DROP,
+            )
+            self._graph_subs.append(
+                host.graph.subscribe(
+                    topic.name, self._mirror(topic.name), type=topic.type, owner="bus"
+                )
+            )
+
+    def _mirror(self, topic: str) -> Callable[[dict[str, Any]], None]:
+        pub = self._graph_pubs[topic]
+
+        def put(msg: dict[str, Any]) -> None:
+            pub.put(to_json_text(msg))
+
+        return put
+
+    def _actions_of(self, text: str) -> set[str]:
+        nlu = getattr(self.host.dialog, "nlu", None)
+        if nlu is None:
+            return set()
+        return {str(c.get("action")) for c in nlu.interpret(text, None)}
+
+    def _on_reply(self, msg: dict[str, Any]) -> None:
+        if msg.get("alarm"):
+            self._alarms.append((time.monotonic(), str(msg.get("text", ""))))
+
+    async def _command(self, command: Command) -> dict[str, Any]:
+        """One command, through the vehicle's control ops; refusals with their reason."""
+        if command.op == "jog":
+            return self._jog(command)
+        if command.op == "utterance" and command.args.get("heard") is True:
+            return self._heard(command)
+        args: dict[str, Any] = {**command.args, "op": command.op}
+        if command.issued is not None:
+            args["issued"] = command.issued
+        if command.op == "direct" and command.is_stop and args.get("id") is None:
+            args["id"] = command.id  # a stop runs once per id, whichever road brings it
+        if command.op == "utterance":
+            args.setdefault("role", "pilot")
+        try:
+            out = await self.host._control(args)
+        except VehicleError as exc:
+            raise CommandRefused(str(exc)) from exc
+        if command.op == "direct" and isinstance(out.get("expired"), dict):
+            raise CommandRefused(str(out.get("detail") or f"{command.action} expired"), out)
+        return out
+
+    def _jog(self, command: Command) -> dict[str, Any]:
+        """A velocity for the vehicle node's ``/cmd_vel`` (jog limits, the operator watchdog
+        and the deadline are its own), as a page's jog over rosbridge is."""
+        twist = {
+            part: {axis: float(command.args.get(part, {}).get(axis, 0.0)) for axis in "xyz"}
+            for part in ("linear", "angular")
+        }
+        issued = self.host._issued_arg({"issued": command.issued})
+        self.host.graph.publish(f"{self.host.options.prefix}/cmd_vel", twist, issued=issued)
+        return {"accepted": True, "detail": "jog sent"}
+
+    def _heard(self, command: Command) -> dict[str, Any]:
+        """A sentence a console heard (its ``/console/utterance``): on this vehicle's graph,
+        where its dialog judges whether it is addressed, as one typed in its own console."""
+        from server.dialog.manager import UTTERANCE
+
+        keep = ("text", "confidence", "source", "drone", "asked_by")
+        msg = {k: command.args[k] for k in keep if k in command.args}
+        issued = self.host._issued_arg({"issued": command.issued})
+        self.host.graph.publish(UTTERANCE, msg, issued=issued)
+        return {"accepted": True, "detail": "heard"}
+
+    def step(self, now: float) -> None:
+        """Publish the status when due, the camera's newest frame if new, and the latched
+        topics again every few seconds (a console that joined since has them too)."""
+        count, jpeg = self.host.stack.latest_jpeg()
+        if jpeg is not None and count != self._camera_sent:
+            self._camera_sent = count
+            self.commanded.publish_camera(jpeg)
+        if now >= self._next_status:
+            self._next_status = now + STATUS_PERIOD_S
+            self.commanded.publish_status(self.status(now))
+        if now >= self._next_latched:
+            self._next_latched = now + LATCHED_AGAIN_S
+            for topic in self._mirrored:
+                last = self.host.graph.latched(topic.name) if topic.latch else None
+                if last is not None:
+                    self._graph_pubs[topic.name].put(to_json_text(last))
+
+    def status(self, now: float) -> Status:
+        detail = self.host.telemetry()
+        detail.pop("truth", None)
+        task = detail.get("task")
+        task_name = ""
+        if isinstance(task, dict):
+            task_name = str(task.get("name") or "")
+        return Status(
+            drone=self.name,
+            stamp=time.time(),
+            mode=str(detail.get("ctrl_state", "")),
+            task=task_name,
+            alarms=[text for t, text in self._alarms if now - t <= ALARM_HOLD_S],
+            lease=self.lease.current(time.time()),
+            simulated=self.host.stack.sim is not None,
+            detail=detail,
+        )
+
+    def close(self) -> None:
+        for sub in self._graph_subs:
+            sub.close()
+        for pub in self._graph_pubs.values():
+            pub.undeclare()  # type: ignore[no-untyped-call]
+        self._reply_sub.close()
+        self.presence.close()
+        self.commanded.close()
