@@ -1,16 +1,18 @@
 """Train the scene-region kind classifier (``server/captioner/scene.py``) on simulator renders.
 
 Renders randomised scenes (``server.captioner.evalset.scene`` on its own seed range, randomised
-objects only: the shipped worlds' layouts are never trained on), finds the regions of one paint
-in each frame exactly as at run time, and labels each from the renderer's id buffer: the kind
-of the object covering most of the region when the region has that object's paint, ``none``
-otherwise (a part in another paint, floor, sky). Then fits a one-hidden-layer network (ReLU,
-softmax) with full-batch Adam in numpy: seeded, single-threaded, exactly reproducible.
+objects only: the shipped worlds' layouts are never trained on) and, with ``--rooms``, cluttered
+rooms (:func:`room_scene`), finds the regions of one paint in each frame exactly as at run time,
+and labels each from the renderer's id buffer: the kind of the object covering most of the
+region when the region has that object's paint, ``none`` otherwise (a part in another paint,
+floor, sky). Then fits a one-hidden-layer network (ReLU, softmax) with Adam in numpy, full-batch
+or on mini-batches (``--batch``), from scratch or from earlier weights (``--init``): seeded,
+single-threaded, exactly reproducible. How the shipped file was made: models/captioner/MODEL.md.
 
     .venv/bin/python tools/train_scene_regions.py --workers 2 --out models/captioner/regions.json
 
-8000 scenes (about 33 000 regions); rendering and parsing take a few minutes of CPU per
-thousand scenes, fitting a few more.
+8000 scenes (about 33 000 regions), 4000 rooms about 40 000 more; rendering and parsing take
+a few minutes of CPU per thousand scenes.
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ _ROOM_PALETTE = (*_PALETTE, "white", "grey", "brown")
 
 
 def room_objects(world: World, rng: random.Random) -> tuple[SceneObject, ...]:
-    """A cluttered room: 5–10 objects, chairs around a table, furniture against the walls,
+    """A cluttered room: up to 15 objects, chairs around a table, furniture against the walls,
     0.6 m apart (the randomised scenes of ``server.captioner.evalset`` hold 1–6 objects 0.9 m
     apart in the open, so kinds are rarely seen side by side, occluded or close up)."""
     b = world.bounds
@@ -182,13 +184,19 @@ def train(
     seed: int,
     l2: float = 1e-3,
     batch: int = 0,
+    init: dict[str, list[float] | list[list[float]]] | None = None,
+    lr0: float = 0.01,
 ) -> dict[str, list[float] | list[list[float]]]:
-    """One-hidden-layer softmax network, Adam (lr 0.01, L2 weight decay): full-batch, or with
-    ``batch`` > 0 on seeded mini-batches with the rate decaying (cosine) to a tenth, which
-    fits many regions at a fraction of the arithmetic."""
+    """One-hidden-layer softmax network, Adam (rate ``lr0``, L2 weight decay): full-batch, or
+    with ``batch`` > 0 on seeded mini-batches with the rate decaying (cosine) to a tenth, which
+    fits many regions at a fraction of the arithmetic. ``init``: weights (and standardisation)
+    to start from, as written by this tool (``hidden`` is then theirs)."""
     rng = np.random.default_rng(seed)
-    mean = x.mean(axis=0)
-    scale = x.std(axis=0) + 1e-6
+    if init is not None:
+        mean, scale = np.asarray(init["mean"], np.float64), np.asarray(init["scale"], np.float64)
+    else:
+        mean = x.mean(axis=0)
+        scale = x.std(axis=0) + 1e-6
     z = (x - mean) / scale
     n, d = z.shape
     k = len(KINDS)
@@ -198,10 +206,12 @@ def train(
         "w2": rng.normal(0, np.sqrt(1.0 / hidden), (hidden, k)),
         "b2": np.zeros(k),
     }
+    if init is not None:
+        params = {name: np.asarray(init[name], np.float64) for name in params}
     m = {p: np.zeros_like(v) for p, v in params.items()}
     v = {p: np.zeros_like(val) for p, val in params.items()}
     onehot = np.eye(k)[y]
-    lr0, b1, b2 = 0.01, 0.9, 0.999
+    b1, b2 = 0.9, 0.999
     order = rng.permutation(n)
     at = 0
     for t in range(1, steps + 1):
@@ -272,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hidden", type=int, default=64)
     ap.add_argument("--steps", type=int, default=1500)
     ap.add_argument("--batch", type=int, default=0, help="mini-batch size (0: full batch)")
+    ap.add_argument("--lr", type=float, default=0.01, help="Adam's rate (its start, in batches)")
+    ap.add_argument("--init", type=Path, help="start from these weights (a regions.json)")
     ap.add_argument("--l2", type=float, default=0.003)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--workers", type=int, default=1, help="render the seed ranges in parallel")
@@ -303,7 +315,9 @@ def main(argv: list[str] | None = None) -> int:
     took = time.perf_counter() - t0
     scenes = args.scenes + args.rooms
     print(f"{len(y)} regions from {scenes} scenes in {took:.0f} s: {counts}")
-    weights = train(x, y, args.hidden, args.steps, args.seed, args.l2, args.batch)
+    init = json.loads(args.init.read_text()) if args.init is not None else None
+    hidden = len(init["b1"]) if init is not None else args.hidden
+    weights = train(x, y, hidden, args.steps, args.seed, args.l2, args.batch, init, args.lr)
     out = {
         "format": "uav-console-scene-regions/1",
         "kinds": list(KINDS),
@@ -316,9 +330,11 @@ def main(argv: list[str] | None = None) -> int:
             "rooms": args.rooms,
             "room_seed_base": ROOM_SEED_BASE,
             "regions": counts,
-            "hidden": args.hidden,
+            "hidden": hidden,
             "steps": args.steps,
             "batch": args.batch,
+            "lr": args.lr,
+            "init": None if init is None else {"file": args.init.name, **init["trained"]},
             "l2": args.l2,
             "seed": args.seed,
         },

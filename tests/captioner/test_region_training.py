@@ -29,7 +29,7 @@ def test_cluttered_rooms_are_reproducible_inside_the_room_and_apart(indoor: Worl
     for seed in range(6_040_001, 6_040_041):
         objects = trainer.room_objects(indoor, random.Random(seed))
         assert objects == trainer.room_objects(indoor, random.Random(seed))
-        assert 4 <= len(objects) <= 14, len(objects)
+        assert 1 <= len(objects) <= 15, len(objects)
         standing = [o for o in objects if o.kind not in ("door", "window")]
         for o in objects:
             x, y, _ = o.position
