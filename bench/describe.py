@@ -12,7 +12,7 @@ accuracy, the rate of naming something not in view, marker figures and latency:
 
 The truth is read only here, to score; the describers see nothing but the frame.
 
-    .venv/bin/python bench/describe.py [--n 400] [--quick] [--json out.json]
+    .venv/bin/python bench/describe.py [--n 400] [--quick] [--by-kind] [--json out.json]
 """
 
 from __future__ import annotations
@@ -30,7 +30,12 @@ sys.path.insert(0, str(ROOT))
 
 from drone.sim.world import COLOURS, OBJECT_KINDS  # noqa: E402
 from server.captioner import Captioner, CaptionerUnavailable  # noqa: E402
-from server.captioner.eval import DescriptionScores, TruthItem, score_descriptions  # noqa: E402
+from server.captioner.eval import (  # noqa: E402
+    DescriptionScores,
+    TruthItem,
+    recall_by_kind,
+    score_descriptions,
+)
 from server.captioner.evalset import SEED_BASE, Sample, samples  # noqa: E402
 from server.captioner.grounding import ground_marker_ids, ground_objects, sentence  # noqa: E402
 from server.captioner.markers import MarkerDetector  # noqa: E402
@@ -84,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--start", type=int, default=SEED_BASE, help="first seed")
     ap.add_argument("--json", type=Path, help="also write the results here")
     ap.add_argument("--examples", type=int, default=6)
+    ap.add_argument(
+        "--by-kind", action="store_true", help="the grounded recall per kind in each world"
+    )
     args = ap.parse_args(argv)
     n = 80 if args.quick else args.n
     try:
@@ -146,6 +154,19 @@ def main(argv: list[str] | None = None) -> int:
             }
         print()
         out["subsets"][sub] = rows  # type: ignore[index]
+    if args.by_kind:
+        for world in ("indoor", "outdoor"):
+            idx = subsets[world]
+            r = score_descriptions(
+                [systems[1][1][i] for i in idx], [truths[i] for i in idx], KINDS, list(COLOURS)
+            )
+            per = ", ".join(
+                f"{k} {named}/{gold}"
+                + (f" ({r.counts[f'absent:{k}']} absent)" if r.counts.get(f"absent:{k}") else "")
+                for k, (named, gold) in recall_by_kind(r).items()
+            )
+            print(f"grounded, {world}: salient kinds named/salient: {per}")
+        print()
     base, grounded = systems[0][1], systems[1][1]
     print("Examples (truth: mentionable things):")
     for i in range(min(args.examples, n)):

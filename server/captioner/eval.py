@@ -226,6 +226,9 @@ class DescriptionScores:
       view fits / things named; ``frames_with_absent``: share of descriptions with one or more;
     * markers: share of marker mentions with an id, share of those ids that are in view, and
       mentionable markers whose id is named / mentionable markers.
+
+    ``counts`` holds the sums behind these, and per kind ``gold:<kind>`` (salient),
+    ``gold_named:<kind>`` (salient and named) and ``absent:<kind>`` (named, none in view).
     """
 
     frames: int
@@ -243,6 +246,15 @@ class DescriptionScores:
 
 def _ratio(a: int, b: int) -> float:
     return a / b if b else float("nan")
+
+
+def recall_by_kind(scores: DescriptionScores) -> dict[str, tuple[int, int]]:
+    """Salient object kinds named / salient, per kind (from ``scores.counts``), most missed
+    first: which kinds a describer misses."""
+    c = scores.counts
+    kinds = [k.split(":", 1)[1] for k in c if k.startswith("gold:")]
+    out = {k: (c.get(f"gold_named:{k}", 0), c[f"gold:{k}"]) for k in kinds}
+    return dict(sorted(out.items(), key=lambda kv: (kv[1][0] - kv[1][1], kv[0])))
 
 
 def score_descriptions(
@@ -273,6 +285,11 @@ def score_descriptions(
         c["kinds_named_visible"] += len(named & visible_kinds)
         c["kinds_gold"] += len(gold)
         c["kinds_gold_named"] += len(gold & named)
+        for kind in gold:
+            c[f"gold:{kind}"] += 1
+            c[f"gold_named:{kind}"] += kind in named
+        for kind in named - visible_kinds:
+            c[f"absent:{kind}"] += 1
         absent_here = 0
         for s in things:
             c["mentions"] += 1

@@ -28,6 +28,10 @@ Variant = Literal["world", "random"]
 SEED_BASE = 3_000_000
 """First seed of the held-out description set: far above every seed range
 ``tools/make_caption_dataset.py`` trains, validates or tests the captioner on."""
+TUNING_SEED_BASE = 3_100_000
+"""First seed of the tuning set: frames made exactly as the held-out ones, on which the
+grounding's thresholds and the region classifier's training are chosen (``bench/describe.py
+--start 3100000``), so that the held-out figures are not tuned on."""
 MENTION_MIN_AREA = 0.012
 MARKER_MIN_AREA = 0.005
 """As in ``tools/make_caption_dataset.py``: smaller things need not be named (recall), but

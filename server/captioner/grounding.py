@@ -99,16 +99,27 @@ def ground_marker_ids(caption: str, seen: Sequence[SeenMarker]) -> str:
 
 # -- the whole sentence grounded in the image ---------------------------------------------------
 
-# Thresholds chosen on a tuning set of its own (held-out seeds 3 100 000+, bench/describe.py
-# --start 3100000), never on the reported one (3 000 000+).
+# Thresholds chosen on the tuning set (server.captioner.evalset.TUNING_SEED_BASE: seeds
+# 3 100 000+, bench/describe.py --start 3100000), never on the reported one (3 000 000+).
 CAPTION_MIN_P = 0.1
 """A kind the captioner names is kept when a region on its side is at least this likely to be
 one (the captioner has seen the whole image; the region classifier confirms it is there)."""
 CAPTION_RIVAL_RATIO = 0.5
 """...unless the classifier finds another kind for that region this many times likelier (then
 the region is left to the classifier: a white shelf the captioner calls a door)."""
-DETECT_MIN_P = 0.7
-"""A region the captioner left out is named with a kind when the classifier is this sure."""
+CAPTION_ELSEWHERE_P = 0.5
+"""A kind the captioner names on a side where no region supports it is taken from a region on
+another side whose likeliest kind it is, at least this likely (the captioner's kinds are
+more often right than its sides)."""
+DETECT_MIN_P = 0.5
+"""A region the captioner left out is named with its likeliest kind when the classifier is
+this sure..."""
+DETECT_MIN_P_KIND = {"shelf": 0.8}
+"""...or, for kinds it takes other things for more often (a door or a wall face seen as a
+shelf), this sure..."""
+DETECT_MARGIN = 2.0
+"""...and that kind is at least this many times likelier than any other (a region that is as
+likely a box as a sofa is not named either)."""
 DETECT_MIN_AREA = 0.004
 MAX_THINGS = 5
 """At most this many objects are named (largest first), plus every detected marker."""
@@ -137,9 +148,10 @@ def _touch(a: tuple[int, int, int, int], b: tuple[int, int, int, int], pad: int 
 
 
 def ground_objects(caption: str, regions: Sequence[Any]) -> list[Thing]:
-    """The objects to name: the captioner's kinds that a region of the image supports, with the
-    region's colour and side, then regions the classifier is sure of (one kind per object: a
-    region touching one already named in its colour is taken for another face of it).
+    """The objects to name: the captioner's kinds that a region of the image supports (on the
+    captioner's side, or elsewhere when very likely), with the region's colour and side, then
+    regions the classifier is sure of (one kind per object: a region touching one already named
+    in its colour is taken for another face of it).
     ``regions`` are ``server.captioner.scene.Region`` (largest first)."""
     from server.captioner.references import mentions
     from server.captioner.scene import KINDS, REGION_COLOURS
@@ -155,12 +167,20 @@ def ground_objects(caption: str, regions: Sequence[Any]) -> list[Thing]:
         on_side = [r for r in free if (m.side is None or r.side == m.side)]
         on_side = [r for r in on_side if fits(r, m.kind)]
         ranked = sorted(on_side, key=lambda r: (r.p(m.kind) + 0.1 * (r.colour == m.colour), r.area))
+        if not ranked:
+            elsewhere = [r for r in free if r.kind == m.kind and r.p(m.kind) >= CAPTION_ELSEWHERE_P]
+            ranked = sorted(elsewhere, key=lambda r: (r.p(m.kind), r.area))
         best = ranked[-1] if ranked else None
         if best is not None:
             free.remove(best)
             chosen.append((best, m.kind))
     for r in sorted(free, key=lambda r: -max(r.probs[1:])):
-        if r.kind == "none" or r.p(r.kind) < DETECT_MIN_P or r.area < DETECT_MIN_AREA:
+        sure = DETECT_MIN_P_KIND.get(r.kind, DETECT_MIN_P)
+        runner_up = sorted(r.probs[1:])[-2]
+        p = r.p(r.kind)
+        if r.kind == "none" or p < sure or p < DETECT_MARGIN * runner_up:
+            continue
+        if r.area < DETECT_MIN_AREA:  # too few pixels to tell
             continue
         if any(c.colour == r.colour and _touch(c.box, r.box) for c, _ in chosen):
             continue

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drone.sim.world import COLOURS, OBJECT_KINDS
-from server.captioner.eval import Said, TruthItem, said, score_descriptions
+from server.captioner.eval import Said, TruthItem, recall_by_kind, said, score_descriptions
 from server.captioner.evalset import SEED_BASE, sample
 
 KINDS = (*sorted(OBJECT_KINDS), "marker")
@@ -62,6 +62,8 @@ def test_scores_count_absent_things_wrong_colours_and_missed_kinds() -> None:
     assert r.frames_with_absent == pytest.approx(1 / 2)
     assert r.marker_with_id == pytest.approx(1 / 2)
     assert r.marker_id_correct == 1.0 and r.marker_recall == 1.0
+    assert recall_by_kind(r) == {"tree": (0, 1), "door": (1, 1), "person": (1, 1)}
+    assert r.counts["absent:door"] == 1  # the outdoor one
 
     right = [
         "an orange person on the right, a brown door ahead and marker 3 on the left.",

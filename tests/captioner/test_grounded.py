@@ -20,9 +20,11 @@ from drone.sim.camera import Renderer
 from drone.sim.world import COLOURS, OBJECT_KINDS, World, load_world
 from server.captioner import Captioner, CaptionerUnavailable, describe_frame_sync
 from server.captioner.eval import Said, TruthItem, said, score_descriptions
-from server.captioner.evalset import SEED_BASE, Truth, sample
-from server.captioner.grounding import SeenMarker, ground_marker_ids
+from server.captioner.evalset import SEED_BASE, TUNING_SEED_BASE, Truth, sample
+from server.captioner.grounding import SeenMarker, Thing, ground_marker_ids, ground_objects
 from server.captioner.markers import MarkerDetector
+from server.captioner.scene import KINDS as SCENE_KINDS
+from server.captioner.scene import Region
 from server.captioner.service import ground
 from tests.captioner.conftest import MODEL_DIR
 
@@ -260,3 +262,50 @@ def test_held_out_frames_name_less_that_is_false(captioner: Captioner) -> None:
     assert after.named_but_absent < before.named_but_absent, (before, after)
     assert after.colour_accuracy >= 0.9 > before.colour_accuracy, (before, after)
     assert after.kind_precision >= 0.9 and after.marker_with_id == 1.0, after
+
+
+@pytest.mark.timeout(600)  # 60 frames rendered and described: slow on a loaded machine
+def test_indoor_frames_name_the_salient_kinds(captioner: Captioner) -> None:
+    """60 indoor frames of the tuning set (never the reported held-out set): the grounded
+    descriptions name at least 80 % of the kinds a person would name first (white and grey
+    furniture against the walls, chairs beside a table, objects cut by the frame's edge
+    included; 75 % with the classifier trained without cluttered rooms), while naming almost
+    nothing that is not there (the 2 % target is the held-out set's; here one mention in 60
+    frames is 0.4 %)."""
+    frames = [sample(TUNING_SEED_BASE + 2 * i) for i in range(60)]
+    assert {s.world for s in frames} == {"indoor"}
+    truths = [
+        [TruthItem(t.kind, t.colour, t.side, t.area, t.marker_id, t.mentionable) for t in s.truth]
+        for s in frames
+    ]
+    texts = [describe_frame_sync(captioner, s.frame) for s in frames]
+    r = score_descriptions(texts, truths, KINDS, list(COLOURS))
+    assert r.kind_recall >= 0.8, r
+    assert r.kind_precision >= 0.9 and r.colour_accuracy >= 0.9, r
+    assert r.named_but_absent <= 0.03, r
+
+
+def _region(colour: str, side: str, area: float, **p: float) -> Region:
+    """A region of the image with the classifier's probabilities ``p`` (the rest: none)."""
+    probs = [p.get(k, 0.0) for k in SCENE_KINDS]
+    probs[0] = 1.0 - sum(probs)
+    return Region(colour, side, area, (0, 0, 10, 10), 0.0, (), tuple(probs))
+
+
+def test_a_kind_the_captioner_puts_on_the_wrong_side_is_found_where_it_is() -> None:
+    sofa = _region("grey", "left", 0.05, sofa=0.6, table=0.1)
+    things = ground_objects("There is a pink sofa far off on the right.", [sofa])
+    assert things == [Thing("sofa", "grey", "left", 0.05)]
+    unsure = _region("grey", "left", 0.05, sofa=0.4, table=0.3)
+    assert ground_objects("There is a pink sofa far off on the right.", [unsure]) == []
+
+
+def test_regions_the_captioner_left_out_are_named_when_likely_shelves_when_sure() -> None:
+    chair = _region("red", "ahead", 0.03, chair=0.55, table=0.2)
+    shelf = _region("white", "left", 0.04, shelf=0.7, door=0.2)
+    assert ground_objects("", [shelf, chair]) == [Thing("chair", "red", "ahead", 0.03)]
+    sure = _region("white", "left", 0.04, shelf=0.85, door=0.1)
+    assert [t.kind for t in ground_objects("", [sure, chair])] == ["shelf", "chair"]
+    # as likely a sofa as a box (the yellow box beside the shipped room's door): not named
+    either = _region("yellow", "right", 0.03, sofa=0.5, box=0.46)
+    assert ground_objects("", [either]) == []
