@@ -128,17 +128,31 @@ def served(args: argparse.Namespace, data: Path) -> Iterator[tuple[subprocess.Po
             proc.wait(10)
 
 
-def press_start(page: Any, drones: int, handoff: str) -> str:
+def _until(page: Any, pred: Any, timeout_s: float, what: str) -> None:
+    """Poll the page from here (the console's CSP forbids the string evaluation that
+    Playwright's ``wait_for_function`` polls with)."""
+    end = time.monotonic() + timeout_s
+    while not pred():
+        if time.monotonic() > end:
+            raise RuntimeError(f"timed out waiting for {what}")
+        page.wait_for_timeout(250)
+
+
+def press_start(page: Any, drones: int) -> str:
     """Wait until every drone is idle in the Central panel, open it, press Start; the reply."""
-    page.wait_for_function(
-        f"document.querySelectorAll('#central-drones li[data-role=\"idle\"]').length === {drones}",
-        timeout=120_000,
+    _until(
+        page,
+        lambda: len(page.query_selector_all('#central-drones li[data-role="idle"]')) == drones,
+        120.0,
+        "every drone idle in the Central panel",
     )
     page.click("#central-h")
     page.click("#central-start")
-    page.wait_for_function(
-        "document.querySelector('#central-reply').textContent.startsWith('Starting the patrol')",
-        timeout=20_000,
+    _until(
+        page,
+        lambda: str(page.text_content("#central-reply")).startswith("Starting the patrol"),
+        30.0,
+        "the patrol's start reply",
     )
     return str(page.text_content("#central-reply"))
 
@@ -208,10 +222,14 @@ def live_figures(head: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, 
     }
 
 
-def lockstep_figures(seconds: float, seed: int, drones: int, charge: float) -> dict[str, Any]:
+def lockstep_figures(
+    seconds: float, seed: int, drones: int, charge: float, handoff: str
+) -> dict[str, Any]:
     from server.fleet.patrol import PatrolConfig, PatrolExperiment
 
-    cfg = PatrolConfig(drones=drones, duration_s=seconds, seed=seed, charge_pct_s=charge)
+    cfg = PatrolConfig(
+        drones=drones, duration_s=seconds, seed=seed, charge_pct_s=charge, handoff=handoff
+    )
     rep = PatrolExperiment(cfg).run()
     return {
         "duration_s": seconds,
@@ -237,7 +255,13 @@ def report(path: Path, lockstep: bool = True) -> dict[str, Any]:
     # simulated time since then
     secs = float(live["sim_elapsed_s"])
     if lockstep and secs > 0:
-        ls = lockstep_figures(secs, int(head.get("seed", 1)), int(head.get("drones", 2)), 1.0)
+        ls = lockstep_figures(
+            secs,
+            int(head.get("seed", 1)),
+            int(head.get("drones", 2)),
+            1.0,  # the outdoor world's pads charge at 1 %/s (worlds/outdoor.yaml)
+            str(head.get("handoff", "predictive")),
+        )
         out["lockstep"] = ls
         print(f"lockstep experiment, {secs:.0f} s, seed {head.get('seed', 1)}:")
         for k, v in ls.items():
@@ -293,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
             )
             page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(f"{base}/?token={TOKEN}")
-            reply = press_start(page, args.drones, args.handoff)
+            reply = press_start(page, args.drones)
         else:
             r = http.post("/api/v1/patrol", json={"handoff": args.handoff})
             r.raise_for_status()
@@ -405,6 +429,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-lockstep", action="store_true", help="skip the lockstep comparison")
     p.add_argument("--report", type=Path, default=None, help="figures of a JSONL file so far")
     args = p.parse_args(argv)
+    if args.browser and args.handoff != "predictive":
+        p.error("the console's button starts a predictive patrol; --handoff needs --no-browser")
     if args.report is not None:
         report(args.report, lockstep=not args.no_lockstep)
         return 0

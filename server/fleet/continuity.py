@@ -251,7 +251,9 @@ class RouteCoverage:
                 self.first_t = self.last_t = now
             return
         assert self.last_t is not None
-        dt = max(0.0, now - self.last_t)
+        if now < self.last_t:
+            return  # never count time backwards
+        dt = now - self.last_t
         self.last_t = now
         if covered:
             self.covered_s += dt
