@@ -147,14 +147,22 @@ def press_start(page: Any, drones: int) -> str:
         "every drone idle in the Central panel",
     )
     page.click("#central-h")
-    page.click("#central-start")
-    _until(
-        page,
-        lambda: str(page.text_content("#central-reply")).startswith("Starting the patrol"),
-        30.0,
-        "the patrol's start reply",
-    )
-    return str(page.text_content("#central-reply"))
+    replies = []
+    for _ in range(10):  # as an operator does: read the reply, press again if it was refused
+        page.click("#central-start")
+        with contextlib.suppress(RuntimeError):
+            _until(
+                page,
+                lambda: not str(page.text_content("#central-reply")).endswith("…"),
+                30.0,
+                "the patrol's start reply",
+            )
+        reply = str(page.text_content("#central-reply"))
+        if reply.startswith("Starting the patrol"):
+            return reply
+        replies.append(reply)
+        page.wait_for_timeout(3000)
+    raise RuntimeError(f"the patrol did not start: {replies}")
 
 
 def panel_text(page: Any) -> dict[str, str]:
