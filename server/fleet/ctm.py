@@ -627,6 +627,20 @@ class CentralTaskManager:
         elif rec.role is Role.CHARGING and st.battery_pct >= self.stations.ready_pct:
             rec.role = Role.IDLE
             self.event(now, f"{rec.name} ready ({st.battery_pct:.0f} %)")
+        elif (
+            rec.role is Role.RETURNING
+            and st.flying
+            and st.autonomous.startswith(f"{HELD}hover")
+            and rec.plan is not None
+            and rec.plan.kind is PlanKind.RETURN
+            and st.plan_id == rec.plan.plan_id
+        ):
+            # on its way home, its own safety held it in a hover (the central server's
+            # silence): it would hover there until its battery ran out; home again
+            self.event(now, f"{rec.name} held on its way home ({st.autonomous}); home again")
+            plan = FlightPlan(next(self._plan_ids), PlanKind.RETURN, cruise_z=rec.plan.cruise_z)
+            rec.plan, rec.plan_sent_t = plan, now
+            out.append(Dispatch(rec.name, plan))
         if (
             st.autonomous
             and rec.role in (Role.PATROLLING, Role.RELIEVING)
