@@ -18,7 +18,7 @@ Usage::
 
     PYTHONPATH=$PWD python bench/live_patrol.py --duration 7200 --out live.jsonl
     PYTHONPATH=$PWD python bench/live_patrol.py --report live.jsonl   # figures so far
-    PYTHONPATH=$PWD python bench/live_patrol.py --duration 120 --sim-speed 10 --no-browser
+    PYTHONPATH=$PWD python bench/live_patrol.py --duration 90 --clock-speed 8 --no-camera
 """
 
 from __future__ import annotations
@@ -98,8 +98,10 @@ def served(args: argparse.Namespace, data: Path) -> Iterator[tuple[subprocess.Po
     cmd = [sys.executable, "-m", "server", "serve", "--host", "127.0.0.1", "--port", str(port)]
     cmd += ["--token", TOKEN, "--data-dir", str(data), "--seed", str(args.seed)]
     cmd += ["--fleet", str(args.drones), "--world", "outdoor", "--sim-addr", args.sim_addr]
-    if args.sim_speed != 1.0:
-        cmd += ["--sim-speed", str(args.sim_speed)]
+    if args.clock_speed != 1.0:
+        cmd += ["--clock-speed", str(args.clock_speed)]
+    if not args.camera:
+        cmd += ["--no-camera"]
     env = {**os.environ, "UAVC_VEHICLES": "process", "PYTHONUNBUFFERED": "1"}
     log_path = data / "serve.log"
     with open(log_path, "wb") as log:
@@ -212,7 +214,12 @@ def live_figures(head: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, 
     truth_cov = None if first is None else sum(on[first:]) / max(1, len(on) - first)
     return {
         "elapsed_s": last["t"],
-        "sim_elapsed_s": last["t"] * head.get("sim_speed", 1.0),
+        # the mission's own time (the console's clock) up to its latest coverage sample
+        "sim_elapsed_s": (
+            float(route["first_on_route_s"]) + float(route["window_s"])
+            if route.get("first_on_route_s") is not None
+            else last["t"] * head.get("clock_speed", 1.0)
+        ),
         "state": last["patrol"].get("state"),
         "coverage_pct": route.get("coverage_pct"),
         "longest_gap_s": route.get("longest_gap_s"),
@@ -339,7 +346,8 @@ def run(args: argparse.Namespace) -> int:
             "duration_s": args.duration,
             "seed": args.seed,
             "drones": args.drones,
-            "sim_speed": args.sim_speed,
+            "clock_speed": args.clock_speed,
+            "camera": args.camera,
             "handoff": args.handoff,
             "browser": args.browser,
             "reply": reply,
@@ -432,7 +440,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--handoff", choices=("predictive", "reactive"), default="predictive")
     p.add_argument("--sim-addr", default="127.0.77.10", help="first simulated drone's address")
-    p.add_argument("--sim-speed", type=float, default=1.0, help="serve's simulator speed")
+    p.add_argument(
+        "--clock-speed", type=float, default=1.0, help="serve --clock-speed (server/timewarp.py)"
+    )
+    p.add_argument("--no-camera", dest="camera", action="store_false", help="serve --no-camera")
     p.add_argument("--no-browser", dest="browser", action="store_false", help="REST start")
     p.add_argument("--no-lockstep", action="store_true", help="skip the lockstep comparison")
     p.add_argument("--report", type=Path, default=None, help="figures of a JSONL file so far")

@@ -134,9 +134,12 @@ async def build_drone_stack(
                 navdata_port=ports.navdata,
                 video_port=ports.video,
                 config=DriverConfig(link_timeout_s=s.link_timeout_s),
+                video=s.camera,
             )
         else:
-            driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+            driver = ARDroneDriver(
+                kind, config=DriverConfig(link_timeout_s=s.link_timeout_s), video=s.camera
+            )
         await driver.start()
         vehicle = Vehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
         await vehicle.start(
