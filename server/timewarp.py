@@ -12,9 +12,11 @@ the web process and in each vehicle process (which inherit the variable). The wa
 Threads' own timed waits (locks, events) stay in wall seconds; asyncio runs on its selector
 loop (uvloop keeps its own clock).
 
-Every process does ``N`` times the work per wall second, so the camera belongs off
-(``--no-camera``) and ``N`` within what the machine's cores sustain; the simulator caps a
-stall at 0.5 simulated seconds, so an overloaded machine shows as a slower run, not a jump.
+Watchdogs on links (navdata silence, the console's heartbeat, an LTM's status) judge silence in
+wall seconds (:func:`guard_s`). Every process does ``N`` times the work per wall second, so the
+camera belongs off (``--no-camera``) and ``N`` within what the machine's cores sustain; the
+simulator caps a stall at 0.5 simulated seconds, so an overloaded machine shows as a slower
+run, not a jump.
 """
 
 from __future__ import annotations
@@ -79,6 +81,14 @@ class _ScaledSelector(selectors.DefaultSelector):
         if timeout is not None and timeout > 0:
             timeout = timeout / _speed
         return super().select(timeout)
+
+
+def guard_s(seconds: float) -> float:
+    """A watchdog on a link (navdata, the console's heartbeat, an LTM's status) in clock
+    seconds. The link's delays are the machine's, in wall seconds, so its silence is judged in
+    wall seconds: at ``N``× a scheduling delay of 0.3 s would read as ``0.3 N`` s of silence
+    and trip a 1 s watch that never trips in real time."""
+    return seconds * _speed
 
 
 def install(value: float) -> None:

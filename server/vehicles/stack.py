@@ -25,6 +25,7 @@ from server.mavlink_stack import is_mavlink, start_mavlink
 from server.mavros_node import MavrosNode
 from server.settings import Settings
 from server.tasks.manager import TaskManager
+from server.timewarp import guard_s
 from server.vehicle_node import VehicleNode
 from server.vehicles.stops import StopLedger
 
@@ -133,15 +134,17 @@ async def build_drone_stack(
                 at_port=ports.at,
                 navdata_port=ports.navdata,
                 video_port=ports.video,
-                config=DriverConfig(link_timeout_s=s.link_timeout_s),
+                config=DriverConfig(link_timeout_s=guard_s(s.link_timeout_s)),
                 video=s.camera,
             )
         else:
             driver = ARDroneDriver(
-                kind, config=DriverConfig(link_timeout_s=s.link_timeout_s), video=s.camera
+                kind, config=DriverConfig(link_timeout_s=guard_s(s.link_timeout_s)), video=s.camera
             )
         await driver.start()
-        vehicle = Vehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
+        vehicle = Vehicle(
+            name, world, camera=CameraModel(), link_timeout_s=guard_s(s.link_timeout_s)
+        )
         await vehicle.start(
             driver,
             own_process=own_process,
@@ -157,7 +160,7 @@ async def build_drone_stack(
         tasks,
         name,
         prefix,
-        heartbeat_timeout_s=s.heartbeat_timeout_s,
+        heartbeat_timeout_s=guard_s(s.heartbeat_timeout_s),
         audit=audit,
         command_deadline_s=s.command_deadline_s,
     )
