@@ -145,6 +145,11 @@ async def build_drone_stack(
         vehicle = Vehicle(
             name, world, camera=CameraModel(), link_timeout_s=guard_s(s.link_timeout_s)
         )
+        if sim is not None and not s.camera:
+            # no camera, no marker to find its heading by: a simulated drone starts from its
+            # true start pose, a surveyed home station (as drone.lockstep's known_start)
+            t = sim.truth
+            vehicle.ekf.reset(vehicle.clock.now(), t.x, t.y, t.z, t.yaw_rad)
         await vehicle.start(
             driver,
             own_process=own_process,
