@@ -71,6 +71,16 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--console-name", default=None, help="this console's name on the bus (HOST-PORT)"
     )
+    s.add_argument(
+        "--clock-speed",
+        type=float,
+        default=None,
+        help="run the console, its vehicles and simulators N times faster than the wall clock "
+        "(tests, benchmarks; with --no-camera); env UAVC_CLOCK_SPEED",
+    )
+    s.add_argument(
+        "--no-camera", action="store_true", help="read no video from the drones (env UAVC_CAMERA)"
+    )
 
     sim = sub.add_parser("sim", help="the simulator alone, behind the AR.Drone protocol")
     sim.add_argument(
@@ -164,6 +174,10 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args_list = list(sys.argv[1:] if argv is None else argv)
+    if argv is None:  # the installed script: before anything captures the clock
+        from server import timewarp
+
+        timewarp.install_from(args_list, os.environ)
     # `patrol` owns its flags (and --help); hand them over untouched.
     if args_list[:1] == ["patrol"]:
         from server.fleet.patrol import patrol_main
@@ -263,6 +277,7 @@ def _serve(args: argparse.Namespace) -> int:
         fleet_name=args.fleet_name,
         console_name=args.console_name,
         sim_base_addr=args.sim_addr,
+        camera=False if args.no_camera else None,
     )
     if settings.recognizer not in ("server", "browser", "auto"):
         raise SettingsError(
@@ -302,6 +317,8 @@ def _serve(args: argparse.Namespace) -> int:
         # per-IP connection cap and a header deadline (slowloris; issue 14)
         http=guarded_h11(ConnectionLimits()),
         timeout_keep_alive=KEEP_ALIVE_S,
+        # a faster clock (server/timewarp.py) scales asyncio's selector loop, not uvloop's
+        loop="asyncio" if settings.clock_speed != 1.0 else "auto",
     )
     # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
     with contextlib.suppress(KeyboardInterrupt):

@@ -118,6 +118,17 @@ class Runtime:
         )
         if isinstance(self._captioner, CaptionerUnavailable):
             log.warning(self.captioner_status())
+        from server import timewarp
+
+        if self.settings.clock_speed != timewarp.speed():
+            log.warning(
+                "clock_speed %g is only honoured from the command line or UAVC_CLOCK_SPEED "
+                "(python -m server installs it first); this process runs at %g×",
+                self.settings.clock_speed,
+                timewarp.speed(),
+            )
+        elif timewarp.speed() != 1.0:
+            log.warning("the console's clock runs at %g× the wall clock", timewarp.speed())
         if self.settings.drone.startswith("sim") and self.settings.sim_speed != 1.0:
             log.warning(
                 "simulator at %.1f× real time: the EKF and the 100 Hz PID run on the wall clock, "

@@ -86,6 +86,16 @@ class Settings(BaseSettings):
         1.0,
         description="Real-time factor of a socket-served simulator; autonomy is tuned for 1.",
     )
+    clock_speed: float = Field(
+        1.0,
+        gt=0.0,
+        le=100.0,
+        description="The whole console (web process, vehicle processes, simulators) runs this "
+        "many times faster than the wall clock; for tests and benchmarks (server/timewarp.py).",
+    )
+    camera: bool = Field(
+        True, description="Read the drones' video (off: no frames, no marker localisation)."
+    )
     # -- limits on clients ---------------------------------------------------------------------
     max_frame_bytes: int = Field(
         16 * 1024 * 1024, description="Largest rosbridge frame after authentication."

@@ -18,6 +18,10 @@ Two jobs, both pure functions of the LTM statuses the CTM already receives:
   intervals between visits; the longest wait so far (a finished interval or the wait still
   open); and at every handoff the interval of each waypoint that straddles it, against the
   median interval before it, which is the revisit-interval change a handoff costs.
+* **Route coverage** (:class:`RouteCoverage`). The share of time a drone flies on the route
+  (within the CTM's corridor, at route height) from the moment one first reached it, and the
+  coverage gaps (the route empty): the figures ``uav-console patrol`` measures from the
+  simulator's truth, here from the drones' reported positions.
 
 A waypoint is *visited* when a drone of the mission passes within ``visit_radius_m``
 (horizontally, the same 2 m ``server.fleet.patrol`` measures coverage with) at route height.
@@ -226,6 +230,80 @@ class HandoffRecord:
 
 
 @dataclass
+class RouteCoverage:
+    """Time with a drone on the route, from samples ``(covered, now)`` at the CTM's rate.
+
+    Each interval between two samples counts as the later sample says (as the lockstep
+    experiment counts each tick). The window opens at the first covered sample.
+    """
+
+    first_t: float | None = None
+    last_t: float | None = None
+    covered_s: float = 0.0
+    gap_start: float | None = None
+    gaps: int = 0
+    longest_gap_s: float = 0.0
+
+    def sample(self, covered: bool, now: float) -> None:
+        """One look at the route: is a drone on it now?"""
+        if self.first_t is None:
+            if covered:
+                self.first_t = self.last_t = now
+            return
+        assert self.last_t is not None
+        if now < self.last_t:
+            return  # never count time backwards
+        dt = now - self.last_t
+        self.last_t = now
+        if covered:
+            self.covered_s += dt
+            if self.gap_start is not None:
+                self._close_gap(now)
+        elif self.gap_start is None:
+            self.gap_start = now - dt
+
+    def _close_gap(self, now: float) -> None:
+        assert self.gap_start is not None
+        self.gaps += 1
+        self.longest_gap_s = max(self.longest_gap_s, now - self.gap_start)
+        self.gap_start = None
+
+    def window_s(self) -> float:
+        """Seconds since a drone first reached the route (up to the latest sample)."""
+        if self.first_t is None or self.last_t is None:
+            return 0.0
+        return self.last_t - self.first_t
+
+    def coverage(self) -> float | None:
+        """Share of the window with a drone on the route (None before one reached it)."""
+        w = self.window_s()
+        if self.first_t is None:
+            return None
+        return 1.0 if w <= 0 else min(1.0, self.covered_s / w)
+
+    def longest(self) -> float:
+        """The longest gap, the one still open included."""
+        open_s = 0.0
+        if self.gap_start is not None and self.last_t is not None:
+            open_s = self.last_t - self.gap_start
+        return max(self.longest_gap_s, open_s)
+
+    def as_dict(self, started_t: float) -> dict[str, Any]:
+        cov = self.coverage()
+        return {
+            "coverage": None if cov is None else round(cov, 5),
+            "coverage_pct": None if cov is None else round(100.0 * cov, 2),
+            "window_s": round(self.window_s(), 1),
+            "covered_s": round(self.covered_s, 1),
+            "longest_gap_s": round(self.longest(), 1),
+            "gaps": self.gaps + (1 if self.gap_start is not None else 0),
+            "first_on_route_s": (
+                None if self.first_t is None else round(self.first_t - started_t, 1)
+            ),
+        }
+
+
+@dataclass
 class CoverageTracker:
     """Visits of one route's waypoints, from drone positions (see the module docstring)."""
 
@@ -234,6 +312,7 @@ class CoverageTracker:
     visit_radius_m: float = VISIT_RADIUS_M
     visits: list[deque[float]] = field(default_factory=list)
     handoffs: list[HandoffRecord] = field(default_factory=list)
+    route_coverage: RouteCoverage = field(default_factory=RouteCoverage)
     _inside: dict[tuple[str, int], bool] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -325,6 +404,7 @@ class CoverageTracker:
             "waypoints": wps,
             "longest_gap_s": round(self.longest_gap_s(now), 1),
             "lap_s": None if lap is None else round(lap, 1),
+            "route": self.route_coverage.as_dict(self.started_t),
             "handoffs": [
                 {
                     "t": round(h.t, 1),

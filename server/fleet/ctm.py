@@ -533,6 +533,7 @@ class CentralTaskManager:
         for ms in self.missions.values():
             if ms.state.flying or ms.state is MissionState.STALLED:
                 self._run_mission(ms, now, out)
+        self._sample_coverage(now)
         for rec in self.drones.values():
             self._home_if_unused(rec, now, out)
         for rec in self.drones.values():  # resend unconfirmed plans
@@ -548,6 +549,23 @@ class CentralTaskManager:
                 rec.plan_sent_t = now
                 out.append(Dispatch(rec.name, plan))
         return out
+
+    def _sample_coverage(self, now: float) -> None:
+        """Route coverage of every live mission: is a drone flying on its route now (any
+        drone heard, as the experiment counts any drone on the route)?"""
+        flying = [
+            r.status.position
+            for r in self.drones.values()
+            if r.status is not None
+            and r.role is not Role.LOST
+            and r.status.flying
+            and not r.status.emergency
+        ]
+        for ms in self.missions.values():
+            if ms.coverage is None or not ms.state.live:
+                continue
+            covered = any(self.on_route(p, ms.mission) for p in flying)
+            ms.coverage.route_coverage.sample(covered, now)
 
     def _failure(self, rec: DroneRecord, now: float) -> str:
         st = rec.status
@@ -609,6 +627,20 @@ class CentralTaskManager:
         elif rec.role is Role.CHARGING and st.battery_pct >= self.stations.ready_pct:
             rec.role = Role.IDLE
             self.event(now, f"{rec.name} ready ({st.battery_pct:.0f} %)")
+        elif (
+            rec.role is Role.RETURNING
+            and st.flying
+            and st.autonomous.startswith(f"{HELD}hover")
+            and rec.plan is not None
+            and rec.plan.kind is PlanKind.RETURN
+            and st.plan_id == rec.plan.plan_id
+        ):
+            # on its way home, its own safety held it in a hover (the central server's
+            # silence): it would hover there until its battery ran out; home again
+            self.event(now, f"{rec.name} held on its way home ({st.autonomous}); home again")
+            plan = FlightPlan(next(self._plan_ids), PlanKind.RETURN, cruise_z=rec.plan.cruise_z)
+            rec.plan, rec.plan_sent_t = plan, now
+            out.append(Dispatch(rec.name, plan))
         if (
             st.autonomous
             and rec.role in (Role.PATROLLING, Role.RELIEVING)

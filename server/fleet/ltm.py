@@ -20,7 +20,8 @@ mission for the operator too; any other (a monitor's landing or climb-down, the 
 of the vehicle's watch of a silent central server) as ``autonomous = "held: hover (central
 server silent)"``, and a return home (the operator's or the battery monitor's) as ``autonomous =
 "sent home"``: the drone has left its post, and the CTM gives the post to a drone able to fly it
-(the same one again, once it may).
+(the same one again, once it may). A drone flying home that the central server's silence holds
+in a hover says so the same way, and the CTM sends it home again.
 """
 
 from __future__ import annotations
@@ -214,9 +215,17 @@ class LocalTaskManager:
             return
         if self.operator or self.autonomous or self.held:
             return
-        if self.plan is None or self.plan.kind is not PlanKind.PATROL:
+        if self.plan is None:
             return
         action, by = interruption(self._reason(notice))
+        if self.plan.kind is PlanKind.RETURN:
+            # on its way home, held in a hover by its own safety (the central server's
+            # silence): said, so the CTM sends it home again once it hears it
+            if action == "hover" and by and not by.endswith(" monitor"):
+                self.autonomous = f"{HELD}{action} ({by})"
+            return
+        if self.plan.kind is not PlanKind.PATROL:
+            return
         if action == "return home":
             self.autonomous = SENT_HOME
         elif action == "hover" and by.endswith(" monitor"):

@@ -24,7 +24,13 @@ from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
-from server.fleet.continuity import MAX_VISITS, CoverageTracker, HandoffRecord, Join
+from server.fleet.continuity import (
+    MAX_VISITS,
+    CoverageTracker,
+    HandoffRecord,
+    Join,
+    RouteCoverage,
+)
 from server.fleet.ctm import CentralTaskManager, DroneRecord, MissionRecord
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
@@ -199,7 +205,33 @@ def _coverage(c: CoverageTracker, now: float) -> dict[str, Any]:
             for h in c.handoffs
         ],
         "inside": [[name, k, inside] for (name, k), inside in c._inside.items()],
+        "route_coverage": _route_coverage(c.route_coverage, now),
     }
+
+
+def _route_coverage(r: RouteCoverage, now: float) -> dict[str, Any]:
+    return {
+        "first_t": _age(r.first_t, now),
+        "last_t": _age(r.last_t, now),
+        "covered_s": r.covered_s,
+        "gap_start": _age(r.gap_start, now),
+        "gaps": r.gaps,
+        "longest_gap_s": r.longest_gap_s,
+    }
+
+
+def _route_coverage_of(x: Any, now: float) -> RouteCoverage:
+    if x is None:  # a replica from a console without route coverage
+        return RouteCoverage()
+    d = _obj(x, "route_coverage")
+    return RouteCoverage(
+        first_t=_at(d.get("first_t"), now, never=None),
+        last_t=_at(d.get("last_t"), now, never=None),
+        covered_s=_float(d["covered_s"]),
+        gap_start=_at(d.get("gap_start"), now, never=None),
+        gaps=int(d["gaps"]),
+        longest_gap_s=_float(d["longest_gap_s"]),
+    )
 
 
 def _coverage_of(x: Any, now: float) -> CoverageTracker:
@@ -225,7 +257,8 @@ def _coverage_of(x: Any, now: float) -> CoverageTracker:
         _float(d["visit_radius_m"]),
         visits,
         handoffs,
-        inside,
+        _route_coverage_of(d.get("route_coverage"), now),
+        _inside=inside,
     )
 
 

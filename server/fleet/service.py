@@ -36,6 +36,7 @@ from server.fleet.patrol import station_positions
 from server.fleet.planner import FlightModel, StationModel
 from server.fleet.router import make_fleet_router
 from server.graph import Graph
+from server.timewarp import guard_s
 
 
 def station_model(world: Any) -> StationModel:
@@ -62,6 +63,7 @@ class FleetService:
         self.world = world
         self.clock = clock
         self.ctm = CentralTaskManager(
+            lost_after_s=guard_s(3.0),  # the CTM's default, in wall seconds (server.timewarp)
             model=model,
             stations=stations or station_model(world),
             origin=origin_of(world),

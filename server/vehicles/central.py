@@ -76,6 +76,8 @@ CHILD_SETTINGS = (
     "seed",
     "sim_base_addr",
     "sim_speed",
+    "clock_speed",
+    "camera",
     "mavlink_sim_port",
     "mavlink_key",
     "allow_origins",

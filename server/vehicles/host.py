@@ -48,6 +48,7 @@ from drone.deadline import BadIssued, ClockOffset, parse_issued
 from drone.sim.errors import AddressInUse
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.settings import Settings
+from server.timewarp import guard_s
 from server.tls import TLSError, server_context
 from server.vehicles import names
 from server.vehicles.bus_vehicle import BusVehicleSide
@@ -219,8 +220,8 @@ class VehicleHost:
         self.safety_token = safety_token
         self.name = options.name
         self.watch = CentralWatch(
-            settings.heartbeat_timeout_s,
-            max(settings.central_loss_land_s, settings.heartbeat_timeout_s + 0.1),
+            guard_s(settings.heartbeat_timeout_s),
+            guard_s(max(settings.central_loss_land_s, settings.heartbeat_timeout_s + 0.1)),
         )
         self.loss_actions: list[str] = []
         self.bus: VehicleBus | None = None

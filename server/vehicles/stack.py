@@ -26,6 +26,7 @@ from server.mavlink_stack import is_mavlink, start_mavlink
 from server.mavros_node import MavrosNode
 from server.settings import Settings
 from server.tasks.manager import TaskManager
+from server.timewarp import guard_s
 from server.vehicle_node import VehicleNode
 from server.vehicles.stops import StopLedger
 
@@ -141,12 +142,22 @@ async def build_drone_stack(
                 at_port=ports.at,
                 navdata_port=ports.navdata,
                 video_port=ports.video,
-                config=DriverConfig(link_timeout_s=s.link_timeout_s),
+                config=DriverConfig(link_timeout_s=guard_s(s.link_timeout_s)),
+                video=s.camera,
             )
         else:
-            driver = ARDroneDriver(kind, config=DriverConfig(link_timeout_s=s.link_timeout_s))
+            driver = ARDroneDriver(
+                kind, config=DriverConfig(link_timeout_s=guard_s(s.link_timeout_s)), video=s.camera
+            )
         await driver.start()
-        ardrone = ARDroneVehicle(name, world, camera=CameraModel(), link_timeout_s=s.link_timeout_s)
+        ardrone = ARDroneVehicle(
+            name, world, camera=CameraModel(), link_timeout_s=guard_s(s.link_timeout_s)
+        )
+        if sim is not None and not s.camera:
+            # no camera, no marker to find its heading by: a simulated drone starts from its
+            # true start pose, a surveyed home station (as drone.lockstep's known_start)
+            t = sim.truth
+            ardrone.ekf.reset(ardrone.clock.now(), t.x, t.y, t.z, t.yaw_rad)
         await ardrone.start(
             driver,
             own_process=own_process,
@@ -171,7 +182,7 @@ async def build_drone_stack(
         tasks,
         name,
         prefix,
-        heartbeat_timeout_s=s.heartbeat_timeout_s,
+        heartbeat_timeout_s=guard_s(s.heartbeat_timeout_s),
         audit=audit,
         command_deadline_s=s.command_deadline_s,
     )

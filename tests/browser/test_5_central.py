@@ -40,11 +40,12 @@ def test_central_button_and_voice(browser: Any, central_server: ServerProcess) -
         assert page.is_enabled("#central-start") and not page.is_enabled("#central-stop")
 
         page.click("#central-start")
-        page.wait_for_function(
-            "document.querySelector('#central-reply').textContent"
-            ".startsWith('Starting the patrol of 12 waypoints with 2 drones')",
-            timeout=5000,
+        page.wait_for_function(  # the reply, whatever it is (a loaded machine answers late)
+            "!document.querySelector('#central-reply').textContent.endsWith('…')",
+            timeout=30_000,
         )
+        reply = str(page.text_content("#central-reply"))
+        assert reply.startswith("Starting the patrol of 12 waypoints with 2 drones"), reply
         page.wait_for_selector("#central[data-running='true']", timeout=5000)
         assert not page.is_enabled("#central-start") and page.is_enabled("#central-stop")
         # live coverage: a drone patrols, waypoints are visited and their age counts up
@@ -55,6 +56,16 @@ def test_central_button_and_voice(browser: Any, central_server: ServerProcess) -
         assert first is not None and first.endswith(" s ago"), first
         gap = page.text_content("#central-gap")
         assert gap is not None and gap.endswith(" s"), gap
+        # route coverage, its longest gap and the handoffs, as GET /patrol has them
+        page.wait_for_function(
+            "document.querySelector('#central-coverage').textContent.endsWith(' %')",
+            timeout=20_000,
+        )
+        route = central_server.api("GET", "/patrol").json()["mission"]["coverage"]["route"]
+        shown = float(str(page.text_content("#central-coverage")).removesuffix(" %"))
+        assert 0.0 <= shown <= 100.0 and abs(shown - route["coverage_pct"]) <= 5.0, (shown, route)
+        assert str(page.text_content("#central-cov-gap")).endswith(" s")
+        assert page.text_content("#central-handoffs") == "0"
         drones = page.eval_on_selector_all("#central-drones li", "ls => ls.map(l => l.textContent)")
         assert any("patrolling, battery" in d and d.endswith("%") for d in drones), drones
         assert len(drones) == 2, drones

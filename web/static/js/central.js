@@ -87,7 +87,8 @@ export class CentralPanel {
 
   /**
    * GET /patrol: {running, state, mission: {id, state, detail, drones, active, relief,
-   * handoffs, coverage}, drones}; ``state`` is "none" with no live mission.
+   * handoffs, coverage: {waypoints, longest_gap_s, lap_s, route: {coverage_pct,
+   * longest_gap_s, gaps, …}}}, drones}; ``state`` is "none" with no live mission.
    */
   render(status) {
     this.last = status;
@@ -111,6 +112,11 @@ export class CentralPanel {
     this.$("central-stop").disabled = !live || observer;
     this.$("central-state").textContent = live ? missionLine(m) : "not running";
     const cov = live ? m.coverage : null;
+    const route = cov ? cov.route : null;
+    this.$("central-coverage").textContent = coverageText(route);
+    this.$("central-cov-gap").textContent =
+      route && route.coverage !== null ? seconds(route.longest_gap_s) : "–";
+    this.$("central-handoffs").textContent = live ? String(m.handoffs) : "–";
     this.$("central-gap").textContent = cov ? ago(cov.longest_gap_s) : "–";
     this.$("central-lap").textContent = cov && cov.lap_s !== null ? ago(cov.lap_s) : "–";
     const wps = this.$("central-waypoints");
@@ -137,6 +143,21 @@ export class CentralPanel {
       }),
     );
   }
+}
+
+/**
+ * Route coverage as "99.65 %" (the share of the time since a drone first reached the route
+ * with a drone on it), "–" before one has.
+ */
+export function coverageText(route) {
+  if (!route || route.coverage_pct === null || route.coverage_pct === undefined) return "–";
+  return `${route.coverage_pct.toFixed(2)} %`;
+}
+
+/** A gap as "0 s", "12.7 s" or "3 min 05 s". */
+export function seconds(s) {
+  if (s === null || s === undefined || !Number.isFinite(s)) return "–";
+  return s < 90 ? `${Math.round(10 * s) / 10} s` : ago(s);
 }
 
 /**
