@@ -196,3 +196,17 @@ def test_the_task_keeps_the_command_as_said() -> None:
     task = build_task(obj)
     assert task.command == obj
     assert build_task(Waypoints.model_validate(obj)).command == obj
+
+
+def test_the_task_manager_takes_typed_commands_as_their_json() -> None:
+    from drone.sim.world import load_world
+    from tests.autonomy.flight import Flight
+
+    def flight() -> Flight:
+        return Flight.make(load_world("indoor"), seed=3, camera=False, starts=[(4.0, 2.0, 0.0)])
+
+    typed = flight().tm.submit([parse_command({"action": "takeoff"}), Move(direction="up")])
+    as_json = flight().tm.submit([{"action": "takeoff"}, {"action": "move", "direction": "up"}])
+    assert all(d.accepted for d in typed)
+    assert [(d.command, d.accepted) for d in typed] == [(d.command, d.accepted) for d in as_json]
+    assert typed[1].command == {"action": "move", "direction": "up"}
