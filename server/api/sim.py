@@ -21,9 +21,7 @@ def truth(stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
 
 
 @router.post("/{drone_id}/fault")
-def fault(
-    body: FaultRequest, stack: DroneDep, _role: PilotDep, _lease: LeaseDep
-) -> FaultApplied:
+def fault(body: FaultRequest, stack: DroneDep, _role: PilotDep, _lease: LeaseDep) -> FaultApplied:
     """Inject a fault: link loss for a while, battery drained to a level, a wind gust, or clear.
 
     Needs the pilot lease to be free or held by the caller (409 otherwise)."""

@@ -37,6 +37,7 @@ from server.tasks.types import (
     WaypointsTask,
 )
 
+
 def build_task(command: object) -> Task:
     """The task for one DESIGN §4 command (a typed command or its JSON object).
 

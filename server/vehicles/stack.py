@@ -15,8 +15,8 @@ from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
 from drone.ardrone.driver import ARDroneDriver, DriverConfig
-from drone.commands import DirectAction
 from drone.camera import CameraModel
+from drone.commands import DirectAction
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World
 from drone.vehicle import Vehicle

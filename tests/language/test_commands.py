@@ -48,7 +48,9 @@ def _command(action: str, **slots: st.SearchStrategy[Any]) -> st.SearchStrategy[
 
 
 waypoint = st.one_of(
-    st.fixed_dictionaries({"x": numbers, "y": numbers}, optional={"z": numbers, "yaw_deg": numbers}),
+    st.fixed_dictionaries(
+        {"x": numbers, "y": numbers}, optional={"z": numbers, "yaw_deg": numbers}
+    ),
     st.fixed_dictionaries(
         {"lat": numbers, "lon": numbers}, optional={"alt": numbers, "yaw_deg": numbers}
     ),
@@ -115,7 +117,7 @@ def test_any_object_parses_or_raises_invalid_command(obj: dict[str, Any]) -> Non
 
 
 def test_every_action_the_union_holds_is_generated_above() -> None:
-    assert ACTIONS == {
+    assert {
         "takeoff",
         "land",
         "hover",
@@ -133,7 +135,7 @@ def test_every_action_the_union_holds_is_generated_above() -> None:
         "choose",
         "waypoints",
         *PATROL_CONTROLS,
-    }
+    } == ACTIONS
 
 
 def test_every_command_the_grammars_produce_is_in_the_union() -> None:
