@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from enum import StrEnum
-from typing import Annotated, Any, Literal, TypeAlias
+from typing import Annotated, Any, Literal, TypeAlias, get_args
 
 from pydantic import (
     BaseModel,
@@ -36,10 +36,14 @@ from pydantic import (
     model_validator,
 )
 
-DIRECTIONS = ("forward", "backward", "left", "right", "up", "down")
-SIDES = ("left", "right")
-QUERY_ITEMS = ("battery", "altitude", "position", "state")
-PATROL_CONTROLS = ("patrol_start", "patrol_pause", "patrol_resume", "patrol_stop")
+Direction = Literal["forward", "backward", "left", "right", "up", "down"]
+Side = Literal["left", "right"]  # counter-clockwise is left (REP 103)
+QueryItem = Literal["battery", "altitude", "position", "state"]
+PatrolVerb = Literal["patrol_start", "patrol_pause", "patrol_resume", "patrol_stop"]
+DIRECTIONS: tuple[Direction, ...] = get_args(Direction)
+SIDES: tuple[Side, ...] = get_args(Side)
+QUERY_ITEMS: tuple[QueryItem, ...] = get_args(QueryItem)
+PATROL_CONTROLS: tuple[PatrolVerb, ...] = get_args(PatrolVerb)
 
 
 class InvalidCommand(ValueError):
@@ -124,7 +128,7 @@ class Move(_Command):
     default)."""
 
     action: Literal["move"] = "move"
-    direction: str | None = None
+    direction: Direction | None = None
     distance: Number | None = None
 
     @field_validator("direction", mode="before")
@@ -139,7 +143,7 @@ class Turn(_Command):
     """Turn in place (left = counter-clockwise) by ``angle`` degrees, or to face an object."""
 
     action: Literal["turn"] = "turn"
-    direction: str | None = None
+    direction: Side | None = None
     angle: Number | None = None
     object: Text | None = None
     colour: Text | None = None
@@ -185,14 +189,14 @@ class Patrol(_Command):
 class PatrolControl(_Command):
     """The fleet's patrol of the world's route: start, pause, resume or stop it."""
 
-    action: Literal["patrol_start", "patrol_pause", "patrol_resume", "patrol_stop"]
+    action: PatrolVerb
 
 
 class Query(_Command):
     """A question answered from telemetry."""
 
     action: Literal["query"] = "query"
-    item: str | None = None
+    item: QueryItem | None = None
 
     @field_validator("item", mode="before")
     @classmethod

@@ -4,9 +4,47 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from fastapi import FastAPI
+from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema
 
+from drone.commands import COMMAND_ADAPTER
 from server.api.strict import StrictBody
+
+COMMAND_SCHEMA_PREFIX = "Command"
+"""OpenAPI component names of the command union: ``Command`` (the union) and ``CommandMove``,
+``CommandTurn``, … (its members), apart from the REST bodies' own names."""
+
+CommandList = Annotated[
+    list[dict[str, Any]],
+    WithJsonSchema(
+        {"type": "array", "items": {"$ref": f"#/components/schemas/{COMMAND_SCHEMA_PREFIX}"}}
+    ),
+]
+"""Commands as they travel (DESIGN §4's flat objects, in the grammar's key order), documented
+as the typed union of drone/commands.py (:func:`add_command_schemas` puts it in /docs)."""
+
+
+def command_schemas() -> dict[str, Any]:
+    """The union's JSON schemas as OpenAPI components (``Command`` and one per member)."""
+    prefix = COMMAND_SCHEMA_PREFIX
+    schema = COMMAND_ADAPTER.json_schema(
+        mode="serialization", ref_template=f"#/components/schemas/{prefix}{{model}}"
+    )
+    members = {f"{prefix}{name}": s for name, s in schema.pop("$defs").items()}
+    return {prefix: schema, **members}
+
+
+def add_command_schemas(app: FastAPI) -> None:
+    """Make ``app.openapi()`` hold :func:`command_schemas` among its components."""
+    generate = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        spec = generate()
+        spec.setdefault("components", {}).setdefault("schemas", {}).update(command_schemas())
+        return spec
+
+    app.openapi = openapi  # type: ignore[method-assign]
+
 
 # Wind a simulator fault may blow: well beyond what an AR.Drone survives (Beaufort 11,
 # ~30 m/s), finite (issue 14: [1e308, 1e308] was accepted).
@@ -21,7 +59,7 @@ class InterpretRequest(StrictBody):
 
 class InterpretResponse(BaseModel):
     text: str
-    commands: list[dict[str, Any]]
+    commands: CommandList
 
 
 class CommandRequest(StrictBody):
@@ -39,7 +77,7 @@ class CommandRequest(StrictBody):
 
 class CommandResponse(BaseModel):
     reply: str
-    commands: list[dict[str, Any]]
+    commands: CommandList
     accepted: bool
     expects: str = Field(
         "", description="'confirm': the reply asks 'Did you say …?'; send yes or no next"

@@ -20,7 +20,7 @@ from fastapi import APIRouter, HTTPException, Query, Request, WebSocket, WebSock
 from pydantic import BaseModel, Field
 
 from server.api.deps import RoleDep, RuntimeDep, check_lease
-from server.api.models import SpeechStatus
+from server.api.models import CommandList, SpeechStatus
 from server.security import Role, token_from
 from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
@@ -44,7 +44,7 @@ CLOSE_TRY_AGAIN = 1013  # RFC 6455 §7.4.1 (IANA registry): try again later
 class SpeechResponse(BaseModel):
     text: str = Field(description="the sentence handed to the dialog (snapped to the grammars)")
     confidence: float
-    commands: list[dict[str, Any]]
+    commands: CommandList
     reply: str = Field(description="the dialog's answer ('' with execute=false)")
     accepted: bool
     heard: str = Field(description="the recogniser's own transcript")

@@ -11,7 +11,7 @@ import httpx
 import pytest
 from fastapi import FastAPI
 
-from drone.commands import DirectAction
+from drone.commands import ACTIONS, DirectAction
 from server.app import create_app
 from server.recorder import replay_app
 from server.settings import Settings
@@ -50,6 +50,32 @@ def test_every_route_has_a_response_schema(tmp_path: Path) -> None:
     schemas = spec["components"]["schemas"]
     assert {"name", "simulated", "link_ok"} <= set(schemas["DroneInfo"]["properties"])
     assert schemas["DirectAction"]["enum"] == [a.value for a in DirectAction]
+
+
+def _refs(node: Any) -> set[str]:
+    if isinstance(node, dict):
+        return {v for k, v in node.items() if k == "$ref"} | {
+            r for v in node.values() for r in _refs(v)
+        }
+    if isinstance(node, list):
+        return {r for v in node for r in _refs(v)}
+    return set()
+
+
+def test_commands_are_documented_as_the_typed_union(tmp_path: Path) -> None:
+    app = create_app(Settings(data_dir=tmp_path, token=PILOT, observer_token=OBSERVER))
+    spec = app.openapi()
+    schemas = spec["components"]["schemas"]
+    union = {"$ref": "#/components/schemas/Command"}
+    for body in ("InterpretResponse", "CommandResponse", "SpeechResponse"):
+        assert schemas[body]["properties"]["commands"]["items"] == union, body
+    mapping = schemas["Command"]["discriminator"]["mapping"]
+    assert set(mapping) == ACTIONS
+    move = schemas["CommandMove"]["properties"]["direction"]["anyOf"][0]
+    assert move["enum"] == ["forward", "backward", "left", "right", "up", "down"]
+    missing = {r for r in _refs(spec) if r.removeprefix("#/components/schemas/") not in schemas}
+    assert missing == set()
+    assert app.openapi() is spec
 
 
 def test_the_replay_routes_have_response_schemas() -> None:
