@@ -79,10 +79,14 @@ MarkerId = Annotated[int, BeforeValidator(_marker_id)]
 Text = Annotated[str, BeforeValidator(_text)]
 
 
-class _Command(BaseModel):
-    """Common configuration: frozen, no slots beyond the action's own."""
+class _Frozen(BaseModel):
+    """Common configuration: frozen, no fields beyond the model's own."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class _Command(_Frozen):
+    """A member of the :data:`Command` union (each has its ``action``)."""
 
 
 class Takeoff(_Command):
@@ -215,7 +219,7 @@ class Choose(_Command):
     object: Text | None = None
 
 
-class Waypoint(_Command):
+class Waypoint(_Frozen):
     """One point of a :class:`Waypoints` flight: map frame ``x, y`` (``z`` optional) or
     geodetic ``lat, lon`` (``alt`` optional), with an optional own heading ``yaw_deg``."""
 
@@ -307,7 +311,7 @@ def parse_command(obj: object) -> Command:
         InvalidCommand: not an object, no or unknown ``action``, a slot that is not the
             action's, or a slot value that is wrong (the text names it).
     """
-    if isinstance(obj, _Command) and not isinstance(obj, Waypoint):
+    if isinstance(obj, _Command):
         return obj  # type: ignore[return-value]
     if not isinstance(obj, Mapping):
         raise InvalidCommand(f"a command must be an object, got {type(obj).__name__}")
