@@ -57,6 +57,25 @@ class FleetStatus(BaseModel):
     events: list[str]
 
 
+class CentralRoleInfo(BaseModel):
+    """``GET /central``: who holds the fleet's central role, as this console sees it; on a
+    bus also the console and fleet names, the consoles and holders seen, takeover times."""
+
+    model_config = ConfigDict(extra="allow")
+
+    role: str = Field(description="central, standby, or only (a console on no bus)")
+    central: str | None = Field(description="the console holding the role (null: none seen)")
+    console: str | None = None
+    fleet: str | None = None
+    consoles: list[str] | None = None
+    holders: list[str] | None = None
+    takeovers_s: list[float] | None = None
+    claimed_unix: float | None = None
+    lost_holder_unix: float | None = None
+    replicas_in: int | None = None
+    on_bus: list[str] | None = None
+
+
 def make_fleet_router(
     ctm: CentralTaskManager,
     *,
