@@ -17,6 +17,7 @@ from drone.share import share_dir
 from server import __version__
 from server.api import drones, flights, language, sim, speech, strict, system, tls, tts
 from server.api.deps import fleet_access, fleet_deadline
+from server.api.models import add_command_schemas
 from server.audit_trail import RestAuditMiddleware
 from server.deadlines import CommandExpired
 from server.http_guard import HttpGuard, content_security_policy
@@ -62,6 +63,7 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     # Host allowlist, body limits before parsing, security headers, the token cookie (issue 14).
     app.add_middleware(HttpGuard, security=runtime.security)
     strict.install(app)  # 422s that echo NaN or lone surrogates stay 422s
+    add_command_schemas(app)  # /docs shows the commands' union
 
     @app.exception_handler(VehicleUnavailable)
     async def vehicle_unavailable(request: Request, exc: VehicleUnavailable) -> JSONResponse:

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, HTTPException, Request
+from fastapi import APIRouter, Body, HTTPException, Path, Request
 from fastapi.responses import StreamingResponse
 
+from drone.commands import DirectAction
 from server.api.deps import DroneDep, IssuedDep, PilotDep, RoleDep, RuntimeDep, check_lease
-from server.api.models import ActionBody, ActionResult, Describe
+from server.api.models import BINARY, ActionBody, ActionResult, Describe, DroneInfo
 from server.direct_actions import command_source, perform_async, perform_stop_async
 from server.runtime import Runtime
 from server.vehicles.door import advertised_url
@@ -18,7 +19,6 @@ from server.vehicles.door_protocol import STOP_ACTIONS
 
 router = APIRouter(prefix="/drones", tags=["drones"])
 
-Action = Literal["takeoff", "land", "hover", "emergency", "reset"]
 MJPEG_BOUNDARY = "frame"
 
 
@@ -36,7 +36,7 @@ def _for_caller(
     return out
 
 
-@router.get("")
+@router.get("", response_model=list[DroneInfo], response_model_exclude_unset=True)
 def list_drones(request: Request, runtime: RuntimeDep, role: RoleDep) -> list[dict[str, Any]]:
     """Every drone with its telemetry, state, task and link."""
     return [
@@ -44,7 +44,7 @@ def list_drones(request: Request, runtime: RuntimeDep, role: RoleDep) -> list[di
     ]
 
 
-@router.get("/{drone_id}")
+@router.get("/{drone_id}", response_model=DroneInfo, response_model_exclude_unset=True)
 def get_drone(
     request: Request, stack: DroneDep, runtime: RuntimeDep, role: RoleDep
 ) -> dict[str, Any]:
@@ -68,7 +68,7 @@ async def describe(stack: DroneDep, runtime: RuntimeDep, _role: RoleDep) -> Desc
 
 @router.post("/{drone_id}/{action}", response_model=ActionResult)
 async def act(
-    action: Action,
+    which: Annotated[DirectAction, Path(alias="action")],
     request: Request,
     stack: DroneDep,
     runtime: RuntimeDep,
@@ -91,6 +91,7 @@ async def act(
     safety door; the answer says when it ran (``delivered``), by which ``road``, and ``late_s``
     after ``issued``. ``delivered`` null: sent, not confirmed yet (try again with the same id).
     """
+    action = which.value
     check_lease(request, runtime, {action})
     source = command_source(request.headers.get("x-command-source"))
     if action in STOP_ACTIONS and body is not None and body.id is not None:
@@ -127,7 +128,11 @@ async def act(
     return ActionResult(drone=stack.name, action=action, accepted=out.accepted, detail=out.detail)
 
 
-@router.get("/{drone_id}/video.mjpg")
+@router.get(
+    "/{drone_id}/video.mjpg",
+    response_class=StreamingResponse,
+    responses={200: {"content": {f"multipart/x-mixed-replace; boundary={MJPEG_BOUNDARY}": BINARY}}},
+)
 async def video(request: Request, stack: DroneDep, _role: RoleDep) -> StreamingResponse:
     """The front camera with the tracking overlay as an MJPEG stream (at most 15 fps)."""
 

@@ -8,12 +8,13 @@ from fastapi import APIRouter, HTTPException
 from fastapi.responses import FileResponse
 
 from server.api.deps import RoleDep, RuntimeDep
+from server.api.models import BINARY, FlightDeleted, FlightList
 from server.recorder.errors import FlightNotFound, RecorderError
 
 router = APIRouter(prefix="/flights", tags=["flights"])
 
 
-@router.get("")
+@router.get("", response_model=FlightList, response_model_exclude_unset=True)
 def list_flights(runtime: RuntimeDep, _role: RoleDep) -> dict[str, Any]:
     """Every recorded flight, oldest first: ``{"flights": [{id, started, ended, drones,
     bytes, messages}]}``; the flight being recorded has ``ended: null``."""
@@ -23,7 +24,7 @@ def list_flights(runtime: RuntimeDep, _role: RoleDep) -> dict[str, Any]:
 @router.get(
     "/{flight_id}",
     response_class=FileResponse,
-    responses={200: {"content": {"application/octet-stream": {}}}},
+    responses={200: {"content": {"application/octet-stream": BINARY}}},
 )
 def download_flight(flight_id: str, runtime: RuntimeDep, _role: RoleDep) -> FileResponse:
     """The flight's MCAP file (open it in Foxglove, or ``uav-console replay FILE``).
@@ -46,7 +47,7 @@ def download_flight(flight_id: str, runtime: RuntimeDep, _role: RoleDep) -> File
 
 
 @router.delete("/{flight_id}")
-def delete_flight(flight_id: str, runtime: RuntimeDep, role: RoleDep) -> dict[str, Any]:
+def delete_flight(flight_id: str, runtime: RuntimeDep, role: RoleDep) -> FlightDeleted:
     """Delete a recording (pilot only: 403 for an observer; 404 unknown; 409 in progress)."""
     if role != "pilot":
         raise HTTPException(status_code=403, detail=f"role '{role}' may not delete recordings")
@@ -56,4 +57,4 @@ def delete_flight(flight_id: str, runtime: RuntimeDep, role: RoleDep) -> dict[st
         raise HTTPException(status_code=404, detail=str(exc)) from exc
     except RecorderError as exc:
         raise HTTPException(status_code=409, detail=str(exc)) from exc
-    return {"deleted": flight_id}
+    return FlightDeleted(deleted=flight_id)

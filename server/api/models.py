@@ -4,9 +4,47 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field
+from fastapi import FastAPI
+from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema
 
+from drone.commands import COMMAND_ADAPTER
 from server.api.strict import StrictBody
+
+COMMAND_SCHEMA_PREFIX = "Command"
+"""OpenAPI component names of the command union: ``Command`` (the union) and ``CommandMove``,
+``CommandTurn``, … (its members), apart from the REST bodies' own names."""
+
+CommandList = Annotated[
+    list[dict[str, Any]],
+    WithJsonSchema(
+        {"type": "array", "items": {"$ref": f"#/components/schemas/{COMMAND_SCHEMA_PREFIX}"}}
+    ),
+]
+"""Commands as they travel (DESIGN §4's flat objects, in the grammar's key order), documented
+as the typed union of drone/commands.py (:func:`add_command_schemas` puts it in /docs)."""
+
+
+def command_schemas() -> dict[str, Any]:
+    """The union's JSON schemas as OpenAPI components (``Command`` and one per member)."""
+    prefix = COMMAND_SCHEMA_PREFIX
+    schema = COMMAND_ADAPTER.json_schema(
+        mode="serialization", ref_template=f"#/components/schemas/{prefix}{{model}}"
+    )
+    members = {f"{prefix}{name}": s for name, s in schema.pop("$defs").items()}
+    return {prefix: schema, **members}
+
+
+def add_command_schemas(app: FastAPI) -> None:
+    """Make ``app.openapi()`` hold :func:`command_schemas` among its components."""
+    generate = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        spec = generate()
+        spec.setdefault("components", {}).setdefault("schemas", {}).update(command_schemas())
+        return spec
+
+    app.openapi = openapi  # type: ignore[method-assign]
+
 
 # Wind a simulator fault may blow: well beyond what an AR.Drone survives (Beaufort 11,
 # ~30 m/s), finite (issue 14: [1e308, 1e308] was accepted).
@@ -21,7 +59,7 @@ class InterpretRequest(StrictBody):
 
 class InterpretResponse(BaseModel):
     text: str
-    commands: list[dict[str, Any]]
+    commands: CommandList
 
 
 class CommandRequest(StrictBody):
@@ -39,7 +77,7 @@ class CommandRequest(StrictBody):
 
 class CommandResponse(BaseModel):
     reply: str
-    commands: list[dict[str, Any]]
+    commands: CommandList
     accepted: bool
     expects: str = Field(
         "", description="'confirm': the reply asks 'Did you say …?'; send yes or no next"
@@ -95,3 +133,103 @@ class Describe(BaseModel):
     drone: str
     text: str
     ms: float | None = None
+
+
+# -- Responses of routes whose bodies come from a producer's dict (telemetry, the world, the
+# fleet): the fields every answer holds are named and typed for /docs; anything more the
+# producer writes (a MAVLink drone's extra telemetry, say) passes through unchanged. Routes
+# answer with ``response_model_exclude_unset`` so nothing is added that the producer left out.
+
+Num = int | float
+"""A JSON number as the producer wrote it (an integer stays an integer on the wire)."""
+
+
+class OpenResponse(BaseModel):
+    """Named fields documented and checked; further fields passed through as they are."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class WorldInfo(OpenResponse):
+    """``GET /world`` (drone/sim/world.py ``World.to_dict``): map frame, metres."""
+
+    name: str
+    kind: str = Field(description="indoor or outdoor")
+    frame: str = Field(description="always 'map' (REP 103: x east, y north, z up)")
+    bounds: dict[str, Num] = Field(description="x_min, x_max, y_min, y_max, z_min, z_max")
+    markers: list[dict[str, Any]] = Field(description="id, dictionary, position, yaw, size_m")
+    stations: list[dict[str, Any]] = Field(description="home and charging stations")
+
+
+class VehicleProcess(OpenResponse):
+    """Where a drone runs in its own vehicle process: its link and its safety door."""
+
+    mode: str
+    connected: bool
+    pid: int | None = None
+    door_url: str | None = Field(default=None, description="the safety door, for this caller")
+    door_ticket: str | None = Field(default=None, description="what opens it (pilots only)")
+    age_s: float | None = None
+
+
+class DroneInfo(OpenResponse):
+    """``GET /drones/{id}``: the vehicle's snapshot (pose estimate, battery, control state,
+    controller timing) plus these fields; ``vehicle`` for a drone in its own process."""
+
+    name: str
+    simulated: bool
+    link_ok: bool
+    task: dict[str, Any] | None = Field(default=None, description="the running task")
+    vehicle: VehicleProcess | None = None
+
+
+class SimTruth(OpenResponse):
+    """``GET /sim/{id}/truth``: the simulator's true state (map frame, radians)."""
+
+    name: str
+    x: Num
+    y: Num
+    z: Num
+    yaw_rad: Num
+    battery_pct: Num
+
+
+class FaultApplied(BaseModel):
+    drone: str
+    fault: str
+    applied: bool
+
+
+class FlightRow(OpenResponse):
+    """One recorded flight (ISO 8601 UTC times); ``ended`` null while it is being recorded."""
+
+    id: str
+    started: str | None
+    ended: str | None
+    drones: list[str]
+    bytes: int
+    messages: int
+
+
+class FlightList(BaseModel):
+    flights: list[FlightRow]
+
+
+class FlightDeleted(BaseModel):
+    deleted: str
+
+
+class SpeechStatus(BaseModel):
+    """``GET /speech/status``: server recognition's state and the pool's load."""
+
+    status: str
+    model: str | None
+    recognizer: str
+    workers: int
+    running: int
+    waiting: int
+    streams: int
+
+
+BINARY = {"schema": {"type": "string", "format": "binary"}}
+"""The OpenAPI schema of a body that is bytes (a file, audio, a camera stream)."""

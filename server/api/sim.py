@@ -7,12 +7,12 @@ from typing import Any
 from fastapi import APIRouter, HTTPException
 
 from server.api.deps import DroneDep, LeaseDep, PilotDep, RoleDep
-from server.api.models import FaultRequest
+from server.api.models import FaultApplied, FaultRequest, SimTruth
 
 router = APIRouter(prefix="/sim", tags=["simulator"])
 
 
-@router.get("/{drone_id}/truth")
+@router.get("/{drone_id}/truth", response_model=SimTruth, response_model_exclude_unset=True)
 def truth(stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
     """The simulated drone's true pose, velocity, battery and control state."""
     if stack.sim is None:
@@ -21,7 +21,7 @@ def truth(stack: DroneDep, _role: RoleDep) -> dict[str, Any]:
 
 
 @router.post("/{drone_id}/fault")
-def fault(body: FaultRequest, stack: DroneDep, _role: PilotDep, _lease: LeaseDep) -> dict[str, Any]:
+def fault(body: FaultRequest, stack: DroneDep, _role: PilotDep, _lease: LeaseDep) -> FaultApplied:
     """Inject a fault: link loss for a while, battery drained to a level, a wind gust, or clear.
 
     Needs the pilot lease to be free or held by the caller (409 otherwise)."""
@@ -31,4 +31,4 @@ def fault(body: FaultRequest, stack: DroneDep, _role: PilotDep, _lease: LeaseDep
         stack.inject_fault(body)
     except ValueError as exc:
         raise HTTPException(status_code=422, detail=str(exc)) from exc
-    return {"drone": stack.name, "fault": body.kind, "applied": True}
+    return FaultApplied(drone=stack.name, fault=body.kind, applied=True)

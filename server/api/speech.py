@@ -20,6 +20,7 @@ from fastapi import APIRouter, HTTPException, Query, Request, WebSocket, WebSock
 from pydantic import BaseModel, Field
 
 from server.api.deps import RoleDep, RuntimeDep, check_lease
+from server.api.models import CommandList, SpeechStatus
 from server.security import Role, token_from
 from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
@@ -43,7 +44,7 @@ CLOSE_TRY_AGAIN = 1013  # RFC 6455 §7.4.1 (IANA registry): try again later
 class SpeechResponse(BaseModel):
     text: str = Field(description="the sentence handed to the dialog (snapped to the grammars)")
     confidence: float
-    commands: list[dict[str, Any]]
+    commands: CommandList
     reply: str = Field(description="the dialog's answer ('' with execute=false)")
     accepted: bool
     heard: str = Field(description="the recogniser's own transcript")
@@ -146,20 +147,20 @@ async def speech(
     )
 
 
-@router.get("/speech/status")
-def speech_status(runtime: RuntimeDep, _role: RoleDep) -> dict[str, Any]:
+@router.get("/speech/status", response_model=SpeechStatus)
+def speech_status(runtime: RuntimeDep, _role: RoleDep) -> SpeechStatus:
     """Whether server recognition is ready, the model, the recogniser setting, the pool load."""
     service = _service(runtime)
     running, waiting = service.pool.load if service.pool else (0, 0)
-    return {
-        "status": service.status(),
-        "model": service.model_name,
-        "recognizer": getattr(runtime.settings, "recognizer", "auto"),
-        "workers": service.workers,
-        "running": running,
-        "waiting": waiting,
-        "streams": service.streams,
-    }
+    return SpeechStatus(
+        status=service.status(),
+        model=service.model_name,
+        recognizer=getattr(runtime.settings, "recognizer", "auto"),
+        workers=service.workers,
+        running=running,
+        waiting=waiting,
+        streams=service.streams,
+    )
 
 
 @router.websocket("/speech/stream")

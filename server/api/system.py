@@ -8,7 +8,7 @@ from fastapi import APIRouter
 
 from server import __version__
 from server.api.deps import RoleDep, RuntimeDep
-from server.api.models import BusHealth, Health
+from server.api.models import BusHealth, Health, WorldInfo
 
 router = APIRouter(tags=["system"])
 
@@ -31,7 +31,7 @@ def health(runtime: RuntimeDep) -> Health:
     )
 
 
-@router.get("/world")
+@router.get("/world", response_model=WorldInfo, response_model_exclude_unset=True)
 def world(runtime: RuntimeDep, _role: RoleDep) -> dict[str, Any]:
     """Markers (id and pose), stations, bounds and GPS origin of the world being flown."""
     return runtime.world.to_dict()

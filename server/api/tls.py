@@ -10,11 +10,16 @@ from fastapi import APIRouter, HTTPException
 from fastapi.responses import Response
 
 from server.api.deps import RuntimeDep
+from server.api.models import BINARY
 
 router = APIRouter(tags=["system"])
 
 
-@router.get("/tls/ca.pem", response_class=Response)
+@router.get(
+    "/tls/ca.pem",
+    response_class=Response,
+    responses={200: {"content": {"application/x-x509-ca-cert": BINARY}}},
+)
 def ca_certificate(runtime: RuntimeDep) -> Response:
     """The CA that signed this server's certificate (404 when not serving with the local CA)."""
     tls = getattr(runtime, "tls", None)

@@ -18,6 +18,7 @@ from fastapi.responses import Response
 from starlette.datastructures import State
 
 from server.api.deps import RoleDep
+from server.api.models import BINARY
 from server.speech.errors import SynthesisError
 from server.speech.synth import Voice, best_voice, espeak
 
@@ -47,7 +48,7 @@ async def server_voice(state: State) -> Voice | None:
     return voice
 
 
-@router.get("/tts", response_class=Response, responses={200: {"content": {"audio/wav": {}}}})
+@router.get("/tts", response_class=Response, responses={200: {"content": {"audio/wav": BINARY}}})
 async def tts(
     request: Request, _role: RoleDep, text: str = Query(min_length=1, max_length=MAX_CHARS)
 ) -> Response:

@@ -25,6 +25,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
+from drone.commands import (
+    Cancel,
+    Describe,
+    Emergency,
+    Help,
+    Hover,
+    InvalidCommand,
+    Land,
+    PatrolControl,
+    Query,
+    parse_command,
+)
 from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, audit_outcome, not_flown
 from drone.supervisor.alarms import Alarm
 from server.dialog import assist, clarify, confirm, replies
@@ -468,37 +480,45 @@ class DialogManager:
         return None
 
     async def _execute(self, commands: list[dict[str, Any]]) -> tuple[str, bool]:
-        """Run the sentence; (reply, accepted). The task manager may refuse it as a whole."""
+        """Run the sentence; (reply, accepted). The task manager may refuse it as a whole.
+
+        Each command is read as the typed union (drone/commands.py) and handled by its type:
+        the dialog's own (help, query, describe, the fleet's patrol, cancel) here, stops at
+        once, the rest queued for the task manager as said."""
         said: list[str] = []
         queue: list[dict[str, Any]] = []
-        for i, cmd in enumerate(commands):
-            action = cmd["action"]
-            if action == "help":
-                said.append(assist.help_text(self._state))
-            elif action == "query":
-                item = cmd.get("item", "state")
-                said.append(replies.answer(item, self.vehicle.snapshot(), self._state))
-            elif action == "describe":
-                said.append(await self._describe())
-            elif action in ("patrol_start", "patrol_pause", "patrol_resume") or (
-                action == "patrol_stop" and self._fleet_may_run()
-            ):
-                ok, text = await self._fleet_command(cmd)
-                if ok or action != "patrol_stop":
-                    said.append(text)
-                else:  # no fleet patrol running: stop this drone's own task
+        try:
+            typed = [parse_command(c) for c in commands]
+        except InvalidCommand as exc:  # a grammar edited to say what no command is
+            return assist.operator_words(str(exc)), False
+        for i, (cmd, command) in enumerate(zip(commands, typed, strict=True)):
+            action = command.action
+            match command:
+                case Help():
+                    said.append(assist.help_text(self._state))
+                case Query(item=item):
+                    said.append(
+                        replies.answer(item or "state", self.vehicle.snapshot(), self._state)
+                    )
+                case Describe():
+                    said.append(await self._describe())
+                case PatrolControl() if action != "patrol_stop" or self._fleet_may_run():
+                    ok, text = await self._fleet_command(command)
+                    if ok or action != "patrol_stop":
+                        said.append(text)
+                    else:  # no fleet patrol running: stop this drone's own task
+                        said.append(self._cancel_own(queue))
+                case Cancel() | PatrolControl():  # a patrol_stop with no fleet: this drone's own
                     said.append(self._cancel_own(queue))
-            elif action in ("cancel", "patrol_stop"):  # no fleet: this drone's own
-                said.append(self._cancel_own(queue))
-            elif action == "emergency" or (
-                action in PREEMPTING and not queue and not _motion_before(commands, i)
-            ):
-                self.tasks.preempt(cmd)
-                self._event(action)
-                said.append(replies.confirmation(cmd) + ".")
-            else:
-                queue.append(cmd)
-                said.append(replies.confirmation(cmd) + ".")
+                case Emergency() | Land() | Hover() if isinstance(command, Emergency) or (
+                    not queue and not _motion_before(commands, i)
+                ):
+                    self.tasks.preempt(cmd)
+                    self._event(action)
+                    said.append(replies.confirmation(cmd) + ".")
+                case _:
+                    queue.append(cmd)
+                    said.append(replies.confirmation(cmd) + ".")
         if queue:
             decisions = list(self.tasks.submit(list(queue)))
             refused = [d for d in decisions if not d.accepted]
@@ -526,16 +546,23 @@ class DialogManager:
         self._event("cancel")
         return "OK, cancelled."
 
-    async def _fleet_command(self, cmd: dict[str, Any]) -> tuple[bool, str]:
+    async def _fleet_command(self, cmd: PatrolControl) -> tuple[bool, str]:
         """Start, stop, pause or resume the Central patrol (the console's buttons do the
         same): (ok, reply).
 
         The fleet port answers at once in the server's process, or, from a vehicle process,
         after a call to the central server (an awaitable)."""
-        if self.fleet is None:
+        fleet = self.fleet
+        if fleet is None:
             return False, "There is no fleet manager here to run a patrol."
-        verb = str(cmd["action"]).removeprefix("patrol_")
-        method = getattr(self.fleet, verb, None)
+        verb = cmd.action.removeprefix("patrol_")
+        # One fixed method per action (a port may lack one: said, not raised).
+        method = {
+            "patrol_start": getattr(fleet, "start", None),
+            "patrol_stop": getattr(fleet, "stop", None),
+            "patrol_pause": getattr(fleet, "pause", None),
+            "patrol_resume": getattr(fleet, "resume", None),
+        }[cmd.action]
         if method is None:
             return False, f"The fleet manager here cannot {verb} a patrol."
         reply = method()

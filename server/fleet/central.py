@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from fastapi import APIRouter, HTTPException, params
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.errors import MissionError
@@ -218,6 +218,18 @@ class CentralPatrol:
         }
 
 
+class PatrolStatus(BaseModel):
+    """``GET /patrol`` (:meth:`CentralPatrol.status`); ``POST``/``DELETE`` add ``reply``."""
+
+    model_config = ConfigDict(extra="allow")
+
+    running: bool = Field(description="a drone is on its way or patrolling")
+    state: str = Field(description="the live mission's state, or 'none'")
+    mission: dict[str, Any] | None = Field(description="the live mission (GET /missions/{id})")
+    drones: list[dict[str, Any]] = Field(description="name, role, battery, state, mission")
+    reply: str | None = Field(default=None, description="what was done, in words")
+
+
 class PatrolStart(BaseModel):
     """``POST /patrol``: what to do (default: start) and the Central patrol's knobs."""
 
@@ -232,13 +244,13 @@ def make_patrol_router(
     """``GET/POST/DELETE /patrol`` (mounted under ``/api/v1`` with the fleet router)."""
     router = APIRouter(tags=["fleet"], dependencies=list(dependencies or ()))
 
-    @router.get("/patrol")
+    @router.get("/patrol", response_model=PatrolStatus, response_model_exclude_unset=True)
     async def patrol_status() -> dict[str, Any]:
         """The Central patrol: running mission with live coverage, every drone's role and
         battery."""
         return central.status()
 
-    @router.post("/patrol")
+    @router.post("/patrol", response_model=PatrolStatus, response_model_exclude_unset=True)
     async def patrol_start(body: PatrolStart | None = None) -> dict[str, Any]:
         """Start the world's patrol with all drones (409 when one is live), or pause, resume
         or end it (``action``; 409 when the patrol is not in a state for it, 404 when there
@@ -260,7 +272,7 @@ def make_patrol_router(
             raise HTTPException(status_code=code, detail=reply.text)
         return {"reply": reply.text, "mission": reply.mission, **central.status()}
 
-    @router.delete("/patrol")
+    @router.delete("/patrol", response_model=PatrolStatus, response_model_exclude_unset=True)
     async def patrol_stop() -> dict[str, Any]:
         """End the patrol; the drones fly home (404 when none is live)."""
         reply = central.stop()

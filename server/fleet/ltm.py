@@ -26,15 +26,21 @@ in a hover says so the same way, and the CTM sends it home again.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping
 from typing import Any
 
+from pydantic import ValidationError
+
+from drone.commands import Command, Hover, Land, Takeoff, Waypoint, Waypoints
 from drone.vehicle import Vehicle
 from server.fleet.accuracy import GPS_SIGMA_M
 from server.fleet.geo import Enu, Geo, to_enu, to_geo
 from server.fleet.messages import FlightPlan, LtmStatus, PlanKind
 from server.fleet.planner import FlightModel, reserve_pct
+
+log = logging.getLogger(__name__)
 
 ALTITUDE_MAX_MM = 20000  # control:altitude_max for outdoor flight (firmware default 3000 mm)
 # general:navdata_options: demo (tag 0) + raw pressure (tag 21, the barometer the console shows)
@@ -174,7 +180,10 @@ class LocalTaskManager:
         if self.plan is not None and plan.plan_id == self.plan.plan_id:
             return True, "already flying this plan"
         self.configure_drone()
-        commands = self._commands(plan)
+        try:
+            commands = self._commands(plan)
+        except ValidationError as exc:  # e.g. an estimate gone NaN: refused, never raised
+            return False, f"refused: {exc.errors(include_url=False)[0]['msg']}"
         if plan.kind is PlanKind.NONE:
             self._submit(None)
             self._applied(plan, ())
@@ -189,7 +198,7 @@ class LocalTaskManager:
         self._applied(plan, decisions)
         return True, f"flying plan {plan.plan_id} ({plan.kind.value})"
 
-    def _submit(self, commands: list[dict[str, Any]] | None) -> list[Any]:
+    def _submit(self, commands: list[Command] | None) -> list[Any]:
         """Replace what the task manager runs with ``commands`` (None: cancel), as the LTM:
         the tasks this drops were the LTM's, not taken by the operator."""
         self._own = True
@@ -249,57 +258,53 @@ class LocalTaskManager:
         ok, reason = self.apply_plan(plan, now)
         return {"accepted": ok, "reason": reason, "plan_id": plan.plan_id}
 
-    def _commands(self, plan: FlightPlan) -> list[dict[str, Any]]:
+    def _commands(self, plan: FlightPlan) -> list[Command]:
         s = self.vehicle.snapshot()
-        cmds: list[dict[str, Any]] = []
+        cmds: list[Command] = []
         if plan.kind is PlanKind.PATROL:
             if not s.flying:
-                cmds.append({"action": "takeoff"})
+                cmds.append(Takeoff())
             n = len(plan.route)
             idx = [(plan.start_index + k) % n for k in range(n)]
             heads = plan.headings_deg
             if plan.join is not None:  # enter the route here first, then go round from there
                 j = plan.join
                 cmds.append(
-                    {
-                        "action": "waypoints",
-                        "waypoints": [{"x": j.x, "y": j.y, "z": j.z}],
-                        "tolerance_m": plan.tolerance_m,
-                    }
+                    Waypoints(
+                        waypoints=[Waypoint(x=j.x, y=j.y, z=j.z)], tolerance_m=plan.tolerance_m
+                    )
                 )
+            route = [plan.route[i] for i in idx]
             cmds.append(
-                {
-                    "action": "waypoints",
-                    "waypoints": [
-                        {"x": plan.route[i].x, "y": plan.route[i].y, "z": plan.route[i].z}
-                        | ({"yaw_deg": heads[i]} if heads else {})
-                        for i in idx
+                Waypoints(
+                    waypoints=[
+                        Waypoint(x=p.x, y=p.y, z=p.z, yaw_deg=heads[i] if heads else None)
+                        for i, p in zip(idx, route, strict=True)
                     ],
-                    "loop": plan.loop,
-                    "tolerance_m": plan.tolerance_m,
-                }
+                    loop=plan.loop,
+                    tolerance_m=plan.tolerance_m,
+                )
             )
         elif plan.kind is PlanKind.RETURN:
             if s.flying:
                 cmds.extend(self._home_commands(plan.cruise_z, s))
         elif plan.kind is PlanKind.HOLD and s.flying:
-            cmds.append({"action": "hover"})
+            cmds.append(Hover())
         return cmds
 
-    def _home_commands(self, cruise_z: float, s: Any) -> list[dict[str, Any]]:
+    def _home_commands(self, cruise_z: float, s: Any) -> list[Command]:
         st = self.station
         z = max(cruise_z, 1.0)
         limits = getattr(self.vehicle, "limits", None)
         if limits is not None:  # the world's ceiling (drone/limits.py), e.g. a room's 2.7 m
             z = min(z, limits.ceiling_m)
         return [
-            {
-                "action": "waypoints",
+            Waypoints(
                 # climb (or descend) in place to the transit layer, then over the station
-                "waypoints": [{"x": s.x, "y": s.y, "z": z}, {"x": st.x, "y": st.y, "z": z}],
-                "tolerance_m": 0.5,
-            },
-            {"action": "land"},
+                waypoints=[Waypoint(x=s.x, y=s.y, z=z), Waypoint(x=st.x, y=st.y, z=z)],
+                tolerance_m=0.5,
+            ),
+            Land(),
         ]
 
     # ------------------------------------------------------------------ step
@@ -315,7 +320,10 @@ class LocalTaskManager:
             going_home = self.plan is not None and self.plan.kind is PlanKind.RETURN
             if (silent or low) and not going_home:
                 self.autonomous = "ctm_silent" if silent else "battery_reserve"
-                self._submit(self._home_commands(self.home_cruise_z, s))
+                try:
+                    self._submit(self._home_commands(self.home_cruise_z, s))
+                except ValidationError as exc:  # no finite position to fly home from
+                    log.warning("%s: cannot fly home: %s", self.name, exc)
         if now < self._next_status:
             return None
         self._next_status = now + self.period_s

@@ -12,9 +12,18 @@ import enum
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Annotated, Any, Self
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
@@ -66,46 +75,150 @@ class PlanKind(enum.Enum):
     NONE = "none"  # cancel; hover if flying
 
 
-def _num(d: Mapping[str, Any], key: str, *, default: float | None = None) -> float:
-    v = d.get(key, default)
-    if v is None:
-        raise MessageError(f"missing field {key!r}")
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise MessageError(f"field {key!r} must be a finite number, got {v!r}")
-    return float(v)
+def _finite(value: Any, info: ValidationInfo) -> float:
+    """A JSON number that is finite (``true`` is no number), as a float."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"field {info.field_name!r} must be a finite number, got {value!r}")
+    return float(value)
 
 
-def _str(d: Mapping[str, Any], key: str, default: str | None = None) -> str:
-    v = d.get(key, default)
-    if not isinstance(v, str):
-        raise MessageError(f"field {key!r} must be a string, got {v!r}")
-    return v
+def _integer(value: Any, info: ValidationInfo) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"field {info.field_name!r} must be an integer, got {value!r}")
+    return value
 
 
-def _bool(d: Mapping[str, Any], key: str, default: bool | None = None) -> bool:
-    v = d.get(key, default)
-    if not isinstance(v, bool):
-        raise MessageError(f"field {key!r} must be true or false, got {v!r}")
-    return v
+def _text(value: Any, info: ValidationInfo) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"field {info.field_name!r} must be a string, got {value!r}")
+    return value
 
 
-def _word(d: Mapping[str, Any], key: str) -> str:
-    """A short free-text field (at most ``MAX_WORD`` characters, "" when absent)."""
-    v = _str(d, key, "")
-    if len(v) > MAX_WORD:
-        raise MessageError(f"field {key!r} is longer than {MAX_WORD} characters")
-    return v
+def _flag(value: Any, info: ValidationInfo) -> bool:
+    if not isinstance(value, bool):
+        raise ValueError(f"field {info.field_name!r} must be true or false, got {value!r}")
+    return value
 
 
-def _mapping(obj: Any, what: str) -> Mapping[str, Any]:
-    if not isinstance(obj, Mapping):
-        raise MessageError(f"{what} must be a JSON object, got {type(obj).__name__}")
-    return obj
+def _word(value: Any, info: ValidationInfo) -> str:
+    """A short free-text field (at most ``MAX_WORD`` characters)."""
+    text = _text(value, info)
+    if len(text) > MAX_WORD:
+        raise ValueError(f"field {info.field_name!r} is longer than {MAX_WORD} characters")
+    return text
 
 
-def _point(obj: Any, what: str) -> Enu:
-    d = _mapping(obj, what)
-    return Enu(_num(d, "x"), _num(d, "y"), _num(d, "z"))
+Finite = Annotated[float, BeforeValidator(_finite)]
+Integer = Annotated[int, BeforeValidator(_integer)]
+Text = Annotated[str, BeforeValidator(_text)]
+Flag = Annotated[bool, BeforeValidator(_flag)]
+Word = Annotated[str, BeforeValidator(_word)]
+
+
+class _Message(BaseModel):
+    """The fields of a fleet message as they arrive (unknown fields are ignored: a newer
+    peer may send more)."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    @classmethod
+    def read(cls, obj: Any, what: str) -> Self:
+        """``obj`` checked field by field.
+
+        Raises:
+            MessageError: not a JSON object, or the first bad field, named.
+        """
+        if not isinstance(obj, Mapping):
+            raise MessageError(f"{what} must be a JSON object, got {type(obj).__name__}")
+        try:
+            return cls.model_validate(dict(obj))
+        except ValidationError as exc:
+            raise MessageError(_first_error(what, exc)) from None
+
+
+def _first_error(what: str, exc: ValidationError) -> str:
+    err = exc.errors(include_url=False)[0]
+    where = ".".join(str(p) for p in err["loc"])
+    if err["type"] == "value_error":
+        return str(err["ctx"]["error"])
+    if err["type"] == "missing":
+        return f"missing field {where!r}"
+    return f"{what}: field {where!r}: {err['msg']}"
+
+
+class _Point(_Message):
+    x: Finite
+    y: Finite
+    z: Finite
+
+    @property
+    def enu(self) -> Enu:
+        return Enu(self.x, self.y, self.z)
+
+
+class _StatusFields(_Message):
+    """:class:`LtmStatus` on the wire."""
+
+    name: Text
+    t: Finite
+    seq: Integer = 0
+    x: Finite
+    y: Finite
+    z: Finite
+    yaw_deg: Finite = 0.0
+    lat: Finite = 0.0
+    lon: Finite = 0.0
+    battery_pct: Finite
+    flying: Flag
+    state: Text
+    link_ok: Flag
+    emergency: Flag = False
+    station: _Point
+    plan_id: Integer = 0
+    task: Text = ""
+    task_state: Text = "idle"
+    progress: Finite = 0.0
+    autonomous: Text = ""
+    operator: Word = ""
+    held: Word = ""
+    battery_known: Flag = True
+
+    @field_validator("name")
+    @classmethod
+    def _named(cls, value: str) -> str:
+        if not value:
+            raise ValueError("field 'name' must not be empty")
+        return value
+
+    @field_validator("seq")
+    @classmethod
+    def _counted(cls, value: int) -> int:
+        if value < 0:
+            raise ValueError(f"field 'seq' must be a non-negative integer, got {value!r}")
+        return value
+
+
+class _PlanFields(_Message):
+    """:class:`FlightPlan` on the wire (kind-dependent rules in ``FlightPlan.from_dict``)."""
+
+    plan_id: Integer
+    kind: Any = None
+    mission: Text = ""
+    route: list[_Point] = Field(default_factory=list)
+    loop: Flag = True
+    start_index: Integer = 0
+    cruise_z: Finite = 5.0
+    tolerance_m: Finite = 1.0
+    headings_deg: list[Finite] = Field(default_factory=list)
+    join: _Point | None = None
+
+    @field_validator("route", "headings_deg", mode="before")
+    @classmethod
+    def _listed(cls, value: Any, info: ValidationInfo) -> Any:
+        if not isinstance(value, list):
+            what = "{x, y, z}" if info.field_name == "route" else "headings"
+            raise ValueError(f"field {info.field_name!r} must be a list of {what}")
+        return value
 
 
 @dataclass(frozen=True)
@@ -150,41 +263,10 @@ class LtmStatus:
 
     @classmethod
     def from_dict(cls, obj: Any) -> LtmStatus:
-        d = _mapping(obj, "status")
-        seq = d.get("seq", 0)
-        if isinstance(seq, bool) or not isinstance(seq, int) or seq < 0:
-            raise MessageError(f"field 'seq' must be a non-negative integer, got {seq!r}")
-        pid = d.get("plan_id", 0)
-        if isinstance(pid, bool) or not isinstance(pid, int):
-            raise MessageError(f"field 'plan_id' must be an integer, got {pid!r}")
-        name = _str(d, "name")
-        if not name:
-            raise MessageError("field 'name' must not be empty")
-        return cls(
-            name=name,
-            t=_num(d, "t"),
-            seq=seq,
-            x=_num(d, "x"),
-            y=_num(d, "y"),
-            z=_num(d, "z"),
-            yaw_deg=_num(d, "yaw_deg", default=0.0),
-            lat=_num(d, "lat", default=0.0),
-            lon=_num(d, "lon", default=0.0),
-            battery_pct=_num(d, "battery_pct"),
-            flying=_bool(d, "flying"),
-            state=_str(d, "state"),
-            link_ok=_bool(d, "link_ok"),
-            emergency=_bool(d, "emergency", False),
-            station=_point(d.get("station"), "station"),
-            plan_id=pid,
-            task=_str(d, "task", ""),
-            task_state=_str(d, "task_state", "idle"),
-            progress=_num(d, "progress", default=0.0),
-            autonomous=_str(d, "autonomous", ""),
-            operator=_word(d, "operator"),
-            held=_word(d, "held"),
-            battery_known=_bool(d, "battery_known", True),
-        )
+        """Raises: MessageError naming the first bad field."""
+        d = _StatusFields.read(obj, "status")
+        fields = {k: getattr(d, k) for k in type(d).model_fields if k != "station"}
+        return cls(**fields, station=d.station.enu)
 
 
 @dataclass(frozen=True)
@@ -222,47 +304,34 @@ class FlightPlan:
 
     @classmethod
     def from_dict(cls, obj: Any) -> FlightPlan:
-        d = _mapping(obj, "flight plan")
+        """Raises: MessageError naming the first bad field."""
+        d = _PlanFields.read(obj, "flight plan")
         try:
-            kind = PlanKind(d.get("kind"))
+            kind = PlanKind(d.kind)
         except ValueError:
             kinds = ", ".join(k.value for k in PlanKind)
-            raise MessageError(
-                f"field 'kind' must be one of {kinds}, got {d.get('kind')!r}"
-            ) from None
-        raw = d.get("route", [])
-        if not isinstance(raw, list):
-            raise MessageError("field 'route' must be a list of {x, y, z}")
-        route = tuple(_point(p, f"route[{i}]") for i, p in enumerate(raw))
+            raise MessageError(f"field 'kind' must be one of {kinds}, got {d.kind!r}") from None
+        route = tuple(p.enu for p in d.route)
         if kind is PlanKind.PATROL and not route:
             raise MessageError("a patrol plan needs a non-empty 'route'")
-        pid = d.get("plan_id")
-        if isinstance(pid, bool) or not isinstance(pid, int):
-            raise MessageError(f"field 'plan_id' must be an integer, got {pid!r}")
-        start = d.get("start_index", 0)
-        if isinstance(start, bool) or not isinstance(start, int):
-            raise MessageError(f"field 'start_index' must be an integer, got {start!r}")
+        start = d.start_index
         if route and not 0 <= start < len(route):
             raise MessageError(f"field 'start_index' {start} is outside the route")
-        tol = _num(d, "tolerance_m", default=1.0)
-        if tol <= 0:
+        if d.tolerance_m <= 0:
             raise MessageError("field 'tolerance_m' must be > 0")
-        heads = d.get("headings_deg", [])
-        if not isinstance(heads, list) or (heads and len(heads) != len(route)):
+        if d.headings_deg and len(d.headings_deg) != len(route):
             raise MessageError("field 'headings_deg' must be a list with one heading a waypoint")
-        headings = tuple(_num({"h": h}, "h") for h in heads)
-        join = _point(d["join"], "join") if d.get("join") is not None else None
         return cls(
-            join=join,
-            headings_deg=headings,
-            plan_id=pid,
+            join=None if d.join is None else d.join.enu,
+            headings_deg=tuple(d.headings_deg),
+            plan_id=d.plan_id,
             kind=kind,
-            mission=_str(d, "mission", ""),
+            mission=d.mission,
             route=route,
-            loop=_bool(d, "loop", True),
+            loop=d.loop,
             start_index=start,
-            cruise_z=_num(d, "cruise_z", default=5.0),
-            tolerance_m=tol,
+            cruise_z=d.cruise_z,
+            tolerance_m=d.tolerance_m,
         )
 
 

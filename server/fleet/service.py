@@ -34,7 +34,7 @@ from server.fleet.messages import PATROL_SERVICE, PATROL_SERVICE_TYPE, Handoff
 from server.fleet.node import CtmNode, LtmNode
 from server.fleet.patrol import station_positions
 from server.fleet.planner import FlightModel, StationModel
-from server.fleet.router import make_fleet_router
+from server.fleet.router import CentralRoleInfo, make_fleet_router
 from server.graph import Graph
 from server.timewarp import guard_s
 
@@ -98,7 +98,7 @@ class FleetService:
         )
         router.include_router(make_patrol_router(self.central))
 
-        @router.get("/central")
+        @router.get("/central", response_model=CentralRoleInfo, response_model_exclude_unset=True)
         async def central_role() -> dict[str, Any]:
             """Who holds the fleet's central role, as this console sees it (``role``:
             ``central``, ``standby``, or ``only`` for a console on no bus)."""

@@ -10,6 +10,10 @@ Pipeline (each step one compiled regular expression over the whole utterance):
   5. slots are converted (labels, metres, degrees, integers); unmatched slots are omitted.
 
 Anything not matched is left out; an utterance with nothing matched gives ``[]``, never a guess.
+
+A command is the flat JSON object of DESIGN §4, keys in the grammar's order, as the page and
+the recordings see it; :meth:`Parsed.typed` and :meth:`Interpretation.typed_commands` read it
+as the typed union of drone/commands.py, which every rule of the project's grammars produces.
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from drone.commands import Command as TypedCommand
+from drone.commands import parse_command
 from drone.share import share_dir
 from server.language.errors import GrammarError
 from server.language.grammar import Grammar, Matcher, Slot, load_grammar, trie_regex
@@ -74,6 +80,14 @@ class Parsed:
     text: str  # the normalised clause it was read from
     chains: bool = True  # may be read out of commands said back to back (rules.xml chain=)
 
+    def typed(self) -> TypedCommand:
+        """The command as the typed union.
+
+        Raises:
+            InvalidCommand: a grammar edited to produce an action or slot the union lacks.
+        """
+        return parse_command(self.command)
+
 
 @dataclass(frozen=True)
 class Interpretation:
@@ -87,6 +101,10 @@ class Interpretation:
     @property
     def commands(self) -> list[Command]:
         return [dict(p.command) for p in self.parsed]
+
+    def typed_commands(self) -> list[TypedCommand]:
+        """The commands as the typed union, in spoken order (see :meth:`Parsed.typed`)."""
+        return [p.typed() for p in self.parsed]
 
 
 def _alternation(words: list[str]) -> str:

@@ -20,7 +20,7 @@ from typing import Any, Literal, cast
 
 import numpy as np
 from fastapi import APIRouter, FastAPI, HTTPException, Request
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from server.api.deps import RoleDep
 from server.recorder.index import drones_of, iso
@@ -114,6 +114,26 @@ class ReplayCommand(BaseModel):
     speed: float | None = Field(default=None, gt=0, le=100)
 
 
+class ReplayStatus(BaseModel):
+    """``GET``/``POST /replay``: the recording and where the timeline stands."""
+
+    model_config = ConfigDict(extra="allow")
+
+    file: str
+    id: str
+    drones: list[str]
+    complete: bool
+    playing: bool
+    speed: float
+    position_s: float
+    duration_s: float
+    start_ns: int
+    end_ns: int
+    messages: int
+    started: str | None
+    ended: str | None
+
+
 def _player(request: Request) -> Player:
     player = getattr(request.app.state, "player", None)
     if player is None:
@@ -132,13 +152,13 @@ def _status(request: Request) -> dict[str, Any]:
 router = APIRouter(prefix="/replay", tags=["replay"])
 
 
-@router.get("")
+@router.get("", response_model=ReplayStatus)
 async def replay_status(request: Request, _role: RoleDep) -> dict[str, Any]:
     """The timeline: file, position, duration, playing, speed."""
     return _status(request)
 
 
-@router.post("")
+@router.post("", response_model=ReplayStatus)
 async def replay_control(body: ReplayCommand, request: Request, _role: RoleDep) -> dict[str, Any]:
     """Play, pause, seek (``position_s`` from the start) or set the ``speed``."""
     player = _player(request)

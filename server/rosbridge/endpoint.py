@@ -21,6 +21,7 @@ from collections.abc import Callable, Coroutine
 from typing import Any
 
 from fastapi import APIRouter, WebSocket
+from pydantic import BaseModel
 from starlette.websockets import WebSocketDisconnect, WebSocketState
 
 from server.rosbridge.budget import peek_id
@@ -318,18 +319,31 @@ def setup_graph(ctx: BridgeContext) -> None:
         ctx.graph.advertise_service(LEASE_SERVICE, "uav_console/Lease", lease_status)
 
 
+class RosbridgeProtocol(BaseModel):
+    major: int
+    minor: int
+    name: str
+
+
+class VersionInfo(BaseModel):
+    """``GET /version``: the rosbridge protocol spoken at ``/rosbridge`` and this server."""
+
+    protocol: RosbridgeProtocol
+    server: str
+
+
 def make_router(ctx: BridgeContext, *, root_ws: bool = False) -> APIRouter:
     """``GET /version`` and the ``/rosbridge`` WebSocket (also ``/`` when ``root_ws``)."""
     setup_graph(ctx)
     router = APIRouter()
 
-    @router.get("/version")
-    async def version() -> dict[str, Any]:
+    @router.get("/version", response_model=VersionInfo)
+    async def version() -> VersionInfo:
         major, minor = PROTOCOL_VERSION
-        return {
-            "protocol": {"major": major, "minor": minor, "name": "rosbridge"},
-            "server": f"uav-console {server_version()}",
-        }
+        return VersionInfo(
+            protocol=RosbridgeProtocol(major=major, minor=minor, name="rosbridge"),
+            server=f"uav-console {server_version()}",
+        )
 
     async def ws_route(websocket: WebSocket) -> None:
         await serve_rosbridge(websocket, ctx)

@@ -2,9 +2,23 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
+from drone.commands import (
+    Command,
+    Describe,
+    Emergency,
+    Goto,
+    Hover,
+    InvalidCommand,
+    Land,
+    Move,
+    Patrol,
+    ReturnHome,
+    Search,
+    Takeoff,
+    Turn,
+    Waypoints,
+    parse_command,
+)
 from server.tasks.errors import CommandError
 from server.tasks.objects import FaceObjectTask, GotoObjectTask
 from server.tasks.types import (
@@ -23,35 +37,53 @@ from server.tasks.types import (
     WaypointsTask,
 )
 
-TASK_TYPES: dict[str, type[Task]] = {
-    "takeoff": TakeoffTask,
-    "land": LandTask,
-    "emergency": EmergencyTask,
-    "hover": HoverTask,
-    "move": MoveTask,
-    "turn": TurnTask,
-    "goto": GotoMarkerTask,
-    "patrol": PatrolTask,
-    "return_home": ReturnHomeTask,
-    "search": SearchTask,
-    "waypoints": WaypointsTask,
-    "describe": DescribeTask,
-}
-"""Command ``action`` → task class. ``cancel`` and ``query`` are handled by the manager itself."""
 
-
-def build_task(command: Any) -> Task:
-    """The task for one DESIGN §4 command dict.
+def build_task(command: object) -> Task:
+    """The task for one DESIGN §4 command (a typed command or its JSON object).
 
     Raises:
-        CommandError: not a dict, no/unknown ``action``, or a malformed slot.
+        CommandError: not an object, no/unknown ``action``, or a malformed slot.
     """
-    if not isinstance(command, Mapping):
-        raise CommandError(f"a command must be an object, got {type(command).__name__}")
-    action = command.get("action")
-    cls = TASK_TYPES.get(action) if isinstance(action, str) else None
-    if cls is None:
-        raise CommandError(f"unknown action {action!r}")
-    if action in ("goto", "turn") and "object" in command and "marker" not in command:
-        cls = GotoObjectTask if action == "goto" else FaceObjectTask
-    return cls(command)
+    try:
+        cmd = parse_command(command)
+    except InvalidCommand as exc:
+        raise CommandError(str(exc)) from None
+    return task_for(cmd)
+
+
+def task_for(cmd: Command) -> Task:
+    """The task class that runs ``cmd``, one case per command type.
+
+    Raises:
+        CommandError: an action no task runs, or a slot the task needs is missing.
+    """
+    match cmd:
+        case Takeoff():
+            return TakeoffTask(cmd)
+        case Land():
+            return LandTask(cmd)
+        case Emergency():
+            return EmergencyTask(cmd)
+        case Hover():
+            return HoverTask(cmd)
+        case Move():
+            return MoveTask(cmd)
+        case Turn(object=str()):
+            return FaceObjectTask(cmd)
+        case Turn():
+            return TurnTask(cmd)
+        case Goto(marker=None, object=str()):
+            return GotoObjectTask(cmd)
+        case Goto():
+            return GotoMarkerTask(cmd)
+        case Patrol():
+            return PatrolTask(cmd)
+        case ReturnHome():
+            return ReturnHomeTask(cmd)
+        case Search():
+            return SearchTask(cmd)
+        case Waypoints():
+            return WaypointsTask(cmd)
+        case Describe():
+            return DescribeTask(cmd)
+    raise CommandError(f"unknown action {cmd.action!r}")

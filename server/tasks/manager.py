@@ -54,6 +54,9 @@ from dataclasses import dataclass
 from dataclasses import replace as dataclass_replace
 from typing import Any
 
+from pydantic import BaseModel
+
+from drone.commands import Command, parse_command, wire
 from drone.control.clock import Clock
 from drone.control.pid import Setpoint
 from drone.limits import limits_of
@@ -209,9 +212,10 @@ class TaskManager(Context):
         )
 
     def submit(
-        self, commands: Sequence[Mapping[str, Any]], *, replace: bool = False
+        self, commands: Sequence[Command | Mapping[str, Any]], *, replace: bool = False
     ) -> list[Decision]:
-        """Validate ``commands`` (a sentence) and queue them; see the module docstring."""
+        """Validate ``commands`` (a sentence: typed commands or their JSON objects) and queue
+        them; see the module docstring."""
         with self._lock:
             out, tasks = self._validate(list(commands))
             if not all(d.accepted for d in out):
@@ -236,7 +240,7 @@ class TaskManager(Context):
         return out
 
     def _validate(
-        self, commands: list[Mapping[str, Any]]
+        self, commands: list[Command | Mapping[str, Any]]
     ) -> tuple[list[Decision], list[Task | None]]:
         s = self.snapshot()
         flying = s.flying or s.ctrl_state == "TAKEOFF"
@@ -244,7 +248,12 @@ class TaskManager(Context):
         decisions: list[Decision] = []
         tasks: list[Task | None] = []
         for raw in commands:
-            cmd = dict(raw) if isinstance(raw, Mapping) else {"action": repr(raw)}
+            if isinstance(raw, Mapping):
+                cmd = dict(raw)
+            elif isinstance(raw, BaseModel):  # a typed command: as said, unstated slots omitted
+                cmd = wire(parse_command(raw))
+            else:
+                cmd = {"action": repr(raw)}
             action = cmd.get("action")
             if action in ("cancel", "query"):
                 text = "cancelling" if action == "cancel" else "answered from telemetry"

@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
+from drone.commands import Goto, Turn
 from drone.control.pid import Setpoint, wrap_angle
 from drone.vehicle import VehicleSnapshot
 from server.tasks.errors import CommandError, RefusedError
@@ -61,13 +62,9 @@ class AmbiguousObjectError(RefusedError):
         self.options = tuple(options)
 
 
-def _text(cmd: Mapping[str, Any], key: str) -> str | None:
-    v = cmd.get(key)
-    if v is None:
-        return None
-    if not isinstance(v, str) or not v.strip():
-        raise CommandError(f"'{key}' must be a non-empty string, got {v!r}")
-    return v.strip().lower()
+def _text(v: str | None) -> str | None:
+    """A slot's word as the world names it (the union has checked it is a non-empty string)."""
+    return None if v is None else v.strip().lower()
 
 
 def _plural(kind: str, n: int) -> str:
@@ -122,17 +119,17 @@ def _question(kind: str, cands: Sequence[Any], world: Any) -> str:
     return f"Which {kind}? {listed[:1].upper()}{listed[1:]}?"
 
 
-def resolve(world: Any, cmd: Mapping[str, Any], x: float, y: float) -> Any:
+def resolve(world: Any, cmd: Goto | Turn, x: float, y: float) -> Any:
     """The one object ``cmd`` names, seen from ``(x, y)`` (for nearest/farthest).
 
     Raises:
         CommandError: malformed slots; RefusedError: none fits; AmbiguousObjectError: several.
     """
-    kind = _text(cmd, "object")
+    kind = _text(cmd.object)
     if kind is None:
-        raise CommandError(f"'{cmd.get('action')}' needs 'object' or 'marker'")
-    colour = _text(cmd, "colour")
-    which = _text(cmd, "which")
+        raise CommandError(f"'{cmd.action}' needs 'object' or 'marker'")
+    colour = _text(cmd.colour)
+    which = _text(cmd.which)
     if which is not None and which not in WHICH:
         raise CommandError(f"'which' must be one of {', '.join(WHICH)}; got {which!r}")
     objects = list(getattr(world, "objects", ()))
@@ -208,15 +205,17 @@ class GotoObjectTask(LegsTask):
 
     name = "goto"
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Goto) -> None:
         super().__init__(command)
-        _text(command, "object")
+        if command.object is None:
+            raise CommandError(f"'{command.action}' needs 'object' or 'marker'")
+        self.cmd = command
         self.obj: Any = None
-        self.what = f"the {command.get('object')}"
+        self.what = f"the {command.object}"
         self._sp: Setpoint | None = None
 
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
-        self.obj = resolve(ctx.world, self.command, p.x, p.y)
+        self.obj = resolve(ctx.world, self.cmd, p.x, p.y)
         self.what = label(self.obj, ctx.world)
         _need_flying(p, f"fly to {self.what}")
         sp = standoff(self.obj, ctx, p.x, p.y)
@@ -227,7 +226,7 @@ class GotoObjectTask(LegsTask):
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
         if self.obj is None:
-            self.obj = resolve(ctx.world, self.command, s.x, s.y)
+            self.obj = resolve(ctx.world, self.cmd, s.x, s.y)
         sp = self._sp or standoff(self.obj, ctx, s.x, s.y)
         return [sp], [self.what]
 
@@ -243,11 +242,13 @@ class FaceObjectTask(LegsTask):
 
     name = "turn"
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Turn) -> None:
         super().__init__(command)
-        _text(command, "object")
+        if command.object is None:
+            raise CommandError(f"'{command.action}' needs 'object' or 'marker'")
+        self.cmd = command
         self.obj: Any = None
-        self.what = f"the {command.get('object')}"
+        self.what = f"the {command.object}"
 
     @staticmethod
     def _yaw(obj: Any, x: float, y: float) -> float:
@@ -255,7 +256,7 @@ class FaceObjectTask(LegsTask):
         return math.atan2(cy - y, cx - x)
 
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
-        self.obj = resolve(ctx.world, self.command, p.x, p.y)
+        self.obj = resolve(ctx.world, self.cmd, p.x, p.y)
         self.what = label(self.obj, ctx.world)
         _need_flying(p, f"face {self.what}")
         return replace(p, yaw_rad=self._yaw(self.obj, p.x, p.y))
@@ -264,7 +265,7 @@ class FaceObjectTask(LegsTask):
         base = s.setpoint if s.setpoint is not None and s.setpoint.yaw_rate_rad_s is None else None
         x, y, z = (base.x, base.y, base.z) if base else (s.x, s.y, s.z)
         if self.obj is None:
-            self.obj = resolve(ctx.world, self.command, x, y)
+            self.obj = resolve(ctx.world, self.cmd, x, y)
         return [Setpoint(x, y, z, self._yaw(self.obj, x, y))], [f"turning to {self.what}"]
 
     def describe(self) -> str:

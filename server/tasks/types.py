@@ -13,10 +13,22 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
+from drone.commands import (
+    DIRECTIONS,
+    Command,
+    Goto,
+    Land,
+    Move,
+    Patrol,
+    Turn,
+    Waypoint,
+    Waypoints,
+    wire,
+)
 from drone.control.pid import Setpoint, wrap_angle
 from drone.limits import FlightLimits
 from drone.vehicle import Vehicle, VehicleSnapshot
@@ -25,7 +37,6 @@ from server.tasks.states import TaskState
 
 _ids = itertools.count(1)
 
-DIRECTIONS = ("forward", "backward", "left", "right", "up", "down")
 CRUISE_Z_M = 1.0  # height for return home and other legs without a stated height
 RTL_TIMEOUT_S = 300.0  # an autopilot's own return to launch (MAVLink): 120 m at 1 m/s and back
 MIN_Z_M = 0.3
@@ -81,23 +92,6 @@ class Context:
         raise NotImplementedError
 
 
-def _num(cmd: Mapping[str, Any], key: str, default: float | None = None) -> float:
-    if key not in cmd:
-        if default is None:
-            raise CommandError(f"'{cmd.get('action')}' needs '{key}'")
-        return default
-    v = cmd[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise CommandError(f"'{key}' must be a finite number, got {v!r}")
-    return float(v)
-
-
-def _marker_id(v: Any) -> int:
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise CommandError(f"a marker id must be an integer, got {v!r}")
-    return v
-
-
 class Task:
     """Base class: subclasses set ``name`` and override ``plan``/``start``/``step``."""
 
@@ -109,9 +103,9 @@ class Task:
     # the unlocalised estimate would aim at a made-up place and jump with the first fix).
     needs_position = False
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Command) -> None:
         self.id = next(_ids)
-        self.command = dict(command)
+        self.command = wire(command)  # as said, for the dialog's replies and the status
         self.state = TaskState.QUEUED
         self.progress = 0.0
         self.detail = ""
@@ -195,7 +189,7 @@ class LegsTask(Task):
     loop = False
     arrival: ArrivalRule | None = None  # overrides the manager's rule (e.g. outdoor tolerance)
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Command) -> None:
         super().__init__(command)
         self._legs: list[Setpoint] = []
         self._labels: list[str] = []
@@ -383,15 +377,15 @@ class GotoMarkerTask(LegsTask):
     needs_position = True
     standoff_m = 1.0
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Goto) -> None:
         super().__init__(command)
         # "waypoint": the world's numbered waypoint (GPS worlds); a marker elsewhere.
         self.waypoint: int | None = None
-        if "marker" not in command and "waypoint" in command:
-            self.waypoint = _marker_id(command["waypoint"])
-        elif "marker" not in command:
+        if command.marker is None and command.waypoint is not None:
+            self.waypoint = command.waypoint
+        elif command.marker is None:
             raise CommandError("'goto' needs 'marker' or 'waypoint'")
-        self.marker = _marker_id(command["marker"]) if self.waypoint is None else self.waypoint
+        self.marker = command.marker if command.marker is not None else command.waypoint
         self.kind = "marker" if self.waypoint is None else "waypoint"
 
     def _standoff(self, ctx: Context) -> Setpoint:
@@ -452,15 +446,17 @@ class PatrolTask(LegsTask):
     needs_position = True
     loop = True
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Patrol) -> None:
         super().__init__(command)
-        slot = "waypoints" if "markers" not in command and "waypoints" in command else "markers"
-        raw = command.get(slot)
-        if not isinstance(raw, list | tuple) or not raw:
+        by_waypoint = command.markers is None and command.waypoints is not None
+        ids = command.waypoints if by_waypoint else command.markers
+        if not ids:
             raise CommandError("'patrol' needs 'markers', a non-empty list of marker ids")
-        self.markers = [_marker_id(v) for v in raw]
-        one = slot.removesuffix("s")
-        self._gotos = [GotoMarkerTask({"action": "goto", one: m}) for m in self.markers]
+        self.markers = list(ids)
+        self._gotos = [
+            GotoMarkerTask(Goto(waypoint=m) if by_waypoint else Goto(marker=m))
+            for m in self.markers
+        ]
 
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
         for g in self._gotos:
@@ -503,13 +499,13 @@ class MoveTask(LegsTask):
     name = "move"
     needs_position = True
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Move) -> None:
         super().__init__(command)
-        d = command.get("direction")
-        if d not in DIRECTIONS:
+        d = command.direction
+        if d is None:
             raise CommandError(f"'move' needs 'direction' in {', '.join(DIRECTIONS)}; got {d!r}")
-        self.direction = str(d)
-        self.distance = _num(command, "distance", DEFAULT_MOVE_M)
+        self.direction = d
+        self.distance = float(DEFAULT_MOVE_M if command.distance is None else command.distance)
         if not 0 < self.distance <= MAX_MOVE_M:
             raise CommandError(
                 f"move distance must be in (0, {MAX_MOVE_M:.0f}] m, got {self.distance}"
@@ -548,13 +544,13 @@ class TurnTask(LegsTask):
 
     name = "turn"
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Turn) -> None:
         super().__init__(command)
-        d = command.get("direction")
-        if d not in ("left", "right"):
+        d = command.direction
+        if d is None:
             raise CommandError(f"'turn' needs 'direction' left or right; got {d!r}")
-        self.direction = str(d)
-        self.angle = _num(command, "angle", DEFAULT_TURN_DEG)
+        self.direction = d
+        self.angle = float(DEFAULT_TURN_DEG if command.angle is None else command.angle)
         if not 0 < self.angle <= 720:
             raise CommandError(f"turn angle must be in (0, 720] degrees, got {self.angle}")
 
@@ -587,7 +583,7 @@ class ReturnHomeTask(LegsTask):
     name = "return_home"
     needs_localisation = True
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Command) -> None:
         super().__init__(command)
         self._landing: LandTask | None = None
         self._rtl = False
@@ -637,7 +633,7 @@ class ReturnHomeTask(LegsTask):
             return out
         out = super().step(ctx, now)
         if out is not None and out.ok:
-            self._landing = LandTask({"action": "land"})
+            self._landing = LandTask(Land())
             self.detail = "landing at home"
             return self._landing.start(ctx, now)
         return out
@@ -657,39 +653,36 @@ class WaypointsTask(LegsTask):
 
     name = "waypoints"
 
-    def __init__(self, command: Mapping[str, Any]) -> None:
+    def __init__(self, command: Waypoints) -> None:
         super().__init__(command)
-        raw = command.get("waypoints")
-        if not isinstance(raw, list | tuple) or not raw:
-            raise CommandError("'waypoints' needs a non-empty list of waypoints")
-        self.raw = list(raw)
-        self.loop = bool(command.get("loop", False))
-        self.tolerance_m = _num(command, "tolerance_m", 0.0) or None
-        self.yaw_deg = _num(command, "yaw_deg", 0.0) if "yaw_deg" in command else None
+        self.raw: list[Waypoint] = list(command.waypoints)
+        self.loop = bool(command.loop)
+        self.tolerance_m = float(command.tolerance_m) if command.tolerance_m else None
+        self.yaw_deg = None if command.yaw_deg is None else float(command.yaw_deg)
         self.points: list[tuple[float, float, float]] | None = None
 
     def _resolve(self, ctx: Context) -> list[tuple[float, float, float]]:
         out = []
         origin = getattr(ctx.world, "gps_origin", None)
-        for i, w in enumerate(self.raw):
-            if not isinstance(w, Mapping):
-                raise CommandError(f"waypoint {i} must be an object, got {w!r}")
-            if "lat" in w:
+        for w in self.raw:
+            if w.lat is not None and w.lon is not None:
                 if origin is None:
                     raise RefusedError("This world has no GPS origin for lat/lon waypoints.")
                 import pymap3d
 
                 e, n, u = pymap3d.geodetic2enu(
-                    _num(w, "lat"),
-                    _num(w, "lon"),
-                    _num(w, "alt", origin.alt_m + CRUISE_Z_M),
+                    float(w.lat),
+                    float(w.lon),
+                    float(origin.alt_m + CRUISE_Z_M if w.alt is None else w.alt),
                     origin.lat_deg,
                     origin.lon_deg,
                     origin.alt_m,
                 )
                 out.append((float(e), float(n), float(u)))
             else:
-                out.append((_num(w, "x"), _num(w, "y"), _num(w, "z", CRUISE_Z_M)))
+                assert w.x is not None and w.y is not None  # Waypoint's own rule
+                z = CRUISE_Z_M if w.z is None else w.z
+                out.append((float(w.x), float(w.y), float(z)))
         return out
 
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
@@ -711,10 +704,10 @@ class WaypointsTask(LegsTask):
         legs = []
         px, py = s.x, s.y
         for k, (x, y, z) in enumerate(pts):
-            w = self.raw[k] if k < len(self.raw) and isinstance(self.raw[k], Mapping) else {}
+            own = self.raw[k].yaw_deg if k < len(self.raw) else None
             yaw = (
-                math.radians(_num(w, "yaw_deg"))  # this waypoint's own heading
-                if "yaw_deg" in w
+                math.radians(own)  # this waypoint's own heading
+                if own is not None
                 else math.radians(self.yaw_deg)
                 if self.yaw_deg is not None
                 else math.atan2(y - py, x - px)

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 from drone.ardrone.driver import ARDroneDriver, DriverConfig
 from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
+from drone.commands import DirectAction
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World
 from drone.supervisor import Supervisor, keep_away_of, supervise
@@ -62,14 +63,28 @@ class DroneStack:
         return out
 
     def direct(self, action: str) -> str:
-        """Direct control from a button or REST; land and emergency bypass every queue."""
-        if action in ("land", "emergency") and self.tasks is not None:
-            self.tasks.preempt(action)
-            return f"{action} sent"
-        if action in ("hover",) and self.tasks is not None:
+        """Direct control from a button or REST; land and emergency bypass every queue.
+
+        Raises:
+            ValueError: ``action`` is not a :class:`~drone.commands.DirectAction` (nothing is
+                sent: the vehicle is driven from this fixed table, never by the name given).
+        """
+        which = DirectAction(action)
+        if which in (DirectAction.LAND, DirectAction.EMERGENCY) and self.tasks is not None:
+            self.tasks.preempt(which.value)
+            return f"{which} sent"
+        if which is DirectAction.HOVER and self.tasks is not None:
             self.tasks.cancel("hover requested")
-        getattr(self.vehicle, action)()
-        return f"{action} sent"
+        vehicle = self.vehicle
+        send = {
+            DirectAction.TAKEOFF: vehicle.takeoff,
+            DirectAction.LAND: vehicle.land,
+            DirectAction.HOVER: vehicle.hover,
+            DirectAction.EMERGENCY: vehicle.emergency,
+            DirectAction.RESET: vehicle.reset,
+        }[which]
+        send()
+        return f"{which} sent"
 
     def seen_markers(self) -> list[SeenMarker]:
         """The markers the detector sees now (grounding a caption's "marker N on the left")."""
