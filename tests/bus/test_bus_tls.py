@@ -6,6 +6,10 @@ from __future__ import annotations
 import ipaddress
 import json
 import logging
+import os
+import subprocess
+import sys
+import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,12 +24,29 @@ from drone.bus.errors import BusConfigError
 from drone.bus.payloads import Telemetry, decode_telemetry, encode
 from drone.bus.session import open_session
 from drone.bus.vehicle import VehicleBus
+from server.cli import main as cli_main
 from server.settings import Settings
 from server.tls import ensure_ca
 from server.vehicles.central import bus_tls
 from server.vehicles.host import join_bus
-from tests.loopback import free_port
+from tests.isolation.conftest import HOST, ROOT, serve
+from tests.isolation.conftest import wait_for as poll
+from tests.loopback import for_worker, free_port
 from tests.polling import wait_for
+
+SCRIPT = textwrap.dedent(
+    """
+    import json, sys, threading, zenoh
+    samples, done = [], threading.Event()
+    def on_sample(sample):
+        samples.append(json.loads(sample.payload.to_string()))
+        done.set()
+    with zenoh.open(zenoh.Config.from_file(sys.argv[1])) as session:
+        sub = session.declare_subscriber("uavc/default/uav1/telemetry", on_sample)
+        done.wait(30)
+        print(json.dumps(samples))
+    """
+)
 
 
 def forced_on(data_dir: Path, host: str = "127.0.0.1") -> Settings:
@@ -167,3 +188,49 @@ def test_the_certificate_names_the_host_the_bus_listens_on(tmp_path: Path) -> No
     assert tls.ca == str(tmp_path.resolve() / "tls" / "ca.pem")
     assert not (tmp_path / "tls" / "server.pem").exists()  # HTTPS's certificate is its own
     assert bus_tls(Settings(data_dir=tmp_path)) is None  # loopback, auto: plain tcp
+
+
+def test_serve_with_bus_tls_on_its_vehicles_and_a_script_and_an_outside_vehicle_join(
+    tmp_path: Path,
+) -> None:
+    """``serve --bus-tls on``: the vehicle it spawns joins over TLS, a script given only
+    ``client.json5`` receives telemetry, and ``uav-console vehicle --bus-connect tls/…
+    --bus-ca FILE`` from another data directory joins too."""
+    assert cli_main(["vehicle-key", "uav7", "--data-dir", str(tmp_path / "data")]) == 0
+    port = free_port()
+    extra = ("--vehicles", "process", "--bus-listen", f"tcp/127.0.0.1:{port}", "--bus-tls", "on")
+    env = {"UAVC_SIM_BASE_ADDR": for_worker("127.0.41.40")}
+    with serve(tmp_path, "sim", extra=extra, env=env) as srv:
+        srv.wait_vehicle()
+        health = poll(
+            lambda: (h := srv.http.get("/api/v1/health").json())["bus"]["alive"] and h,
+            "uav1 alive on the TLS bus",
+        )
+        assert health["bus"]["endpoints"] == [f"tls/127.0.0.1:{port}"]
+        out = subprocess.run(
+            [sys.executable, "-c", SCRIPT, health["bus"]["client_config"]],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert out.returncode == 0, out.stderr
+        assert json.loads(out.stdout)[0]["drone"] == "uav1"
+        child = {**os.environ, "UAVC_SIM_BASE_ADDR": for_worker("127.0.41.50")}
+        child.pop("UAVC_VEHICLE_KEY", None)
+        child["UAVC_DATA_DIR"] = str(tmp_path / "vehicle-data")  # no CA of its own there
+        argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav7", "--drone", "sim"]
+        argv += ["--central", f"ws://{HOST}:{srv.port}/vehicle-link", "--index", "0"]
+        argv += ["--key-file", str(tmp_path / "data" / "vehicle-keys" / "uav7.key")]
+        argv += ["--bus-connect", f"tls/127.0.0.1:{port}"]
+        argv += ["--bus-ca", str(tmp_path / "data" / "tls" / "ca.pem")]
+        with open(tmp_path / "uav7.log", "wb") as log:
+            proc = subprocess.Popen(argv, cwd=ROOT, env=child, stdout=log, stderr=log)
+        try:
+            poll(
+                lambda: "uav7" in srv.http.get("/api/v1/health").json()["bus"]["alive"],
+                "uav7 alive on the TLS bus",
+                60,
+            )
+        finally:
+            proc.terminate()
+            proc.wait(20)
