@@ -60,7 +60,8 @@ class ConsoleBus:
         connect: other routers to join (consoles on other hosts, ``zenohd``).
         tls: the router's certificate, key and CA: it then listens on ``tls/`` endpoints only
             (a ``tcp/`` one given is served as ``tls/`` on the same address) and the client
-            files it writes carry the CA.
+            files it writes carry the CA. A CA alone: it listens as given and verifies the
+            ``tls/`` routers it joins with that CA.
     """
 
     def __init__(
@@ -81,7 +82,7 @@ class ConsoleBus:
         self.vehicle_names = sorted(
             {keys.segment(v) for v in vehicles} | set(self.vehicle_passwords)
         )
-        wrap = as_tls if tls is not None else str
+        wrap = as_tls if tls is not None and tls.cert is not None else str
         self.listen = [wrap(e) for e in listen] or [free_listen_endpoint(wrap(DEFAULT_LISTEN))]
         self.connect = list(connect)
         self.name = name  # the console's name: its router's id derives from it (router_id)

@@ -47,7 +47,7 @@ from server.msgs import header
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge
 from server.settings import Settings, SettingsError
-from server.tls import TLSError, ensure_server_cert
+from server.tls import TLSError, ensure_ca, ensure_server_cert
 from server.vehicles import names
 from server.vehicles.access import VehicleLinkSecurity
 from server.vehicles.keys import VehicleKeys, vehicle_env
@@ -566,15 +566,18 @@ def bus_topics(name: str, prefix: str) -> dict[str, Any]:
 
 
 def bus_tls(settings: Settings) -> BusTLS | None:
-    """The bus router's TLS (docs/bus.md#tls), or None when ``bus_tls`` leaves it off: a
-    ``bus.pem`` signed by the console's local CA (the one HTTPS uses), naming the host it
-    listens on and this machine's names and addresses.
+    """The bus router's TLS (docs/bus.md#tls): a ``bus.pem`` signed by the console's local CA
+    (the one HTTPS uses), naming the host it listens on and this machine's names and
+    addresses; when ``bus_tls`` leaves it off, the CA alone where it joins a ``tls/`` router,
+    else None.
 
     Raises:
         TLSError: the CA or the certificate cannot be made or read.
     """
     listen = list(settings.bus_listen) or [DEFAULT_LISTEN]
     if not wants_tls(settings.bus_tls, listen):
+        if any(e.startswith("tls/") for e in settings.bus_connect):  # joins a TLS router
+            return BusTLS(str(ensure_ca(settings.data_dir.resolve() / "tls")[0]))
         return None
     hosts = [endpoint_host(e) for e in listen if not on_loopback(e)] or ["127.0.0.1"]
     files = ensure_server_cert(settings.data_dir.resolve() / "tls", hosts[0], stem="bus")

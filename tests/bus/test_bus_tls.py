@@ -234,3 +234,34 @@ def test_serve_with_bus_tls_on_its_vehicles_and_a_script_and_an_outside_vehicle_
         finally:
             proc.terminate()
             proc.wait(20)
+
+
+def test_a_console_off_tls_joins_a_tls_router_with_its_ca(
+    console: ConsoleBus, tmp_path: Path
+) -> None:
+    """A second console of the same data directory, listening on plain loopback, joins the
+    first one's ``tls/`` router: it verifies it with the CA and is connected to it."""
+    settings = Settings(
+        data_dir=tmp_path,
+        bus_listen=(f"tcp/127.0.0.1:{free_port()}",),
+        bus_connect=tuple(console.listen),
+    )
+    tls = bus_tls(settings)
+    assert tls is not None and tls.cert is None and console.tls is not None
+    assert tls.ca == console.tls.ca
+    second = ConsoleBus(
+        tmp_path / "bus", "default", [], settings.bus_listen, settings.bus_connect, tls=tls
+    )
+    second.start()
+    try:
+        assert second.listen == list(settings.bus_listen)  # as given: tcp/ on loopback
+        assert second.session is not None and console.session is not None
+        first_zid = str(console.session.info.zid())
+        wait_for(
+            lambda: [str(z) for z in second.session.info.routers_zid()],  # type: ignore[union-attr]
+            lambda zids: first_zid in zids,
+            10,
+            "the second console's router connected to the first",
+        )
+    finally:
+        second.close()
