@@ -67,6 +67,12 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--bus-connect", action="append", default=None, help="another bus router (repeatable)"
     )
+    s.add_argument(
+        "--bus-tls",
+        choices=("auto", "on", "off"),
+        default=None,
+        help="TLS on the bus router's endpoints with the console's CA (auto: off loopback)",
+    )
     s.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
     s.add_argument(
         "--console-name", default=None, help="this console's name on the bus (HOST-PORT)"
@@ -133,6 +139,13 @@ def _parser() -> argparse.ArgumentParser:
         action="append",
         default=None,
         help="the fleet's bus router to join as vehicle-NAME with this vehicle's key (repeatable)",
+    )
+    v.add_argument(
+        "--bus-ca",
+        type=Path,
+        default=None,
+        help="CA file a tls/ bus router is verified with (the console's DATA/tls/ca.pem; "
+        "default: this data directory's)",
     )
     v.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
     v.add_argument("--ca", type=Path, default=None, help="CA file for a wss:// central")
@@ -274,6 +287,7 @@ def _serve(args: argparse.Namespace) -> int:
         vehicles=serve_vehicles(args.vehicles, os.environ),
         bus_listen=tuple(args.bus_listen) if args.bus_listen else None,
         bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
+        bus_tls=args.bus_tls,
         fleet_name=args.fleet_name,
         console_name=args.console_name,
         sim_base_addr=args.sim_addr,

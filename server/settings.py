@@ -183,6 +183,16 @@ class Settings(BaseSettings):
         description="Other bus routers to join (consoles on other hosts, zenohd); for a "
         "vehicle process, the routers it joins as vehicle-NAME with its vehicle key.",
     )
+    bus_tls: Literal["auto", "on", "off"] = Field(
+        "auto",
+        description="TLS on the bus router's endpoints (tls/), with a certificate from the "
+        "console's local CA; auto: on when it listens off loopback (docs/bus.md#tls).",
+    )
+    bus_ca: Path | None = Field(
+        None,
+        description="For a vehicle process: the CA file a tls/ bus router is verified with; "
+        "unset: the data directory's tls/ca.pem.",
+    )
     fleet_name: str = Field("default", description="The fleet's name on the bus (its keys).")
     console_name: str | None = Field(
         None,

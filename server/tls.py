@@ -187,11 +187,14 @@ def ensure_ca(directory: Path, now: dt.datetime | None = None) -> tuple[Path, Pa
     return cert_path, key_path
 
 
-def ensure_server_cert(directory: Path, host: str, now: dt.datetime | None = None) -> TLSFiles:
-    """The server certificate for ``host`` signed by the local CA (made or remade as needed)."""
+def ensure_server_cert(
+    directory: Path, host: str, now: dt.datetime | None = None, stem: str = "server"
+) -> TLSFiles:
+    """The server certificate for ``host`` signed by the local CA (made or remade as needed):
+    ``<stem>.pem`` and ``<stem>-key.pem`` (the bus router has its own, ``bus``)."""
     now = now or dt.datetime.now(dt.UTC)
     ca_cert_path, ca_key_path = ensure_ca(directory, now)
-    cert_path, key_path = directory / "server.pem", directory / "server-key.pem"
+    cert_path, key_path = directory / f"{stem}.pem", directory / f"{stem}-key.pem"
     names, addrs = local_names(host)
     if cert_path.is_file() and key_path.is_file() and _still_good(cert_path, names, addrs, now):
         return TLSFiles(cert_path, key_path, ca_cert_path, fingerprint(cert_path.read_bytes()))

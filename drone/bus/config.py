@@ -14,8 +14,10 @@ never leaves the router.
 
 from __future__ import annotations
 
+import ipaddress
 from collections.abc import Iterable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 from drone.bus import keys
 
@@ -42,6 +44,56 @@ NO_SHARED_MEMORY: dict[str, Any] = {"shared_memory": {"enabled": False}}
 
 _WATCH = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
 _OWN = ["put", "delete", "liveliness_token", "declare_queryable", "reply"]
+
+
+@dataclass(frozen=True)
+class BusTLS:
+    """TLS on the bus's links: the CA (PEM file) a client verifies the router with, and, for
+    the router, the certificate and key it listens with (signed by that CA)."""
+
+    ca: str
+    cert: str | None = None
+    key: str | None = None
+
+
+def tls_link(tls: BusTLS) -> dict[str, Any]:
+    """Zenoh 1.x ``transport/link/tls`` for ``tls``: files, not inline PEM (Zenoh's
+    DEFAULT_CONFIG.json5). Names are verified on connect (Zenoh's default)."""
+    section: dict[str, Any] = {"root_ca_certificate": tls.ca}
+    if tls.cert is not None and tls.key is not None:
+        section |= {"listen_certificate": tls.cert, "listen_private_key": tls.key}
+    return {"link": {"tls": section}}
+
+
+def endpoint_host(endpoint: str) -> str:
+    """The host of ``proto/host:port`` (brackets of an IPv6 address removed)."""
+    _proto, _, rest = endpoint.partition("/")
+    host, _, _port = rest.partition("#")[0].rpartition(":")
+    return host.strip("[]")
+
+
+def on_loopback(endpoint: str) -> bool:
+    """Whether ``endpoint`` listens for this machine only (a wildcard address does not)."""
+    host = endpoint_host(endpoint)
+    if host in ("localhost", "localhost."):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def wants_tls(mode: Literal["auto", "on", "off"], listen: Iterable[str]) -> bool:
+    """TLS for the router listening on ``listen``: ``auto`` when any endpoint is off loopback
+    or already ``tls/``."""
+    if mode != "auto":
+        return mode == "on"
+    return any(e.startswith("tls/") or not on_loopback(e) for e in listen)
+
+
+def as_tls(endpoint: str) -> str:
+    """``tcp/HOST:PORT`` as ``tls/HOST:PORT`` (TLS runs over TCP); other endpoints unchanged."""
+    return "tls/" + endpoint.removeprefix("tcp/") if endpoint.startswith("tcp/") else endpoint
 
 
 def vehicle_user(name: str) -> str:
@@ -108,10 +160,12 @@ def router_config(
     dictionary_file: str,
     acl: dict[str, Any],
     zid: str | None = None,
+    tls: BusTLS | None = None,
 ) -> dict[str, Any]:
     """The console's embedded router: listens where told, joins only the routers named (no
     multicast scouting: a second console on the same machine must not join this fleet).
-    ``zid``: its Zenoh id, the same at every start (other consoles trust it by its id)."""
+    ``zid``: its Zenoh id, the same at every start (other consoles trust it by its id).
+    ``tls``: its certificate for ``tls/`` endpoints, and the CA it checks routers it joins by."""
     return {
         **({"id": zid} if zid else {}),
         "mode": "router",
@@ -127,18 +181,26 @@ def router_config(
                 }
             },
             **NO_SHARED_MEMORY,
+            **(tls_link(tls) if tls is not None else {}),
         },
         "access_control": acl,
     }
 
 
-def client_config(*, connect: list[str], user: str, password: str) -> dict[str, Any]:
-    """A client of the router: what ``client.json5`` holds for a third-party script."""
+def client_config(
+    *, connect: list[str], user: str, password: str, ca: str | None = None
+) -> dict[str, Any]:
+    """A client of the router: what ``client.json5`` holds for a third-party script.
+    ``ca``: the CA file that a ``tls/`` router's certificate must be signed by."""
     return {
         "mode": "client",
         "connect": {"endpoints": connect},
         "scouting": {"multicast": {"enabled": False}},
-        "transport": {"auth": {"usrpwd": {"user": user, "password": password}}, **NO_SHARED_MEMORY},
+        "transport": {
+            "auth": {"usrpwd": {"user": user, "password": password}},
+            **NO_SHARED_MEMORY,
+            **(tls_link(BusTLS(ca)) if ca is not None else {}),
+        },
     }
 
 

@@ -18,7 +18,9 @@ from drone.bus.config import (
     CONSOLE_USER,
     OBSERVER_USER,
     PILOT_USER,
+    BusTLS,
     access_control,
+    as_tls,
     client_config,
     router_config,
     router_zid,
@@ -42,6 +44,7 @@ class VehicleCredential:
     connect: tuple[str, ...]
     user: str
     password: str
+    ca: str | None = None  # the CA file the router's certificate is verified with (tls/)
 
 
 class ConsoleBus:
@@ -55,6 +58,10 @@ class ConsoleBus:
             console's vehicle keys); they are on the bus too.
         listen: endpoints to listen on; empty: ``tcp/127.0.0.1:7447`` or the next free port.
         connect: other routers to join (consoles on other hosts, ``zenohd``).
+        tls: the router's certificate, key and CA: it then listens on ``tls/`` endpoints only
+            (a ``tcp/`` one given is served as ``tls/`` on the same address) and the client
+            files it writes carry the CA. A CA alone: it listens as given and verifies the
+            ``tls/`` routers it joins with that CA.
     """
 
     def __init__(
@@ -66,14 +73,17 @@ class ConsoleBus:
         connect: Iterable[str] = (),
         vehicle_passwords: Mapping[str, str] | None = None,
         name: str | None = None,
+        tls: BusTLS | None = None,
     ) -> None:
         self.directory = directory
+        self.tls = tls
         self.fleet = keys.segment(fleet)
         self.vehicle_passwords = dict(vehicle_passwords or {})
         self.vehicle_names = sorted(
             {keys.segment(v) for v in vehicles} | set(self.vehicle_passwords)
         )
-        self.listen = list(listen) or [free_listen_endpoint(DEFAULT_LISTEN)]
+        wrap = as_tls if tls is not None and tls.cert is not None else str
+        self.listen = [wrap(e) for e in listen] or [free_listen_endpoint(wrap(DEFAULT_LISTEN))]
         self.connect = list(connect)
         self.name = name  # the console's name: its router's id derives from it (router_id)
         self.credentials: Credentials | None = None
@@ -95,7 +105,8 @@ class ConsoleBus:
         )
         self.credentials = creds
         # the routers we join, known by their ids (drone.bus.session.router_ids)
-        peers = router_ids(self.connect, CONSOLE_USER, creds.password(CONSOLE_USER))
+        ca = self.tls.ca if self.tls is not None else None
+        peers = router_ids(self.connect, CONSOLE_USER, creds.password(CONSOLE_USER), ca=ca)
         acl = access_control(self.fleet, creds.vehicles(), peers)
         self.session = open_session(
             router_config(
@@ -110,6 +121,7 @@ class ConsoleBus:
                     if self.name is not None
                     else router_zid(creds.password(CONSOLE_USER), self.listen[0])
                 ),
+                tls=self.tls,
             )
         )
         self._write_client(CLIENT_FILE, OBSERVER_USER)
@@ -137,6 +149,7 @@ class ConsoleBus:
             tuple(self.client_endpoints),
             vehicle_user(name),
             self.credentials.password(vehicle_user(name)),
+            self.tls.ca if self.tls is not None else None,
         )
 
     def alive(self) -> list[str]:
@@ -158,6 +171,7 @@ class ConsoleBus:
             connect=self.client_endpoints,
             user=user,
             password=self.credentials.password(user),
+            ca=self.tls.ca if self.tls is not None else None,
         )
         write_private(self.directory / name, json.dumps(config, indent=2) + "\n")
 

@@ -31,10 +31,11 @@ def open_session(config: dict[str, Any]) -> zenoh.Session:
 
 
 def free_listen_endpoint(endpoint: str = DEFAULT_LISTEN, tries: int = 64) -> str:
-    """``endpoint`` if its TCP port is free, else the next free port on the same address."""
+    """``endpoint`` if its TCP port is free, else the next free port on the same address
+    (``tls/`` runs over TCP)."""
     proto, _, rest = endpoint.partition("/")
     host, _, port_text = rest.rpartition(":")
-    if proto != "tcp" or not port_text.isdigit():
+    if proto not in ("tcp", "tls") or not port_text.isdigit():
         return endpoint  # only a TCP endpoint can be probed; others are used as given
     port = int(port_text)
     for candidate in range(port, port + tries):
@@ -43,12 +44,16 @@ def free_listen_endpoint(endpoint: str = DEFAULT_LISTEN, tries: int = 64) -> str
                 s.bind((host.strip("[]"), candidate))
             except OSError:
                 continue
-        return f"tcp/{host}:{candidate}"
+        return f"{proto}/{host}:{candidate}"
     raise BusConfigError(f"no free port from {endpoint} to port {port + tries - 1}")
 
 
 def router_ids(
-    endpoints: list[str], user: str, password: str, timeout_s: float = PROBE_TIMEOUT_S
+    endpoints: list[str],
+    user: str,
+    password: str,
+    timeout_s: float = PROBE_TIMEOUT_S,
+    ca: str | None = None,
 ) -> list[str]:
     """The Zenoh ids of the routers at ``endpoints``, asked with a short client session each
     (those that do not answer in ``timeout_s`` are left out, said in the log).
@@ -56,12 +61,13 @@ def router_ids(
     A router that joins another authenticates itself to it, but is not authenticated by it: on
     the joining router's side that link carries no user name, so its access control knows the
     routers it joins only by their ids (``drone.bus.config.access_control``'s ``peers``).
+    ``ca``: the CA that ``tls/`` routers are verified with.
     """
     from drone.bus.config import client_config
 
     found: list[str] = []
     for endpoint in endpoints:
-        config = client_config(connect=[endpoint], user=user, password=password)
+        config = client_config(connect=[endpoint], user=user, password=password, ca=ca)
         config["connect"]["timeout_ms"] = int(timeout_s * 1000)
         try:
             session = zenoh.open(zenoh.Config.from_json5(json.dumps(config)))

@@ -34,11 +34,18 @@ class VehicleBus:
     than queues under congestion (the next sample supersedes a late one)."""
 
     def __init__(
-        self, connect: Iterable[str], user: str, password: str, fleet: str, name: str
+        self,
+        connect: Iterable[str],
+        user: str,
+        password: str,
+        fleet: str,
+        name: str,
+        ca: str | None = None,
     ) -> None:
+        """``ca``: the CA file a ``tls/`` router's certificate must be signed by."""
         self.fleet = keys.segment(fleet)
         self.name = keys.segment(name)
-        self._config = client_config(connect=list(connect), user=user, password=password)
+        self._config = client_config(connect=list(connect), user=user, password=password, ca=ca)
         self.session: zenoh.Session | None = None
         self._publisher: zenoh.Publisher | None = None
         self._token: zenoh.LivelinessToken | None = None

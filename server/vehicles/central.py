@@ -38,13 +38,16 @@ from typing import TYPE_CHECKING, Any
 from fastapi import APIRouter, WebSocket
 
 from drone.bus.commander import BusCommander
+from drone.bus.config import BusTLS, endpoint_host, on_loopback, wants_tls
 from drone.bus.console import ConsoleBus
 from drone.bus.errors import BusError
+from drone.bus.session import DEFAULT_LISTEN
 from server.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.msgs import header
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge
 from server.settings import Settings, SettingsError
+from server.tls import TLSError, ensure_ca, ensure_server_cert
 from server.vehicles import names
 from server.vehicles.access import VehicleLinkSecurity
 from server.vehicles.keys import VehicleKeys, vehicle_env
@@ -261,6 +264,12 @@ class VehicleCentral:
         """The console's embedded bus router (docs/bus.md); None, said in the log, when it
         cannot start: the vehicles still reach the console over /vehicle-link."""
         s = self.runtime.settings
+        try:
+            tls = bus_tls(s)
+        except TLSError as exc:
+            log.error("the bus did not start: %s", exc)
+            self.alerts.append(f"the bus did not start: {exc}")
+            return None
         passwords = {v: self.keys.ensure(v).secret for v in vehicles}
         passwords |= {k.name: k.secret for k in self.keys.all()}  # vehicles from elsewhere
         bus = ConsoleBus(
@@ -271,6 +280,7 @@ class VehicleCentral:
             connect=s.bus_connect,
             vehicle_passwords=passwords,
             name=console_name(s),
+            tls=tls,
         )
         try:
             bus.start()
@@ -290,6 +300,7 @@ class VehicleCentral:
             # our router first, then the routers we join: the vehicle fails over to them
             "UAVC_BUS_CONNECT": ",".join([*cred.connect, *self.runtime.settings.bus_connect]),
             "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
+            **({"UAVC_BUS_CA": cred.ca} if cred.ca is not None else {}),
         }
 
     def door_ticket(self, name: str, now: float | None = None) -> str | None:
@@ -554,6 +565,26 @@ def bus_topics(name: str, prefix: str) -> dict[str, Any]:
             if not topic.name.endswith("/image_raw/compressed"):
                 out[topic.name] = topic
     return out
+
+
+def bus_tls(settings: Settings) -> BusTLS | None:
+    """The bus router's TLS (docs/bus.md#tls): a ``bus.pem`` signed by the console's local CA
+    (the one HTTPS uses), naming the host it listens on and this machine's names and
+    addresses; when ``bus_tls`` leaves it off, the CA alone where it joins a ``tls/`` router,
+    else None.
+
+    Raises:
+        TLSError: the CA or the certificate cannot be made or read.
+    """
+    listen = list(settings.bus_listen) or [DEFAULT_LISTEN]
+    if not wants_tls(settings.bus_tls, listen):
+        if any(e.startswith("tls/") for e in settings.bus_connect):  # joins a TLS router
+            return BusTLS(str(ensure_ca(settings.data_dir.resolve() / "tls")[0]))
+        return None
+    hosts = [endpoint_host(e) for e in listen if not on_loopback(e)] or ["127.0.0.1"]
+    files = ensure_server_cert(settings.data_dir.resolve() / "tls", hosts[0], stem="bus")
+    assert files.ca is not None  # the local CA's certificate, always made with it
+    return BusTLS(str(files.ca), str(files.cert), str(files.key))
 
 
 def console_name(settings: Settings) -> str:

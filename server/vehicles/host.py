@@ -703,7 +703,23 @@ def join_bus(settings: Settings, name: str, key: str) -> VehicleBus | None:
     refuses (said in the log: the vehicle flies on, its console link carries everything)."""
     if not settings.bus_connect:
         return None
-    bus = VehicleBus(settings.bus_connect, vehicle_user(name), key, settings.fleet_name, name)
+    ca = bus_ca(settings)
+    if ca is not None and not ca.is_file():
+        log.error(
+            "%s: not on the bus: a tls/ router is verified with its console's CA, and %s is "
+            "not a file (--bus-ca FILE: the console's DATA/tls/ca.pem)",
+            name,
+            ca,
+        )
+        return None
+    bus = VehicleBus(
+        settings.bus_connect,
+        vehicle_user(name),
+        key,
+        settings.fleet_name,
+        name,
+        ca=str(ca) if ca is not None else None,
+    )
     try:
         bus.start()
     except BusError as exc:
@@ -711,6 +727,14 @@ def join_bus(settings: Settings, name: str, key: str) -> VehicleBus | None:
         return None
     log.info("%s: on the bus at %s", name, ", ".join(settings.bus_connect))
     return bus
+
+
+def bus_ca(settings: Settings) -> Path | None:
+    """The CA file this vehicle verifies a ``tls/`` bus router with (None: no ``tls/`` router
+    to join): ``bus_ca``, else the data directory's ``tls/ca.pem`` (the console's own)."""
+    if not any(e.startswith("tls/") for e in settings.bus_connect):
+        return None
+    return settings.bus_ca or settings.data_dir / "tls" / "ca.pem"
 
 
 async def run_vehicle(

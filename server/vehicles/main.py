@@ -53,6 +53,7 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         drone=args.drone,
         world=args.world,
         bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
+        bus_ca=args.bus_ca,
         fleet_name=args.fleet_name,
     )
     secret_hex = os.environ.get("UAVC_DOOR_SECRET", "")
