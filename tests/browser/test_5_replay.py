@@ -12,7 +12,7 @@ import httpx
 import pytest
 
 from tests.browser.conftest import ROOT, SCREENSHOTS, open_console
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 from tests.recorder.synthetic import write_flight
 
 pytestmark = pytest.mark.browser

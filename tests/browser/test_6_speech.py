@@ -30,7 +30,7 @@ from cryptography.hazmat.primitives import serialization
 
 from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS, OBSERVER, PILOT, ROOT
 from tests.browser.helpers import wait_until
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 from tests.speech.conftest import HAVE_TTS, synthesise
 
 SIM_ADDR = "127.0.15.4"

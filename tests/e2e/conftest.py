@@ -24,8 +24,8 @@ import httpx
 import pytest
 import roslibpy
 
-from tests.loopback import for_worker, free_port
-from tests.polling import wait_for
+from tests.support.loopback import for_worker, free_port
+from tests.support.polling import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "e2e-pilot-token"

@@ -15,7 +15,7 @@ from typing import Any
 
 import httpx
 
-from tests.polling import wait_for
+from tests.support.polling import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -65,7 +65,7 @@ def serve(
     timeout_s: float = 60.0,
 ) -> Iterator[Served]:
     """``serve --port P --token T --data-dir DATA *args`` until its drones are all up."""
-    from tests.loopback import free_port
+    from tests.support.loopback import free_port
 
     port = free_port()
     log_path = data / f"serve-{port}.log"

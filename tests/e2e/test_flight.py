@@ -17,7 +17,7 @@ import numpy as np
 import roslibpy
 
 from tests.inbox import Inbox
-from tests.polling import wait_for
+from tests.support.polling import wait_for
 
 from .conftest import TIMEOUT, Server
 

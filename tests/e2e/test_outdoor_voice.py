@@ -22,8 +22,8 @@ import roslibpy
 
 from drone.sim.world import load_world
 from tests.e2e.served import serve
-from tests.loopback import for_worker
-from tests.polling import wait_for
+from tests.support.loopback import for_worker
+from tests.support.polling import wait_for
 from tests.recorder.test_foxglove import NODE_DIR, node_exe
 
 TOKEN = "outdoor-voice-pilot"

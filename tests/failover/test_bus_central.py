@@ -19,7 +19,7 @@ from drone.bus.central import CentralBus
 from drone.bus.console import ConsoleBus, router_id
 from drone.bus.plans import VehiclePlans
 from drone.bus.vehicle import VehicleBus
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 
 
 async def until(pred: Callable[[], Any], what: str, timeout: float = 10.0) -> Any:

@@ -20,7 +20,7 @@ import httpx
 from websockets.sync.client import connect as ws_connect
 
 from server.vehicles.door_protocol import Ack, Auth, Hello, Stop, encode, parse_door
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "isolation-pilot-token"

@@ -45,7 +45,7 @@ from server.vehicles.door_protocol import (
 from server.vehicles.errors import DoorError, DoorProtocolError, TicketError
 from server.vehicles.stops import StopLedger
 from server.vehicles.tickets import DoorSecrets, mint, verify
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 SECRET = b"k" * 32
 TOKEN = "pilot-token-for-door-tests"

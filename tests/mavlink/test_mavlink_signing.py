@@ -39,7 +39,7 @@ from drone.mavlink.autopilot import SimAutopilot
 from drone.mavlink.errors import InsecureLinkError, SigningKeyError
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
-from tests.polling import wait_for
+from tests.support.polling import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = bytes(range(1, 33))

@@ -32,8 +32,8 @@ import pytest
 from server.cli import main as cli_main
 from server.recorder.mcapfile import read_recording
 from server.ros1 import codec_for
-from tests.loopback import free_port
-from tests.polling import wait_for
+from tests.support.loopback import free_port
+from tests.support.polling import wait_for
 from tests.rosbridge.wsclient import RawClient
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -23,7 +23,7 @@ from server.graph import Graph
 from server.rosbridge import ops
 from server.rosbridge.protocol import BridgeProtocol
 from server.store import AuditLog
-from tests.polling import wait_for
+from tests.support.polling import wait_for
 from tests.rosbridge.server_fixture import RunningServer, running_server
 from tests.rosbridge.wsclient import RawClient
 

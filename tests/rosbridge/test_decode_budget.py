@@ -38,7 +38,7 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 
 from server.rosbridge.encode import PNG_SIGNATURE, png_encode
-from tests.loopback import for_worker, free_port
+from tests.support.loopback import for_worker, free_port
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient

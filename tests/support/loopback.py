@@ -27,8 +27,20 @@ def for_worker(addr: str) -> str:
     return f"127.{worker_index()}.{c}.{d}"
 
 
-def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port free on ``host`` now (the OS's pick; another process may take it before use)."""
-    with socket.socket() as sock:
+def bound_socket(host: str = "127.0.0.1") -> socket.socket:
+    """A TCP socket bound to a port the OS picks on ``host``, held open: for a server started in
+    this process (``tests.support.servers``), no other process can take the port meanwhile."""
+    sock = socket.socket()
+    try:
         sock.bind((host, 0))
+    except OSError:
+        sock.close()
+        raise
+    return sock
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on ``host`` now, for a server in another process to listen on (the OS's
+    pick; another process may take it before use)."""
+    with bound_socket(host) as sock:
         return int(sock.getsockname()[1])
