@@ -31,6 +31,7 @@ import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from server.rosbridge.encode import PNG_SIGNATURE, png_encode
+from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
@@ -337,10 +338,8 @@ async def test_drone_commands_over_rosbridge_are_audited(tmp_path: Path) -> None
             return [e.action for e in reversed(log.recent(100))]
 
         async def wait_for(n: int) -> list[str]:
-            for _ in range(500):  # rows are written off the loop (generous: a loaded machine)
-                if len(actions()) >= n:
-                    break
-                await asyncio.sleep(0.02)
+            """The audit's actions once it holds ``n`` (rows are written off the loop)."""
+            await until_async(lambda: len(actions()) >= n, 10.0, f"{n} audit rows")
             return actions()
 
         async with await RawClient.open(srv.url()) as c:

@@ -35,12 +35,13 @@ def until(
     last: Any = None
     while True:
         try:
-            last = pred()
+            value = pred()
         except ignore as exc:
             last = exc
         else:
-            if last:
-                return last
+            if value:
+                return value
+            last = value
         if time.monotonic() >= deadline:
             raise AssertionError(f"{what}: not in {timeout} s; last: {last!r}")
         time.sleep(period)
