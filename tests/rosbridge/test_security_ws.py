@@ -99,10 +99,26 @@ async def test_cross_site_origin_is_refused(srv: RunningServer) -> None:
         assert (await c.expect_op("service_response", id="t"))["result"] is True
 
 
-async def test_allow_origin_setting(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "origin",
+    [
+        "https://other.example",  # another site
+        "http://console.example",  # the allowed host over another scheme
+        "https://console.example:8443",  # ... or on another port
+        "https://console.example.evil.example",  # a name that starts like it
+        "https://evil.example/https://console.example",  # ... or ends like it
+    ],
+)
+async def test_allow_origin_setting(tmp_path: Path, origin: str) -> None:
+    """``allow_origins`` admits exactly the origins it names, and refuses every other."""
     with running_server(tmp_path, allow_origins=("https://console.example",)) as srv:
-        c = await RawClient.open(srv.url(), origin="https://console.example")  # type: ignore[arg-type]
-        await c.close()
+        allowed = "https://console.example"
+        async with await RawClient.open(srv.url(), origin=allowed) as c:  # type: ignore[arg-type]
+            await c.send({"op": "call_service", "id": "t", "service": "/rosapi/nodes"})
+            assert (await c.expect_op("service_response", id="t"))["result"] is True
+        with pytest.raises(InvalidStatus) as info:
+            await RawClient.open(srv.url(), origin=origin)  # type: ignore[arg-type]
+        assert info.value.response.status_code == 403
 
 
 async def test_pilot_lease_takeover_tells_the_first(srv: RunningServer) -> None:
