@@ -25,7 +25,7 @@ from server.rosbridge.protocol import BridgeProtocol
 from server.store import AuditLog
 from tests.rosbridge.server_fixture import RunningServer, running_server
 from tests.rosbridge.wsclient import RawClient
-from tests.support.polling import until
+from tests.support.polling import until, until_async
 
 EMPTY = "std_msgs/Empty"
 TWIST = "geometry_msgs/Twist"
@@ -103,8 +103,7 @@ async def test_graph_carries_issued_from_another_thread() -> None:
     worker = threading.Thread(target=lambda: graph.publish("/a", {}, issued=3.0))
     worker.start()
     worker.join()
-    while not got:
-        await asyncio.sleep(0.01)
+    await until_async(lambda: got, 5.0, "the publish run on the loop")
     assert got == [3.0]
 
 

@@ -19,7 +19,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import base64
 import json
 import struct
@@ -166,7 +165,9 @@ async def test_concurrent_calls_are_capped_per_connection(srv14: RunningServer) 
         await provider.send(
             {"op": "advertise_service", "service": "/slow", "type": "std_srvs/Trigger"}
         )
-        await asyncio.sleep(0.2)
+        await until_async(
+            lambda: srv14.graph.service_type("/slow") is not None, 10.0, "/slow advertised"
+        )
         for i in range(9):
             await caller.send({"op": "call_service", "id": f"c{i}", "service": "/slow"})
         refused = await caller.expect_op("service_response", id="c8")
@@ -248,10 +249,7 @@ async def test_connections_per_ip_are_capped(tmp_path: Path) -> None:
             for c in clients:
                 await c.close()
         # closed ones free their slots
-        for _ in range(50):
-            if not srv.ctx.connections:
-                break
-            await asyncio.sleep(0.05)
+        await until_async(lambda: not srv.ctx.connections, 10.0, "the closed slots freed")
         async with await RawClient.open(srv.url()) as again:
             await again.send({"op": "call_service", "id": "t", "service": "/rosapi/topics"})
             assert (await again.expect_op("service_response", id="t"))["result"] is True
@@ -283,10 +281,7 @@ async def test_closed_connections_free_their_buffers(tmp_path: Path) -> None:
                 await c.expect_op("service_response", id="t")
             for c in clients:
                 await c.close()
-            for _ in range(100):
-                if not srv.ctx.connections:
-                    break
-                await asyncio.sleep(0.05)
+            await until_async(lambda: not srv.ctx.connections, 10.0, "every connection closed")
         assert not srv.ctx.connections
         held = [
             o

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 
 import httpx
 import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
@@ -176,9 +177,10 @@ async def test_disconnect_cleans_up(srv: RunningServer) -> None:
         await c.send({"op": "call_service", "id": "t", "service": "/rosapi/topics"})
         await c.expect_op("service_response", id="t")
         assert srv.graph.service_type("/my_srv") == "a/B"
-    for _ in range(100):
-        if srv.graph.service_type("/my_srv") is None and "/mine" not in srv.graph.topics():
-            break
-        await asyncio.sleep(0.02)
+    await until_async(
+        lambda: srv.graph.service_type("/my_srv") is None and "/mine" not in srv.graph.topics(),
+        10.0,
+        "the closed client's service and topic gone",
+    )
     assert srv.graph.service_type("/my_srv") is None
     assert "/mine" not in srv.graph.topics()

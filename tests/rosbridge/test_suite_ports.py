@@ -193,7 +193,7 @@ async def test_rapid_disconnect_smoke(srv: RunningServer) -> None:
         while not stop:
             for _ in range(20):
                 srv.graph.publish("/a_topic", payload)
-            await asyncio.sleep(0.005)
+            await asyncio.sleep(0.005)  # the publishing rate: the test's input
 
     pub = asyncio.create_task(publish_many())
     try:
@@ -244,7 +244,7 @@ async def test_event_loop_starvation(srv: RunningServer) -> None:
         while not stop:
             for i in range(n_topics):
                 srv.graph.publish(f"/load_{i}", blob)
-            await asyncio.sleep(0.005)
+            await asyncio.sleep(0.005)  # the load's rate: the test's input
 
     sent: list[float] = []
 
@@ -253,7 +253,7 @@ async def test_event_loop_starvation(srv: RunningServer) -> None:
         while not stop:
             sent.append(loop.time())
             srv.graph.publish("/probe", {"data": str(len(sent))})
-            await asyncio.sleep(0.1)
+            await asyncio.sleep(0.1)  # the probe's 10 Hz: the test's input
 
     loader = asyncio.create_task(load())
     try:
@@ -261,7 +261,7 @@ async def test_event_loop_starvation(srv: RunningServer) -> None:
             for i in range(n_topics):
                 await load_client.send({"op": "subscribe", "topic": f"/load_{i}"})
             drain = asyncio.create_task(_drain(load_client))
-            await asyncio.sleep(0.5)
+            await asyncio.sleep(0.5)  # the flood runs before the probe connects (deliberate)
             probe = await asyncio.wait_for(RawClient.open(srv.url()), 5)  # handshake not starved
             async with probe:
                 await probe.send({"op": "subscribe", "topic": "/probe"})
