@@ -20,7 +20,7 @@ from drone.mavlink.driver import MavlinkDriver
 from drone.mavlink.errors import ConnectionStringError
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
-from tests.support.polling import until_async
+from tests.support.polling import until, until_async
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = bytes(range(100, 132))
@@ -112,7 +112,7 @@ async def test_signed_link_and_a_wrong_key(world: Any) -> None:
             plain.protocol.command(400, 0.0)
             bad.flush()
             plain.flush()
-            await asyncio.sleep(1.0)
+            await asyncio.sleep(1.0)  # a second in which the wrong key must not connect
             assert not bad.protocol.connected
             assert bad.protocol.codec.rejected["bad_signature"] > 0
             # MAVLink 2 lets a system without the key read signed frames (mavlink.io "Message
@@ -145,7 +145,7 @@ async def test_serial_radio_link_over_a_pty(world: Any) -> None:
             out = ap.drain("radio")
             if out:
                 os.write(master, out)
-            await asyncio.sleep(0.01)
+            await asyncio.sleep(0.01)  # the driver's loop reads the pty between two steps
         assert d.protocol.connected and d.protocol.telemetry.autopilot == "PX4"
         assert d.protocol.telemetry.home is not None
     finally:
@@ -185,14 +185,13 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) 
         stderr=subprocess.STDOUT,
     )
     try:
-        deadline = time.monotonic() + 30
-        tcp = None
-        while tcp is None and time.monotonic() < deadline:
-            try:
-                tcp = mavutil.mavlink_connection("tcp:127.0.16.15:5760", autoreconnect=False)
-            except OSError:
-                time.sleep(0.2)
-        assert tcp is not None, "simulator did not come up"
+        tcp = until(
+            lambda: mavutil.mavlink_connection("tcp:127.0.16.15:5760", autoreconnect=False),
+            30.0,
+            "the simulator process listening",
+            period=0.2,
+            ignore=(OSError,),
+        )
         hb = tcp.wait_heartbeat(timeout=10)
         assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4
         assert hb.type == mavutil.mavlink.MAV_TYPE_QUADROTOR
