@@ -1,4 +1,4 @@
-"""Transport limits under uvicorn (issue 14), over real sockets on 127.0.14.3/4: a client
+"""Transport limits under uvicorn, over real sockets on loopback: a client
 that never finishes its headers is cut off; connections beyond the per-IP cap are closed."""
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from collections.abc import Iterator
 from fastapi import FastAPI
 
 from server.conn_guard import ConnectionLimits, guarded_h11
+from tests.support.loopback import fresh_address
 from tests.support.polling import until
 from tests.support.servers import threaded_server
 
@@ -44,7 +45,7 @@ def get(host: str, port: int) -> bytes:
 
 
 def test_slow_headers_are_cut_off() -> None:
-    host = "127.0.14.3"
+    host = fresh_address()
     limits = ConnectionLimits(header_timeout_s=0.3)
     with serve(host, limits) as port:
         slow = socket.create_connection((host, port), timeout=5)
@@ -57,7 +58,7 @@ def test_slow_headers_are_cut_off() -> None:
 
 
 def test_connections_per_ip_are_capped() -> None:
-    host = "127.0.14.4"
+    host = fresh_address()
     limits = ConnectionLimits(max_per_ip=3, header_timeout_s=30)
     with serve(host, limits) as port:
         held = [socket.create_connection((host, port), timeout=5) for _ in range(3)]

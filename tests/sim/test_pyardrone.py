@@ -18,9 +18,10 @@ from pyardrone import at as pat  # noqa: E402
 
 from drone.ardrone.navdata import CtrlState  # noqa: E402
 from drone.sim.server import SimServer  # noqa: E402
+from tests.support.loopback import fresh_address  # noqa: E402
 from tests.support.polling import until_async  # noqa: E402
 
-ADDR = "127.0.0.60"
+ADDR = fresh_address()
 SPEED = 2.0  # pyardrone sends COMWDG every 0.5 s of wall time: keep that under 2 s simulated
 WAIT = 10.0
 

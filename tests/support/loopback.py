@@ -9,6 +9,7 @@ different address in each. Worker ``gwN`` moves ``127.0.c.d`` to ``127.N.c.d`` (
 
 from __future__ import annotations
 
+import itertools
 import os
 import socket
 
@@ -44,3 +45,19 @@ def free_port(host: str = "127.0.0.1") -> int:
     pick; another process may take it before use)."""
     with bound_socket(host) as sock:
         return int(sock.getsockname()[1])
+
+
+FRESH_FROM = 230
+"""Third octet from which ``fresh_address`` hands out addresses; hand-picked ones stay below."""
+
+_fresh = itertools.count()
+
+
+def fresh_address() -> str:
+    """A loopback address that no other caller in this test process has had, in this worker's
+    ``127.N.c.d`` (``c`` from ``FRESH_FROM``): for a simulator whose ports are fixed (the
+    AR.Drone's 5554-5556, PX4's 5760), so that each needs an address of its own."""
+    c, d = divmod(next(_fresh), 254)
+    if FRESH_FROM + c > 255:
+        raise RuntimeError("no fresh loopback address left in this test process")
+    return f"127.{worker_index()}.{FRESH_FROM + c}.{d + 1}"
