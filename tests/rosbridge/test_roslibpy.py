@@ -42,7 +42,7 @@ async def _publish_until(srv: RunningServer, inbox: Inbox, topic: str, msg: dict
             srv.graph.publish(topic, msg)
         return bool(inbox.items)
 
-    await until_async(received, TIMEOUT, f"a message on {topic}", period=0.05)
+    await until_async(received, TIMEOUT, f"a message on {topic}")
 
 
 def test_roslibpy_publish_reaches_graph(srv: RunningServer, ros: roslibpy.Ros) -> None:

@@ -15,8 +15,9 @@ from typing import Any, TypeVar
 
 T = TypeVar("T")
 
-PERIOD_S = 0.02
-"""Between two looks at the condition: short against every timeout the tests use."""
+PERIOD_S = 0.05
+"""Between two looks at the condition: short against every timeout the tests use, long enough
+that a look (an HTTP request, a database read) does not load a shared machine."""
 
 
 def until(
