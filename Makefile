@@ -41,7 +41,7 @@ run: $(VENV)/.installed-run
 
 # The whole suite is two pytest runs: every file but the browser tests and the tests marked
 # `serial` in two worker processes, one test file per worker at a time (pytest-xdist; fixtures
-# that several files share take loopback addresses of their worker's own, tests/loopback.py),
+# that several files share take loopback addresses of their worker's own, tests/support/loopback.py),
 # then those alone: they are CPU-bound or real-time, and failed when a second run shared the
 # 2 cores with them. Both run even if the first fails. With ARGS, one serial pytest run.
 test: $(VENV)/.installed-test node-deps

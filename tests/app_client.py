@@ -12,7 +12,7 @@ import pytest
 
 from server.app import create_app
 from server.settings import Settings
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 
 @contextlib.asynccontextmanager

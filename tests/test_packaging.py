@@ -22,7 +22,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ("grammars", "worlds", "web", "models/captioner")

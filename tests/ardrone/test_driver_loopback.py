@@ -23,6 +23,7 @@ from drone.ardrone.driver import (
 from drone.ardrone.errors import DriverNotStartedError
 from drone.ardrone.navdata import CtrlState, DroneState, Navdata, encode_navdata
 from drone.sim.server import SimServer
+from tests.support.loopback import fresh_address
 
 SPEED = 4.0
 WAIT = 10.0
@@ -45,8 +46,9 @@ async def airborne(addr: str, **kw: object) -> tuple[SimServer, ARDroneDriver]:
 
 
 async def test_handshake_takeoff_move_land() -> None:
-    srv = SimServer("127.0.0.50", speed=SPEED)
-    async with srv, ARDroneDriver("127.0.0.50", video=False) as drv:
+    addr = fresh_address()
+    srv = SimServer(addr, speed=SPEED)
+    async with srv, ARDroneDriver(addr, video=False) as drv:
         await drv.wait_handshake(WAIT)
         nav = drv.latest_navdata
         assert nav is not None and nav.state & DroneState.NAVDATA_DEMO and nav.demo is not None
@@ -65,7 +67,8 @@ async def test_handshake_takeoff_move_land() -> None:
 
 
 async def test_emergency_reaches_the_drone_ahead_of_a_full_queue() -> None:
-    srv, drv = await airborne("127.0.0.51")
+    addr = fresh_address()
+    srv, drv = await airborne(addr)
     try:
         for i in range(200):  # several datagrams' worth of queued config writes
             drv.config(f"custom:key{i}", "x" * 40)
@@ -84,7 +87,8 @@ async def test_emergency_reaches_the_drone_ahead_of_a_full_queue() -> None:
 
 
 async def test_move_from_another_thread_is_safe() -> None:
-    srv, drv = await airborne("127.0.0.52")
+    addr = fresh_address()
+    srv, drv = await airborne(addr)
     try:
         y0 = srv.truth.y
         t = threading.Thread(target=drv.move, args=(-0.5, 0.0, 0.0, 0.0))  # left
@@ -97,16 +101,16 @@ async def test_move_from_another_thread_is_safe() -> None:
 
 
 async def test_watchdog_client_silent_then_comwdg_clears_it() -> None:
-    srv, drv = await airborne("127.0.0.53")
+    addr = fresh_address()
+    srv, drv = await airborne(addr)
     drv.move(0.0, -0.5, 0.0, 0.0)
     await drv.wait_for(lambda d: srv.truth.vx > 0.3, WAIT)
     await drv.stop()  # the client goes silent mid-move
-    await asyncio.sleep(3.0 / SPEED)  # > 2 s of simulated time
-    await asyncio.sleep(2.0 / SPEED)
+    await asyncio.sleep(5.0 / SPEED)  # deliberate: the client stays silent > 2 s (simulated)
     assert srv.sim.command_lost and srv.truth.flying
     assert abs(srv.truth.vx) < 0.15  # hovering on its own
     assert srv.sim.state_bits() & DroneState.COM_WATCHDOG
-    async with ARDroneDriver("127.0.0.53", video=False) as again:
+    async with ARDroneDriver(addr, video=False) as again:
         await again.wait_handshake(WAIT)  # already in demo mode: no new CONFIG needed
         await again.wait_for(
             lambda d: bool(
@@ -119,10 +123,11 @@ async def test_watchdog_client_silent_then_comwdg_clears_it() -> None:
 
 
 async def test_link_loss_and_recovery_by_fault_injection() -> None:
+    addr = fresh_address()
     events: list[DriverEvent] = []
-    srv = SimServer("127.0.0.54", speed=SPEED)
+    srv = SimServer(addr, speed=SPEED)
     await srv.start()
-    drv = ARDroneDriver("127.0.0.54", video=False, on_event=events.append)
+    drv = ARDroneDriver(addr, video=False, on_event=events.append)
     await drv.start()
     try:
         await drv.wait_handshake(WAIT)
@@ -142,35 +147,39 @@ async def test_link_loss_and_recovery_by_fault_injection() -> None:
 
 
 async def test_navdata_from_a_stranger_is_ignored() -> None:
-    srv = SimServer("127.0.0.55", speed=SPEED)
-    async with srv, ARDroneDriver("127.0.0.55", video=False) as drv:
+    addr = fresh_address()
+    other = fresh_address()
+    srv = SimServer(addr, speed=SPEED)
+    async with srv, ARDroneDriver(addr, video=False) as drv:
         await drv.wait_handshake(WAIT)
         port = drv._nav.get_extra_info("sockname")[1]  # type: ignore[union-attr]
         forged = encode_navdata(Navdata(DroneState.EMERGENCY, 10**9))
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            s.bind(("127.0.0.56", 5554))  # right port, wrong host
+            s.bind((other, 5554))  # right port, wrong host
             s.sendto(forged, ("127.0.0.1", port))
-        await asyncio.sleep(0.2)
+        await asyncio.sleep(0.2)  # deliberate: the forged packet has time to (not) take effect
         assert drv.latest_navdata is not None
         assert not drv.latest_navdata.state & DroneState.EMERGENCY
 
 
 async def test_commands_before_start_raise_and_busy_port_raises() -> None:
+    addr = fresh_address()
     with pytest.raises(DriverNotStartedError):
-        ARDroneDriver("127.0.0.57").takeoff()
-    async with SimServer("127.0.0.57", speed=SPEED):
+        ARDroneDriver(addr).takeoff()
+    async with SimServer(addr, speed=SPEED):
         with pytest.raises(OSError):
-            await SimServer("127.0.0.57").start()
+            await SimServer(addr).start()
 
 
 async def test_video_frames_decoded_from_tcp_5555() -> None:
+    addr = fresh_address()
     pytest.importorskip("drone.ardrone.video")
     from drone.sim.world import load_world
 
     world = load_world("indoor")
-    srv = SimServer("127.0.0.58", world, speed=1.0)
+    srv = SimServer(addr, world, speed=1.0)
     asked: list[float] = []  # what each decode asked the gate for (a vehicle's control loop)
-    async with srv, ARDroneDriver("127.0.0.58") as drv:
+    async with srv, ARDroneDriver(addr) as drv:
         drv.decode_gate = asked.append
         await drv.wait_handshake(WAIT)
         await drv.wait_for(lambda d: d.frames_decoded >= 5, WAIT)
@@ -193,17 +202,18 @@ async def test_video_frames_decoded_from_tcp_5555() -> None:
 
 
 async def test_run_sim_serves_until_cancelled_and_frees_its_ports() -> None:
+    addr = fresh_address()
     from drone.sim.server import run_sim
 
-    task = asyncio.create_task(run_sim("127.0.0.59", "indoor", speed=SPEED))
+    task = asyncio.create_task(run_sim(addr, "indoor", speed=SPEED))
     try:
-        async with ARDroneDriver("127.0.0.59", video=False) as drv:
+        async with ARDroneDriver(addr, video=False) as drv:
             await drv.wait_handshake(WAIT)
     finally:
         task.cancel()
         with pytest.raises(asyncio.CancelledError):
             await task
-    async with SimServer("127.0.0.59", speed=SPEED):  # the ports were released
+    async with SimServer(addr, speed=SPEED):  # the ports were released
         pass
 
 

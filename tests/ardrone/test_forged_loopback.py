@@ -22,7 +22,7 @@ import pytest
 from drone.ardrone.driver import ARDroneDriver, DriverEvent, NavdataDoubt
 from drone.ardrone.navdata import CtrlState, Demo, DroneState, Navdata, encode_navdata
 from drone.sim.server import SimServer
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 SPEED = 4.0
 WAIT = 10.0

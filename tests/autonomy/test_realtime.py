@@ -17,6 +17,7 @@ from drone.camera import CameraModel
 from drone.sim.server import SimServer
 from drone.sim.world import load_world
 from server.tasks import TaskManager, TaskNotice
+from tests.support.polling import until_async
 
 # It asserts the control thread never stalled: a second test run sharing the 2 cores starved it
 # (0.57 s without the CPU, in a two-worker run), so it runs in make test's serial run.
@@ -24,12 +25,6 @@ pytestmark = pytest.mark.serial
 
 ADDR = "127.0.0.70"
 WAIT = 20.0
-
-
-async def _until(pred, timeout: float) -> None:  # type: ignore[no-untyped-def]
-    async with asyncio.timeout(timeout):
-        while not pred():
-            await asyncio.sleep(0.02)
 
 
 async def test_real_time_flight_to_a_marker_with_the_100_hz_control_thread() -> None:
@@ -45,7 +40,7 @@ async def test_real_time_flight_to_a_marker_with_the_100_hz_control_thread() -> 
     async def step_tasks() -> None:  # what VehicleNode does at 20 Hz
         while True:
             tm.step(vehicle.clock.now())
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.05)  # 20 Hz, as VehicleNode: the test runs in real time
 
     stepper = asyncio.create_task(step_tasks())
     try:
@@ -54,7 +49,7 @@ async def test_real_time_flight_to_a_marker_with_the_100_hz_control_thread() -> 
         await vehicle.start(drv)
         decisions = tm.submit([{"action": "takeoff"}, {"action": "goto", "marker": 0}])
         assert all(d.accepted for d in decisions)
-        await _until(lambda: tm.current is None and not tm.queued, 2 * WAIT)
+        await until_async(lambda: tm.current is None and not tm.queued, 2 * WAIT, "the tasks done")
         assert events[-1].text == "Reached marker 0", events
         sp = world.marker(0).standoff(1.0)
         tr = srv.truth
@@ -75,7 +70,9 @@ async def test_real_time_flight_to_a_marker_with_the_100_hz_control_thread() -> 
             await stepper
         await vehicle.stop(land=True)
         try:
-            await _until(lambda: srv.truth.ctrl_state is CtrlState.LANDED, WAIT)
+            await until_async(
+                lambda: srv.truth.ctrl_state is CtrlState.LANDED, WAIT, "the drone landed"
+            )
         finally:
             await drv.stop()
             await srv.stop()

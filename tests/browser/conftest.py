@@ -21,7 +21,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.loopback import for_worker, free_port
+from tests.support.loopback import for_worker, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = Path(os.environ.get("UAVC_CHROMIUM", "/usr/bin/chromium"))

@@ -12,8 +12,8 @@ import httpx
 import pytest
 
 from tests.browser.conftest import ROOT, SCREENSHOTS, open_console
-from tests.loopback import free_port
 from tests.recorder.synthetic import write_flight
+from tests.support.loopback import free_port
 
 pytestmark = pytest.mark.browser
 TOKEN = "replay-browser-token"

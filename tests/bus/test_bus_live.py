@@ -21,8 +21,8 @@ from drone.bus.errors import BusConfigError
 from drone.bus.payloads import Telemetry, decode_telemetry, encode
 from drone.bus.session import free_listen_endpoint, open_session
 from drone.bus.vehicle import VehicleBus
-from tests.loopback import free_port
-from tests.polling import wait_for
+from tests.support.loopback import free_port
+from tests.support.polling import wait_for
 
 
 def telemetry(drone: str, battery: float = 80.0) -> Telemetry:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from server.cli import main as cli_main
 from tests.isolation.conftest import HOST, ROOT, serve, wait_for
-from tests.loopback import for_worker, free_port
+from tests.support.loopback import for_worker, free_port
 
 SCRIPT = textwrap.dedent(
     """

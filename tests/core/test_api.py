@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
-import time
 from collections.abc import Callable
 from typing import Any
 
 import httpx
 
 from tests.core.conftest import OBSERVER
+from tests.support.polling import until_async
 
 
 async def wait_for(
@@ -18,15 +17,14 @@ async def wait_for(
     pred: Callable[[dict[str, Any]], bool],
     timeout: float = 20,
 ) -> dict[str, Any]:
-    """Poll ``path`` until ``pred`` holds (the simulator runs in real time here)."""
-    deadline = time.monotonic() + timeout
-    body: dict[str, Any] = {}
-    while time.monotonic() < deadline:
-        body = (await client.get(path)).json()
-        if pred(body):
-            return body
-        await asyncio.sleep(0.05)
-    raise AssertionError(f"{path} never satisfied the condition; last: {body}")
+    """GET ``path`` until ``pred`` holds for its body (the simulator runs in real time here)."""
+
+    async def body() -> dict[str, Any] | None:
+        got: dict[str, Any] = (await client.get(path)).json()
+        return got if pred(got) else None
+
+    found: dict[str, Any] = await until_async(body, timeout, f"{path} to satisfy the condition")
+    return found
 
 
 async def test_health_needs_no_token_and_reports_parts(api: httpx.AsyncClient) -> None:

@@ -1,18 +1,18 @@
-"""Transport limits under uvicorn (issue 14), over real sockets on 127.0.14.3/4: a client
+"""Transport limits under uvicorn, over real sockets on loopback: a client
 that never finishes its headers is cut off; connections beyond the per-IP cap are closed."""
 
 from __future__ import annotations
 
 import contextlib
 import socket
-import threading
-import time
 from collections.abc import Iterator
 
-import uvicorn
 from fastapi import FastAPI
 
 from server.conn_guard import ConnectionLimits, guarded_h11
+from tests.support.loopback import fresh_address
+from tests.support.polling import until
+from tests.support.servers import threaded_server
 
 
 @contextlib.contextmanager
@@ -23,24 +23,8 @@ def serve(host: str, limits: ConnectionLimits) -> Iterator[int]:
     def ping() -> dict[str, str]:
         return {"pong": "yes"}
 
-    with socket.socket() as s:
-        s.bind((host, 0))
-        port = int(s.getsockname()[1])
-    config = uvicorn.Config(
-        app, host=host, port=port, log_level="error", http=guarded_h11(limits), lifespan="off"
-    )
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started:
-        assert time.monotonic() < deadline and thread.is_alive(), "server did not start"
-        time.sleep(0.01)
-    try:
-        yield port
-    finally:
-        server.should_exit = True
-        thread.join(10)
+    with threaded_server(app, host, http=guarded_h11(limits), lifespan="off") as served:
+        yield served.port
 
 
 def closed_by_server(sock: socket.socket, wait_s: float = 10.0) -> bool:
@@ -61,7 +45,7 @@ def get(host: str, port: int) -> bytes:
 
 
 def test_slow_headers_are_cut_off() -> None:
-    host = "127.0.14.3"
+    host = fresh_address()
     limits = ConnectionLimits(header_timeout_s=0.3)
     with serve(host, limits) as port:
         slow = socket.create_connection((host, port), timeout=5)
@@ -74,22 +58,17 @@ def test_slow_headers_are_cut_off() -> None:
 
 
 def test_connections_per_ip_are_capped() -> None:
-    host = "127.0.14.4"
+    host = fresh_address()
     limits = ConnectionLimits(max_per_ip=3, header_timeout_s=30)
     with serve(host, limits) as port:
         held = [socket.create_connection((host, port), timeout=5) for _ in range(3)]
-        for _ in range(100):
-            if limits.open.get(host) == 3:
-                break
-            time.sleep(0.02)
+        client = held[0].getsockname()[0]  # the kernel's source address: 127.0.0.1
+        until(lambda: limits.open.get(client) == 3, 10.0, "three connections counted")
         extra = socket.create_connection((host, port), timeout=5)
         assert closed_by_server(extra)
         assert limits.refused == 1
         for s in held:
             s.close()
         extra.close()
-        for _ in range(100):
-            if not limits.open:
-                break
-            time.sleep(0.02)
+        until(lambda: not limits.open, 10.0, "the closed connections uncounted")
         assert b"200 OK" in get(host, port)

@@ -134,7 +134,7 @@ async def test_services_answer_fail_and_time_out() -> None:
         raise ValueError("no")
 
     async def slow(args: dict) -> dict:
-        await asyncio.sleep(10)
+        await asyncio.Event().wait()  # never answers
         return {}
 
     g.advertise_service("/add", "test/Add", add)

@@ -16,7 +16,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import os
 import stat
 from collections.abc import AsyncIterator
@@ -28,6 +27,7 @@ import pytest
 from server.security import TOKEN_COOKIE, TokenStore
 from server.store import AuditLog
 from tests.app_client import app_fixture
+from tests.support.polling import until_async
 
 PILOT = "pilot-token-for-hardening"
 OBSERVER = "observer-token-for-hardening"
@@ -212,10 +212,9 @@ async def test_direct_actions_write_intent_then_outcome(api: httpx.AsyncClient) 
     # a lease change is a row; a REST take-over writes its intent, the change and the outcome
     runtime.security.lease.acquire("browser-pilot", 0.0)
     assert (await api.post("/api/v1/drones/uav1/reset?take_over=true")).status_code == 200
-    for _ in range(500):  # the lease rows are written off the loop
-        if sum(r[0].startswith("lease:") for r in rows()) >= 2:
-            break
-        await asyncio.sleep(0.02)
+    await until_async(  # the lease rows are written off the loop
+        lambda: sum(r[0].startswith("lease:") for r in rows()) >= 2, 10.0, "two lease rows"
+    )
     actions = [r[0] for r in rows()[n:]]
     assert "lease:acquire" in actions and "lease:take_over" in actions
     assert actions[-1] == "outcome:reset"

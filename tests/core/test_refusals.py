@@ -4,7 +4,6 @@ out, nothing is sent to the drone, and every action is audited with where it cam
 from __future__ import annotations
 
 import asyncio
-import time
 from collections.abc import AsyncIterator
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from server.settings import Settings
 from tests.app_client import app_fixture
 from tests.core.conftest import OBSERVER, PILOT
 from tests.core.test_api import wait_for
+from tests.support.polling import until_async
 
 # The app on its own simulator (127.0.18.2: this test file's loopback address).
 api = app_fixture("127.0.18.2", PILOT, OBSERVER, sim_speed=4.0)
@@ -56,9 +56,7 @@ async def test_takeoff_in_emergency_and_at_low_battery_is_refused_with_the_way_o
         rows = runtime.audit.recent(20, drone="uav1")
         return {(e.commands[0]["action"], e.source, e.action) for e in rows if e.commands}
 
-    deadline = time.monotonic() + 5
-    while ("takeoff", "rest", "refused") not in seen() and time.monotonic() < deadline:
-        await asyncio.sleep(0.05)
+    await until_async(lambda: ("takeoff", "rest", "refused") in seen(), 10.0, "the REST refusal")
     assert ("emergency", "keyboard", "executed") in seen()
     assert ("takeoff", "button", "refused") in seen()
     assert ("takeoff", "rest", "refused") in seen()

@@ -10,11 +10,9 @@ over TCP. Tests that fly leave the drone landed.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,8 +22,8 @@ import httpx
 import pytest
 import roslibpy
 
-from tests.loopback import for_worker, free_port
-from tests.polling import wait_for
+from tests.support.loopback import for_worker, free_port
+from tests.support.polling import until, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "e2e-pilot-token"
@@ -113,17 +111,17 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     )
     srv = Server(port, http, proc, log_path)
     try:
-        deadline = time.monotonic() + 40
-        while True:
+
+        def healthy() -> bool:
             if proc.poll() is not None:
                 raise RuntimeError(f"server exited with {proc.returncode}:\n{srv.log()}")
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"server did not become healthy:\n{srv.log()}")
-            with contextlib.suppress(httpx.TransportError):
-                health = http.get("/api/v1/health")
-                if health.status_code == 200 and health.json()["drones"].get("uav1"):
-                    break
-            time.sleep(0.1)
+            health = http.get("/api/v1/health")
+            return health.status_code == 200 and bool(health.json()["drones"].get("uav1"))
+
+        try:
+            until(healthy, 40.0, "the server healthy", ignore=(httpx.TransportError,))
+        except AssertionError:
+            raise RuntimeError(f"server did not become healthy:\n{srv.log()}") from None
         yield srv
     finally:
         http.close()

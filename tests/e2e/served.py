@@ -7,7 +7,6 @@ import contextlib
 import os
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,7 +14,7 @@ from typing import Any
 
 import httpx
 
-from tests.polling import wait_for
+from tests.support.polling import until, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -65,7 +64,7 @@ def serve(
     timeout_s: float = 60.0,
 ) -> Iterator[Served]:
     """``serve --port P --token T --data-dir DATA *args`` until its drones are all up."""
-    from tests.loopback import free_port
+    from tests.support.loopback import free_port
 
     port = free_port()
     log_path = data / f"serve-{port}.log"
@@ -82,17 +81,17 @@ def serve(
     )
     srv = Served(port, token, proc, http, log_path)
     try:
-        deadline = time.monotonic() + timeout_s
-        while True:
+
+        def healthy() -> bool:
             if proc.poll() is not None:
                 raise RuntimeError(f"serve exited with {proc.returncode}:\n{srv.log()[-4000:]}")
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"serve did not become healthy:\n{srv.log()[-4000:]}")
-            with contextlib.suppress(httpx.TransportError, ValueError):
-                up = http.get("/api/v1/health").json().get("drones", {})
-                if all(up.get(d) for d in drones):
-                    break
-            time.sleep(0.2)
+            up = http.get("/api/v1/health").json().get("drones", {})
+            return all(up.get(d) for d in drones)
+
+        try:
+            until(healthy, timeout_s, "serve healthy", ignore=(httpx.TransportError, ValueError))
+        except AssertionError:
+            raise RuntimeError(f"serve did not become healthy:\n{srv.log()[-4000:]}") from None
         yield srv
     finally:
         http.close()

@@ -17,7 +17,7 @@ import numpy as np
 import roslibpy
 
 from tests.inbox import Inbox
-from tests.polling import wait_for
+from tests.support.polling import wait_for
 
 from .conftest import TIMEOUT, Server
 
@@ -58,7 +58,7 @@ def test_takeoff_jog_watchdog_and_spoken_land(landed: Server, ros: roslibpy.Ros)
     end = time.monotonic() + 1.0
     while time.monotonic() < end:
         cmd_vel.publish(roslibpy.Message(jog))
-        time.sleep(0.05)
+        time.sleep(0.05)  # a jog at 20 Hz for a second: the test's input
     last_publish = time.monotonic()
     moving = srv.truth()
     assert moving["vx"] > 0.3, moving

@@ -22,9 +22,9 @@ import roslibpy
 
 from drone.sim.world import load_world
 from tests.e2e.served import serve
-from tests.loopback import for_worker
-from tests.polling import wait_for
 from tests.recorder.test_foxglove import NODE_DIR, node_exe
+from tests.support.loopback import for_worker
+from tests.support.polling import wait_for
 
 TOKEN = "outdoor-voice-pilot"
 WP3 = (15.0, 15.0, 2.5)  # worlds/outdoor.yaml wp3

@@ -15,7 +15,7 @@ from typing import Any
 import roslibpy
 import websockets
 
-from tests.polling import wait_for
+from tests.support.polling import wait_for
 
 from .conftest import OBSERVER, Server
 

@@ -7,11 +7,9 @@ from __future__ import annotations
 
 import asyncio
 import json
-import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -19,16 +17,8 @@ from drone.bus.central import CentralBus
 from drone.bus.console import ConsoleBus, router_id
 from drone.bus.plans import VehiclePlans
 from drone.bus.vehicle import VehicleBus
-from tests.loopback import free_port
-
-
-async def until(pred: Callable[[], Any], what: str, timeout: float = 10.0) -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if out := pred():
-            return out
-        await asyncio.sleep(0.02)
-    raise AssertionError(f"{what}: not in {timeout} s")
+from tests.support.loopback import free_port
+from tests.support.polling import until_async
 
 
 @dataclass
@@ -88,12 +78,14 @@ async def test_each_console_sees_the_other_and_the_holder(fleet: Fleet) -> None:
     both = {"console-a", "console-b"}
     # the joining router is not authenticated by the one it joins: without the peer's id in
     # its access control, console-b would not see console-a's tokens
-    await until(lambda: fleet.b.central.view()[0] == both, "console-b sees console-a")
-    await until(lambda: fleet.a.central.view()[0] == both, "console-a sees console-b")
+    await until_async(lambda: fleet.b.central.view()[0] == both, 10.0, "console-b sees console-a")
+    await until_async(lambda: fleet.a.central.view()[0] == both, 10.0, "console-a sees console-b")
     fleet.a.central.claim()
-    await until(lambda: fleet.b.central.view()[1] == {"console-a"}, "console-b sees the holder")
+    await until_async(
+        lambda: fleet.b.central.view()[1] == {"console-a"}, 10.0, "console-b sees the holder"
+    )
     fleet.a.central.release()
-    await until(lambda: fleet.b.central.view()[1] == set(), "the holder's token gone")
+    await until_async(lambda: fleet.b.central.view()[1] == set(), 10.0, "the holder's token gone")
 
 
 async def test_the_routers_ids_derive_from_the_consoles_names(fleet: Fleet) -> None:
@@ -104,9 +96,11 @@ async def test_the_routers_ids_derive_from_the_consoles_names(fleet: Fleet) -> N
 
 async def test_replicas_reach_the_standby_and_plans_reach_the_vehicle(fleet: Fleet) -> None:
     loop = asyncio.get_running_loop()
-    await until(lambda: fleet.b.central.view()[0] == {"console-a", "console-b"}, "joined")
+    await until_async(
+        lambda: fleet.b.central.view()[0] == {"console-a", "console-b"}, 10.0, "joined"
+    )
     fleet.a.central.publish_replica(b'{"console": "console-a"}')
-    await until(lambda: fleet.b.replicas, "the replica at console-b")
+    await until_async(lambda: fleet.b.replicas, 10.0, "the replica at console-b")
     assert fleet.b.replicas == [b'{"console": "console-a"}']
 
     async def on_plan(payload: bytes) -> bytes:
@@ -118,7 +112,7 @@ async def test_replicas_reach_the_standby_and_plans_reach_the_vehicle(fleet: Fle
     plans.start()
     try:
         plans.publish_status(b'{"name": "uav1"}')
-        await until(lambda: fleet.b.statuses, "the LTM status at console-b")
+        await until_async(lambda: fleet.b.statuses, 10.0, "the LTM status at console-b")
         assert fleet.b.statuses[0] == ("uav1", b'{"name": "uav1"}')
         # both consoles reach it: console-a directly, console-b through console-a's router
         for console in (fleet.a, fleet.b):
@@ -127,10 +121,10 @@ async def test_replicas_reach_the_standby_and_plans_reach_the_vehicle(fleet: Fle
         # the vehicle sees the central's token come and go
         assert not plans.central_alive
         fleet.b.central.claim()
-        await until(lambda: plans.central_alive, "the vehicle sees a central")
+        await until_async(lambda: plans.central_alive, 10.0, "the vehicle sees a central")
         assert plans.central_name == "console-b"
         fleet.b.central.release()
-        await until(lambda: not plans.central_alive, "the vehicle sees none")
+        await until_async(lambda: not plans.central_alive, 10.0, "the vehicle sees none")
     finally:
         plans.close()
 

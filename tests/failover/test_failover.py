@@ -28,7 +28,7 @@ from server.cli import main as cli_main
 from server.fleet.continuity import CoverageTracker
 from server.fleet.geo import Enu
 from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
-from tests.loopback import for_worker, free_port
+from tests.support.loopback import for_worker, free_port
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 

@@ -27,7 +27,7 @@ from server.fleet.continuity import CoverageTracker
 from server.fleet.geo import Enu
 from tests.failover.test_failover import central_of, serve, vehicle
 from tests.isolation.conftest import wait_for
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 

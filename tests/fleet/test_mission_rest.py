@@ -25,7 +25,7 @@ async def wait_for_async(
     get: Callable[[], Awaitable[Any]], pred: Callable[[Any], bool], timeout: float, what: str
 ) -> Any:
     """``await get()`` every 100 ms until ``pred`` holds for it (returned); fails naming
-    ``what`` (``tests/polling.wait_for`` for a server in this event loop)."""
+    ``what`` (``tests.support.polling.wait_for`` for a server in this event loop)."""
     deadline = time.monotonic() + timeout
     last: Any = None
     while time.monotonic() < deadline:

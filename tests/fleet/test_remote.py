@@ -40,7 +40,7 @@ from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
 from server.security import Security, TokenStore
 from server.settings import ROOT, Settings
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 
 pytestmark = pytest.mark.timeout(60)
 WORLD = load_world("outdoor")

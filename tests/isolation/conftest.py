@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,8 @@ import httpx
 from websockets.sync.client import connect as ws_connect
 
 from server.vehicles.door_protocol import Ack, Auth, Hello, Stop, encode, parse_door
-from tests.loopback import free_port
+from tests.support.loopback import free_port
+from tests.support.polling import until
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "isolation-pilot-token"
@@ -28,16 +28,11 @@ HOST = "127.0.13.1"
 
 
 def wait_for(fn: Callable[[], Any], what: str, timeout: float = 20.0, period: float = 0.1) -> Any:
-    """Poll ``fn`` until it returns something truthy (fails with ``what`` otherwise)."""
-    deadline = time.monotonic() + timeout
-    last: Any = None
-    while time.monotonic() < deadline:
-        with contextlib.suppress(httpx.HTTPError, KeyError, ValueError, TypeError):
-            last = fn()
-            if last:
-                return last
-        time.sleep(period)
-    raise AssertionError(f"timed out waiting for {what} (last: {last!r})")
+    """``until`` for a ``serve`` process: an HTTP error or a body without the field yet (the
+    process still starting) means "not yet"."""
+    return until(
+        fn, timeout, what, period=period, ignore=(httpx.HTTPError, KeyError, ValueError, TypeError)
+    )
 
 
 @dataclass

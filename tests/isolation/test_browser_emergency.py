@@ -29,7 +29,7 @@ from drone.sim.probe import SimThread
 from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS
 from tests.isolation.conftest import HOST, PILOT, Served, serve, wait_for
 from tests.isolation.test_processes import leave_emergency
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 pytestmark = [
     pytest.mark.timeout(300),

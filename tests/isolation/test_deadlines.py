@@ -27,7 +27,7 @@ import pytest
 from drone.sim.probe import SimThread
 from tests.isolation.conftest import Served, reply_texts, serve, wait_for
 from tests.isolation.test_processes import Listener
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 pytestmark = pytest.mark.timeout(240)
 SIM_ADDR = for_worker("127.0.13.30")

@@ -45,7 +45,8 @@ from server.vehicles.door_protocol import (
 from server.vehicles.errors import DoorError, DoorProtocolError, TicketError
 from server.vehicles.stops import StopLedger
 from server.vehicles.tickets import DoorSecrets, mint, verify
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
+from tests.support.polling import until_async
 
 SECRET = b"k" * 32
 TOKEN = "pilot-token-for-door-tests"
@@ -457,26 +458,20 @@ async def _tcp(host: str, port: int, source: str) -> asyncio.StreamWriter:
     return writer
 
 
-async def _until(pred: Any, what: str, timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        await asyncio.sleep(0.01)
-
-
 async def test_unauthenticated_connections_are_capped_per_address_and_in_all() -> None:
     limits = DoorLimits(unauthenticated_per_address=4, unauthenticated=8, authenticated=2)
     async with running_door(limits) as (door, _):
         pilot = await opened(door)  # held before the flood
         a = [await _tcp(HOST, door.port, for_worker("127.0.26.50")) for _ in range(5)]
-        await _until(lambda: door.counts.refused_at_accept == 1, "the 5th from one address")
+        await until_async(
+            lambda: door.counts.refused_at_accept == 1, 10.0, "the 5th from one address"
+        )
         assert door.counts.unauthenticated_total == 4
         b = [await _tcp(HOST, door.port, for_worker("127.0.26.51")) for _ in range(4)]
-        await _until(lambda: door.counts.unauthenticated_total == 8, "a second address")
+        await until_async(lambda: door.counts.unauthenticated_total == 8, 10.0, "a second address")
         # all unauthenticated places taken: a newcomer from a third address is refused ...
         c = await _tcp(HOST, door.port, for_worker("127.0.26.52"))
-        await _until(lambda: door.counts.refused_at_accept == 2, "the overall cap")
+        await until_async(lambda: door.counts.refused_at_accept == 2, 10.0, "the overall cap")
         # ... while the held connection goes on: heartbeats, and a stop is run
         await recv_op(pilot, Heartbeat)
         await pilot.send(encode(Stop("hover", "h1", None)))
@@ -509,7 +504,9 @@ async def test_the_held_connection_keeps_working_through_a_no_token_flood() -> N
 
         flooding = asyncio.create_task(flood())
         try:
-            await _until(lambda: door.counts.refused_at_accept > 0, "the flood to hit the caps")
+            await until_async(
+                lambda: door.counts.refused_at_accept > 0, 10.0, "the flood to hit the caps"
+            )
             beats = 0
             deadline = time.monotonic() + 3.2  # two refreshes of the flood
             while time.monotonic() < deadline:

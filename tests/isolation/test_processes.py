@@ -92,10 +92,10 @@ def leave_emergency(sim: SimThread, srv: Served) -> None:
     driver may still hold it from the stop: a reset then is no edge, so wait and retry)."""
 
     def reset() -> bool:
-        time.sleep(1.0)
+        time.sleep(1.0)  # the driver lets go of the bit: the next reset is an edge
         r = srv.http.post("/api/v1/drones/uav1/reset")
         assert r.status_code == 200, r.text
-        time.sleep(1.0)
+        time.sleep(1.0)  # the edge reaches the simulator (no state to poll for "not yet")
         return not sim.truth.emergency
 
     wait_for(reset, "the drone to leave EMERGENCY", 40)
@@ -148,7 +148,7 @@ def test_a_remote_vehicle_is_a_whole_vehicle(rig: tuple[SimThread, Served]) -> N
         twist = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0, "y": 0, "z": 0}}
         for _ in range(10):
             lis.send({"op": "publish", "topic": "/cmd_vel", "msg": twist})
-            time.sleep(0.1)
+            time.sleep(0.1)  # a key held for a second at the page's 10 Hz
         zero = {"linear": {"x": 0, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}}
         lis.send({"op": "publish", "topic": "/cmd_vel", "msg": zero})
         wait_for(lambda: sim.truth.x - x0 > 0.15, "the jog to move the drone forward", 10)
@@ -259,7 +259,7 @@ def test_web_process_crash_vehicle_keeps_flying_and_is_adopted_by_the_next_serve
             first.proc.kill()  # SIGKILL: no clean shutdown, the vehicle is orphaned
             first.proc.wait()
             port = first.port
-        time.sleep(2.0)
+        time.sleep(2.0)  # deliberate: two seconds with no web process, and it stays up
         assert sim.truth.flying, "the orphaned vehicle must keep the drone in the air"
         with serve(tmp_path, addr, extra=("--vehicles", "process"), env=env, port=port) as second:
             again = second.wait_vehicle()

@@ -36,13 +36,11 @@ async def test_a_call_waits_for_a_starting_vehicle_to_join() -> None:
         seen.append(args)
         return {"accepted": False, "detail": "I cannot take off: in emergency."}
 
-    async def join_later() -> None:
-        await asyncio.sleep(0.2)
-        graph.advertise_service(names.control_service("uav1"), names.CONTROL_TYPE, control)
-
-    joining = asyncio.create_task(join_later())
-    accepted, detail = await stack.act("takeoff", 20.0)
-    await joining
+    acting = asyncio.create_task(stack.act("takeoff", 20.0))
+    await asyncio.sleep(0)  # one turn of the loop: the call finds no vehicle and waits
+    assert not acting.done() and not seen
+    graph.advertise_service(names.control_service("uav1"), names.CONTROL_TYPE, control)
+    accepted, detail = await acting
     assert (accepted, detail) == (False, "I cannot take off: in emergency.")
     assert seen == [{"op": "direct", "action": "takeoff", "check": True, "battery_low_pct": 20.0}]
     assert stack.expected_until is None  # joined: later calls do not wait

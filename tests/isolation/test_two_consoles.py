@@ -20,7 +20,7 @@ import pytest
 from drone.sim.server import SimPorts, in_use, sim_sockets
 from server.vehicles.keys import new_key
 from tests.e2e.served import ROOT, serve
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 BASE = for_worker("127.0.0.190")
 NEXT = BASE.rsplit(".", 1)[0] + "." + str(int(BASE.rsplit(".", 1)[1]) + 1)

@@ -220,11 +220,11 @@ def test_the_pilot_token_does_not_open_the_vehicle_link(srv: Served) -> None:
                                "type": "geometry_msgs/Twist"})  # fmt: skip
                 for _ in range(15):
                     attacker.send({"op": "publish", "topic": "/uav1/cmd_vel", "msg": JOG})
-                    time.sleep(0.1)
+                    time.sleep(0.1)  # a jog at the page's 10 Hz
                 attacker.send({"op": "publish", "topic": "/uav1/cmd_vel", "msg": ZERO})
                 msg = {"text": FAKE, "level": "alert", "speak": True, "drone": "uav1"}
                 attacker.send({"op": "publish", "topic": "/console/reply", "msg": msg})
-                time.sleep(1.0)
+                time.sleep(1.0)  # deliberate: a second for the forged jog to (not) move it
             finally:
                 attacker.close()
         after = truth(srv, "uav1")

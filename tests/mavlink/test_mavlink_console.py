@@ -6,9 +6,7 @@ operator with the vehicle's reason."""
 
 from __future__ import annotations
 
-import asyncio
-import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +15,7 @@ import pytest
 
 from server.settings import Settings
 from tests.app_client import app_client
+from tests.support.polling import until_async
 
 PILOT = "pilot-token-mavlink"
 
@@ -35,18 +34,6 @@ async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
     )
     async with app_client(settings) as client:
         yield client
-
-
-async def _until(pred: Callable[[], Any], timeout_s: float) -> Any:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        value = pred()
-        if asyncio.iscoroutine(value):
-            value = await value
-        if value:
-            return value
-        await asyncio.sleep(0.05)
-    raise AssertionError("timed out")
 
 
 async def test_fleet_of_mavlink_drones_flies_by_words(api: httpx.AsyncClient) -> None:
@@ -68,11 +55,13 @@ async def test_fleet_of_mavlink_drones_flies_by_words(api: httpx.AsyncClient) ->
         body = r.json()
         return bool(body["link_ok"] and body["extra"].get("home"))
 
-    await _until(linked, 15.0)
+    await until_async(linked, 15.0, "linked")
     body = (await api.get("/api/v1/drones/uav2")).json()
     assert body["extra"]["protocol"] == "mavlink" and body["extra"]["autopilot"] == "PX4"
     assert body["x"] == pytest.approx(1.5, abs=0.05)  # standing on station home2
-    await _until(lambda: seen.get("/uav2/mavros/state", [{}])[-1].get("connected"), 5.0)
+    await until_async(
+        lambda: seen.get("/uav2/mavros/state", [{}])[-1].get("connected"), 5.0, "mavros connected"
+    )
     assert seen["/uav2/mavros/state"][-1]["mode"] == "AUTO.LOITER"
 
     r = await api.post("/api/v1/command", json={"text": "take off", "drone": "uav2"})
@@ -82,7 +71,7 @@ async def test_fleet_of_mavlink_drones_flies_by_words(api: httpx.AsyncClient) ->
         s = (await api.get("/api/v1/drones/uav2")).json()
         return bool(s["flying"] and s["ctrl_state"] in ("HOVERING", "FLYING"))
 
-    await _until(flying, 20.0)
+    await until_async(flying, 20.0, "flying")
     r = await api.post("/api/v1/command", json={"text": "go forward three meters", "drone": "uav2"})
     assert r.json()["accepted"], r.text
     # the world's start yaw is 90° (north): forward is +y in the map frame
@@ -91,10 +80,10 @@ async def test_fleet_of_mavlink_drones_flies_by_words(api: httpx.AsyncClient) ->
         s = (await api.get("/api/v1/drones/uav2")).json()
         return bool(s["y"] > 2.7 and s["task"]["state"] in ("idle", "succeeded"))
 
-    await _until(moved, 20.0)
+    await until_async(moved, 20.0, "moved")
     truth = (await api.get("/api/v1/sim/uav2/truth")).json()
     assert truth["y"] == pytest.approx(3.0, abs=0.3)
-    await _until(lambda: seen["/uav2/mavros/state"][-1]["armed"], 5.0)
+    await until_async(lambda: seen["/uav2/mavros/state"][-1]["armed"], 5.0, "mavros armed")
     fix = seen["/uav2/mavros/global_position/global"][-1]
     assert fix["latitude"] > 36.36716 and fix["status"]["status"] == 0
     assert 0.9 < seen["/uav2/mavros/battery"][-1]["percentage"] <= 1.0
@@ -105,12 +94,13 @@ async def test_fleet_of_mavlink_drones_flies_by_words(api: httpx.AsyncClient) ->
     stack = runtime.drones["uav2"]
     stack.vehicle.protocol.command(400, 0.0)
     stack.vehicle._track(stack.vehicle.protocol._token, "disarm")
-    await _until(
+    await until_async(
         lambda: any(
             "Disarming denied: not landed" in m["text"] and m["level"] == "alert"
             for m in seen.get("/console/reply", [])
         ),
         10.0,
+        "the refusal's reason in a reply",
     )
 
     r = await api.post("/api/v1/command", json={"text": "land", "drone": "uav2"})
@@ -120,17 +110,20 @@ async def test_fleet_of_mavlink_drones_flies_by_words(api: httpx.AsyncClient) ->
         s = (await api.get("/api/v1/drones/uav2")).json()
         return not s["flying"] and s["ctrl_state"] == "LANDED"
 
-    await _until(landed, 30.0)
+    await until_async(landed, 30.0, "landed")
     # Link loss: the alert names what the autopilot will do on its own.
     r = await api.post("/api/v1/sim/uav2/fault", json={"kind": "link_loss", "duration_s": 12.0})
     assert r.status_code in (200, 204), r.text
     want = "I lost the link to the drone. PX4's data-link-loss failsafe will return to launch"
-    await _until(
-        lambda: any(m["text"].startswith(want) for m in seen.get("/console/reply", [])), 10.0
+    await until_async(
+        lambda: any(m["text"].startswith(want) for m in seen.get("/console/reply", [])),
+        10.0,
+        "the link-loss alert",
     )
-    await _until(
+    await until_async(
         lambda: any("link to the drone is back" in m["text"] for m in seen["/console/reply"]),
         10.0,
+        "the link-back reply",
     )
 
     # uav1, the AR.Drone of the same fleet, is there and never moved

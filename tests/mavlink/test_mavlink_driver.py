@@ -20,6 +20,7 @@ from drone.mavlink.driver import MavlinkDriver
 from drone.mavlink.errors import ConnectionStringError
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
+from tests.support.polling import until, until_async
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = bytes(range(100, 132))
@@ -30,25 +31,24 @@ def world() -> Any:
     return load_world("outdoor")
 
 
-async def _until(pred: Any, timeout_s: float) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return True
-        await asyncio.sleep(0.02)
-    return bool(pred())
-
-
 async def test_driver_over_tcp_arms_and_takes_off(world: Any) -> None:
     events: list[Any] = []
     async with MavlinkSimServer("127.0.16.11", SimAutopilot(world), speed=4.0) as sim:
         d = MavlinkDriver("tcp:127.0.16.11:5760", on_event=events.append)
         await d.start()
         try:
-            assert await _until(lambda: d.protocol.telemetry.home is not None, 10.0)
+            await until_async(
+                lambda: d.protocol.telemetry.home is not None,
+                10.0,
+                "d.protocol.telemetry.home is not None",
+            )
             d.protocol.arm_and_takeoff(3.0)
             d.flush()
-            assert await _until(lambda: d.protocol.telemetry.rel_alt_m > 2.8, 15.0)
+            await until_async(
+                lambda: d.protocol.telemetry.rel_alt_m > 2.8,
+                15.0,
+                "d.protocol.telemetry.rel_alt_m > 2.8",
+            )
             flight = ("COMPONENT_ARM_DISARM", "NAV_TAKEOFF")
             done = [
                 e.command
@@ -75,11 +75,15 @@ async def test_driver_udpin_hears_a_vehicle_that_pushes(world: Any) -> None:
             speed=4.0,
         )
         async with sim:
-            assert await _until(lambda: d.protocol.connected, 10.0)
+            await until_async(lambda: d.protocol.connected, 10.0, "d.protocol.connected")
             # replies go back to where the datagrams came from: commands work
             d.protocol.intent("hold")
             d.flush()
-            assert await _until(lambda: d.protocol.pending_commands() == 0, 10.0)
+            await until_async(
+                lambda: d.protocol.pending_commands() == 0,
+                10.0,
+                "d.protocol.pending_commands() == 0",
+            )
     finally:
         await d.stop()
 
@@ -94,15 +98,21 @@ async def test_signed_link_and_a_wrong_key(world: Any) -> None:
         for d in (good, bad, plain):
             await d.start()
         try:
-            assert await _until(lambda: good.protocol.telemetry.home is not None, 10.0)
+            await until_async(
+                lambda: good.protocol.telemetry.home is not None,
+                10.0,
+                "good.protocol.telemetry.home is not None",
+            )
             good.protocol.command(400, 1.0)
             good.flush()
-            assert await _until(lambda: good.protocol.telemetry.armed, 5.0)
+            await until_async(
+                lambda: good.protocol.telemetry.armed, 5.0, "good.protocol.telemetry.armed"
+            )
             bad.protocol.command(400, 0.0)
             plain.protocol.command(400, 0.0)
             bad.flush()
             plain.flush()
-            await asyncio.sleep(1.0)
+            await asyncio.sleep(1.0)  # a second in which the wrong key must not connect
             assert not bad.protocol.connected
             assert bad.protocol.codec.rejected["bad_signature"] > 0
             # MAVLink 2 lets a system without the key read signed frames (mavlink.io "Message
@@ -135,7 +145,7 @@ async def test_serial_radio_link_over_a_pty(world: Any) -> None:
             out = ap.drain("radio")
             if out:
                 os.write(master, out)
-            await asyncio.sleep(0.01)
+            await asyncio.sleep(0.01)  # the driver's loop reads the pty between two steps
         assert d.protocol.connected and d.protocol.telemetry.autopilot == "PX4"
         assert d.protocol.telemetry.home is not None
     finally:
@@ -175,14 +185,13 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) 
         stderr=subprocess.STDOUT,
     )
     try:
-        deadline = time.monotonic() + 30
-        tcp = None
-        while tcp is None and time.monotonic() < deadline:
-            try:
-                tcp = mavutil.mavlink_connection("tcp:127.0.16.15:5760", autoreconnect=False)
-            except OSError:
-                time.sleep(0.2)
-        assert tcp is not None, "simulator did not come up"
+        tcp = until(
+            lambda: mavutil.mavlink_connection("tcp:127.0.16.15:5760", autoreconnect=False),
+            30.0,
+            "the simulator process listening",
+            period=0.2,
+            ignore=(OSError,),
+        )
         hb = tcp.wait_heartbeat(timeout=10)
         assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4
         assert hb.type == mavutil.mavlink.MAV_TYPE_QUADROTOR

@@ -9,14 +9,10 @@ import contextlib
 import os
 import subprocess
 import sys
-import threading
-import time
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
-import uvicorn
 from fastapi import FastAPI
 
 from drone.mavlink.autopilot import SimAutopilot
@@ -30,7 +26,9 @@ from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
 from server.security import Security, TokenStore
 from server.settings import ROOT, Settings
-from tests.loopback import free_port
+from tests.support.loopback import bound_socket
+from tests.support.polling import until_async
+from tests.support.servers import threaded_server
 
 pytestmark = pytest.mark.timeout(90)
 WORLD = load_world("outdoor")
@@ -38,7 +36,8 @@ WORLD = load_world("outdoor")
 
 @contextlib.contextmanager
 def _central(tmp: Path) -> Iterator[tuple[str, CentralTaskManager, str]]:
-    port = free_port("127.0.16.1")
+    sock = bound_socket("127.0.16.1")
+    port = int(sock.getsockname()[1])
     settings = Settings(host="127.0.16.1", port=port, data_dir=tmp, world="outdoor")
     graph = Graph()
     tokens = TokenStore(tmp)
@@ -55,27 +54,8 @@ def _central(tmp: Path) -> Iterator[tuple[str, CentralTaskManager, str]]:
 
     app = FastAPI(lifespan=lifespan)
     app.include_router(make_router(ctx))
-    server = uvicorn.Server(
-        uvicorn.Config(app, host="127.0.16.1", port=port, log_level="error", ws_ping_interval=None)
-    )
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started:
-        assert time.monotonic() < deadline and thread.is_alive(), "server did not start"
-        time.sleep(0.01)
-    try:
-        yield f"ws://127.0.16.1:{port}/rosbridge", ctm, tokens.pilot_token
-    finally:
-        server.should_exit = True
-        thread.join(10)
-
-
-async def _until(pred: Any, timeout_s: float) -> None:
-    end = time.monotonic() + timeout_s
-    while not pred():
-        assert time.monotonic() < end, "condition not reached in time"
-        await asyncio.sleep(0.05)
+    with threaded_server(app, sock=sock) as served:
+        yield served.url("/rosbridge", scheme="ws"), ctm, tokens.pilot_token
 
 
 async def test_mavlink_vehicle_process_joins_the_central(tmp_path: Path) -> None:
@@ -102,15 +82,20 @@ async def test_mavlink_vehicle_process_joins_the_central(tmp_path: Path) -> None
                 cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
             )
             try:
-                await _until(lambda: "uav2" in ctm.drones or proc.poll() is not None, 40.0)
+                await until_async(
+                    lambda: "uav2" in ctm.drones or proc.poll() is not None,
+                    40.0,
+                    "uav2 to join (or its process to end)",
+                )
                 assert proc.poll() is None, proc.stdout.read().decode()[-2000:]  # type: ignore[union-attr]
-                await _until(
+                await until_async(
                     lambda: (
                         (st := ctm.drones["uav2"].status) is not None
                         and st.link_ok
                         and st.battery_pct > 90
                     ),
                     20.0,
+                    "uav2's status: link up, battery full",
                 )
                 st = ctm.drones["uav2"].status
                 assert st is not None and st.station == Enu(1.5, 0.0, 0.0)

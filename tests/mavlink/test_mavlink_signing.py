@@ -39,7 +39,7 @@ from drone.mavlink.autopilot import SimAutopilot
 from drone.mavlink.errors import InsecureLinkError, SigningKeyError
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
-from tests.polling import wait_for
+from tests.support.polling import until_async, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = bytes(range(1, 33))
@@ -323,11 +323,14 @@ async def test_connection_flood_is_capped_and_a_signed_client_still_flies(world:
             readers.append(asyncio.create_task(open_one(garbage=i % 2 == 0)))
             await asyncio.sleep(0)
             watch()
-        end = time.monotonic() + 30
-        while closed_by_server < 250 and time.monotonic() < end:
-            await asyncio.sleep(0.05)
+
+        def displaced() -> bool:
             watch()
-        assert closed_by_server >= 250, closed_by_server  # displaced as newer ones arrived
+            return closed_by_server >= 250
+
+        await until_async(
+            displaced, 30.0, "250 connections displaced by newer ones"
+        )  # displaced as newer ones arrived
 
         stop = asyncio.Event()
 
@@ -336,7 +339,7 @@ async def test_connection_flood_is_capped_and_a_signed_client_still_flies(world:
             while not stop.is_set():
                 readers.append(asyncio.create_task(open_one(garbage=n % 2 == 0)))
                 n += 1
-                await asyncio.sleep(0.01)
+                await asyncio.sleep(0.01)  # the flood's pace: the test's input
                 watch()
 
         churner = asyncio.create_task(churn())
@@ -380,10 +383,8 @@ async def test_udp_peers_are_capped_too_and_a_signed_peer_commands(world: Any) -
                 s.bind((addr, 0))
                 s.sendto(b"\xfd" + bytes([i]) * 40, (addr, port))
                 await asyncio.sleep(0)  # the simulator takes each datagram in turn
-            end = time.monotonic() + 10
-            while sim.admission.refused < 50 and time.monotonic() < end:
-                await asyncio.sleep(0.02)
-            assert len(ap.links) <= 16 and sim.admission.refused >= 50
+            await until_async(lambda: sim.admission.refused >= 50, 10.0, "50 peers refused")
+            assert len(ap.links) <= 16
 
             def signed_peer() -> int:
                 m = mavutil.mavlink_connection(f"udpout:{addr}:{port}", source_system=254)
@@ -508,16 +509,12 @@ async def test_serve_sim_mavlink_signs_the_console_link_with_the_data_dir_key(
         key, _ = signing.load_or_create(tmp_path)
         assert parts.sim is not None and parts.sim.autopilot.signing_key == key
         assert parts.driver.protocol.codec.signed
-        end = time.monotonic() + 20
-        while time.monotonic() < end and not parts.driver.protocol.connected:
-            await asyncio.sleep(0.05)
-        assert parts.driver.protocol.connected
+        await until_async(lambda: parts.driver.protocol.connected, 20.0, "the driver connected")
         token = parts.driver.protocol.command(400, 1.0)
         parts.driver.flush()
-        end = time.monotonic() + 10
-        while time.monotonic() < end and not parts.sim.autopilot.armed:
-            await asyncio.sleep(0.05)
-        assert parts.sim.autopilot.armed, token  # the console's signed command is obeyed
+        await until_async(  # the console's signed command is obeyed
+            lambda: parts.sim is not None and parts.sim.autopilot.armed, 10.0, f"armed ({token})"
+        )
         assert parts.sim.autopilot.rejected().get("bad_signature", 0) == 0
     finally:
         await parts.vehicle.stop(land=False)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
@@ -25,6 +24,7 @@ import pytest
 from drone.mavlink.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
+from tests.support.polling import until_async
 
 SPEED = 4.0
 
@@ -32,16 +32,6 @@ SPEED = 4.0
 @pytest.fixture(scope="module")
 def world() -> Any:
     return load_world("outdoor")
-
-
-async def _until(fn: Callable[[], Awaitable[Any]], timeout_s: float) -> Any:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        value = await fn()
-        if value:
-            return value
-        await asyncio.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {fn}")
 
 
 @contextlib.asynccontextmanager
@@ -57,7 +47,7 @@ async def _mavsdk(addr: str) -> AsyncIterator[tuple[Any, Any]]:
         system = await m.first_autopilot(10.0)
         assert system is not None
         tel, act = TelemetryAsync(system), ActionAsync(system)
-        assert await _until(tel.health_all_ok, 20.0)
+        await until_async(tel.health_all_ok, 20.0, "MAVSDK health all ok")
         yield tel, act
 
 
@@ -82,7 +72,7 @@ async def test_mavsdk_flight_to_a_set_altitude_judged_by_mavsdk(world: Any) -> N
                 await tel.flight_mode() == FlightMode.HOLD
             )
 
-        await _until(took_off, 40.0)
+        await until_async(took_off, 40.0, "took_off")
         home = await tel.home()
         assert math.isclose(home.latitude_deg, 36.367164, abs_tol=1e-6)
         p = await tel.position()
@@ -104,13 +94,13 @@ async def test_mavsdk_flight_to_a_set_altitude_judged_by_mavsdk(world: Any) -> N
                 and abs(p.relative_altitude_m - 8.0) < 0.15
             )
 
-        await _until(there, 60.0)
+        await until_async(there, 60.0, "there")
         await act.return_to_launch()
 
         async def landed() -> bool:
             return not await tel.in_air()
 
-        await _until(landed, 90.0)
+        await until_async(landed, 90.0, "landed")
         try:
             await act.disarm()  # PX4 may have disarmed itself after landing already
         except Exception as exc:
@@ -119,7 +109,7 @@ async def test_mavsdk_flight_to_a_set_altitude_judged_by_mavsdk(world: Any) -> N
         async def disarmed() -> bool:
             return not await tel.armed()
 
-        await _until(disarmed, 10.0)
+        await until_async(disarmed, 10.0, "disarmed")
         p = await tel.position()
         assert abs(p.latitude_deg - home.latitude_deg) < 6e-6  # back home (≈ 0.6 m)
         assert abs(p.longitude_deg - home.longitude_deg) < 6e-6
@@ -147,16 +137,16 @@ async def test_mavsdk_takeoff_above_the_room_is_refused_with_the_reason() -> Non
         async def told() -> bool:
             return "above ceiling (2.9 m)" in (await tel.status_text()).text
 
-        await _until(told, 10.0)
+        await until_async(told, 10.0, "told")
         await act.set_takeoff_altitude(2.0)
         await act.takeoff()
 
         async def at_two_m() -> bool:
             return abs((await tel.position()).relative_altitude_m - 2.0) < 0.15
 
-        await _until(at_two_m, 30.0)
+        await until_async(at_two_m, 30.0, "at_two_m")
         await act.land()
-        await _until(lambda: _not(tel.armed), 40.0)
+        await until_async(lambda: _not(tel.armed), 40.0, "disarmed after landing")
 
 
 async def _not(get: Callable[[], Awaitable[Any]]) -> bool:

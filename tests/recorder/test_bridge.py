@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from typing import Any
 
@@ -13,6 +12,7 @@ from server.ros1 import codec_for, definition
 from server.rosout import ERROR, INFO, WARN, Rosout
 from tests.rosbridge.server_fixture import RunningServer
 from tests.rosbridge.wsclient import RawClient
+from tests.support.polling import until_async
 
 
 async def test_cbor_raw_is_ros1_bytes_in_a_cbor_frame(srv: RunningServer) -> None:
@@ -20,7 +20,7 @@ async def test_cbor_raw_is_ros1_bytes_in_a_cbor_frame(srv: RunningServer) -> Non
     try:
         sub = {"op": "subscribe", "topic": "/fox/pose", "type": "geometry_msgs/PoseStamped"}
         await client.send({**sub, "compression": "cbor-raw", "id": "s1"})
-        await asyncio.sleep(0.2)
+        await until_async(lambda: srv.graph.subscribers("/fox/pose"), 10.0, "the subscription")
         pose = {
             "header": {"stamp": {"sec": 12, "nanosec": 34}, "frame_id": "map"},
             "pose": {"position": {"x": 1.5, "y": -2.0, "z": 0.25}},

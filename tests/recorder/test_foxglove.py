@@ -32,9 +32,9 @@ import pytest
 from server.cli import main as cli_main
 from server.recorder.mcapfile import read_recording
 from server.ros1 import codec_for
-from tests.loopback import free_port
-from tests.polling import wait_for
 from tests.rosbridge.wsclient import RawClient
+from tests.support.loopback import free_port
+from tests.support.polling import until, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 NODE_DIR = ROOT / "tests" / "node"
@@ -77,14 +77,16 @@ def serve(cmd: list[str], data: Path, port: int, ready: str, **env: str) -> Iter
         )
     http = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=10.0)
     try:
-        deadline = time.monotonic() + 40
-        while True:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"server did not start:\n{log_path.read_text()[-3000:]}")
-            with contextlib.suppress(httpx.TransportError):
-                if http.get(ready, headers={"Authorization": f"Bearer {env['TOKEN']}"}).is_success:
-                    break
-            time.sleep(0.1)
+
+        def is_ready() -> bool:
+            if proc.poll() is not None:
+                raise RuntimeError(f"server exited:\n{log_path.read_text()[-3000:]}")
+            return http.get(ready, headers={"Authorization": f"Bearer {env['TOKEN']}"}).is_success
+
+        try:
+            until(is_ready, 40.0, "the server ready", ignore=(httpx.TransportError,))
+        except AssertionError:
+            raise RuntimeError(f"server did not start:\n{log_path.read_text()[-3000:]}") from None
         yield http
     finally:
         http.close()

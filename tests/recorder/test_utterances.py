@@ -21,9 +21,9 @@ from mcap.reader import make_reader
 
 from server.ros1 import codec_for
 from tests.e2e.served import serve
-from tests.loopback import for_worker
-from tests.polling import wait_for
 from tests.speech.conftest import HAVE_TTS, synthesise
+from tests.support.loopback import for_worker
+from tests.support.polling import wait_for
 
 TOKEN = "utterance-pilot"
 

@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import threading
-import time
 from collections.abc import AsyncIterator, Coroutine, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-import uvicorn
 from fastapi import FastAPI
 
 from server.graph import Graph
@@ -20,7 +17,8 @@ from server.rosbridge.endpoint import make_router
 from server.security import Security, TokenStore
 from server.settings import Settings
 from server.ws_guard import preauth_capped_ws
-from tests.loopback import free_port
+from tests.support.loopback import bound_socket
+from tests.support.servers import threaded_server
 
 T = TypeVar("T")
 
@@ -63,8 +61,8 @@ def running_server(
         k: ctx_overrides.pop(k) for k in list(ctx_overrides) if k in Settings.model_fields
     }
     host = str(settings_overrides.pop("host", "127.0.0.1"))
-    port = free_port(host)
-    settings = Settings(host=host, port=port, data_dir=tmp, **settings_overrides)
+    sock = bound_socket(host)
+    settings = Settings(host=host, port=sock.getsockname()[1], data_dir=tmp, **settings_overrides)
     graph = Graph()
     tokens = TokenStore(tmp)
     ctx = BridgeContext(graph=graph, security=Security(settings, tokens), settings=settings)
@@ -81,29 +79,22 @@ def running_server(
 
     app = FastAPI(lifespan=lifespan)
     app.include_router(make_router(ctx))
-    config = uvicorn.Config(
-        app,
-        host=host,
-        port=port,
-        log_level="error",
-        ws_max_size=4 * settings.max_frame_bytes,
-        ws=ws or preauth_capped_ws(ctx.preauth_max_bytes),
-        ws_ping_interval=None,
-        timeout_graceful_shutdown=1,
-    )
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started:
-        if time.monotonic() > deadline or not thread.is_alive():
-            raise RuntimeError("test server did not start")
-        time.sleep(0.01)
     try:
-        yield RunningServer(
-            port, graph, ctx, tokens.pilot_token, tokens.observer_token, loop_box[0], host
-        )
+        with threaded_server(
+            app,
+            sock=sock,
+            ws_max_size=4 * settings.max_frame_bytes,
+            ws=ws or preauth_capped_ws(ctx.preauth_max_bytes),
+            timeout_graceful_shutdown=1,
+        ) as served:
+            yield RunningServer(
+                served.port,
+                graph,
+                ctx,
+                tokens.pilot_token,
+                tokens.observer_token,
+                loop_box[0],
+                host,
+            )
     finally:
-        server.should_exit = True
-        thread.join(10)
         ctx.close()

@@ -24,6 +24,8 @@ from pathlib import Path
 import pytest
 from websockets.exceptions import ConnectionClosed
 
+from tests.support.polling import until_async
+
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
 
@@ -156,11 +158,13 @@ async def test_client_that_never_reads(tmp_path: Path) -> None:
         await writer.drain()
         async with await RawClient.open(srv.url()) as other:
             await other.send({"op": "subscribe", "topic": "/firehose"})
-            await asyncio.sleep(0.3)
+            await until_async(
+                lambda: len(srv.graph.subscribers("/firehose")) == 2, 10.0, "both subscribed"
+            )
             blob = "y" * 100_000
             for i in range(200):  # 20 MB towards a client that reads nothing
                 srv.graph.publish("/firehose", {"data": f"{i}:{blob}"})  # thread-safe
-                if i % 50 == 0:
+                if i % 50 == 0:  # the reading client's loop runs now and then
                     await asyncio.sleep(0.01)
             # the reading client still gets messages, up to the last one
             await other.expect(
@@ -170,11 +174,11 @@ async def test_client_that_never_reads(tmp_path: Path) -> None:
                 timeout=20,
             )
             # the stalled connection is closed by the server (its subscription removed)
-            loop = asyncio.get_running_loop()
-            deadline = loop.time() + 15
-            while len(srv.graph.subscribers("/firehose")) > 1 and loop.time() < deadline:
-                await asyncio.sleep(0.1)
-            assert len(srv.graph.subscribers("/firehose")) == 1
+            await until_async(
+                lambda: len(srv.graph.subscribers("/firehose")) == 1,
+                15.0,
+                "the stalled client's subscription removed",
+            )
         # reset the stalled socket so the server's unflushed transport goes away before shutdown
         writer.transport.abort()
-        await asyncio.sleep(0.3)
+        await until_async(lambda: not srv.ctx.connections, 10.0, "both connections gone")

@@ -23,9 +23,9 @@ from server.graph import Graph
 from server.rosbridge import ops
 from server.rosbridge.protocol import BridgeProtocol
 from server.store import AuditLog
-from tests.polling import wait_for
 from tests.rosbridge.server_fixture import RunningServer, running_server
 from tests.rosbridge.wsclient import RawClient
+from tests.support.polling import until, until_async
 
 EMPTY = "std_msgs/Empty"
 TWIST = "geometry_msgs/Twist"
@@ -103,17 +103,11 @@ async def test_graph_carries_issued_from_another_thread() -> None:
     worker = threading.Thread(target=lambda: graph.publish("/a", {}, issued=3.0))
     worker.start()
     worker.join()
-    while not got:
-        await asyncio.sleep(0.01)
+    await until_async(lambda: got, 5.0, "the publish run on the loop")
     assert got == [3.0]
 
 
 # -- a real server ----------------------------------------------------------------------------
-def _until(get: Any, what: str) -> Any:
-    """Poll ``get()`` until it is truthy (a few seconds at most)."""
-    return wait_for(get, bool, 10.0, what)
-
-
 def _expired_rows(db: Path) -> list[tuple[str, str, str]]:
     with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as conn:
         rows = conn.execute(
@@ -178,7 +172,7 @@ async def test_a_late_take_off_is_dropped_said_audited_and_a_late_stop_goes_thro
                     "issued": now - 5.0,
                 }
             )
-            _until(lambda: ("/ardrone/land", now - 5.0) in seen, "the late land")
+            until(lambda: ("/ardrone/land", now - 5.0) in seen, 10.0, "the late land")
             # a take-off in time is delivered, carrying when it was issued
             fresh = time.time()
             await pilot.send(
@@ -191,11 +185,11 @@ async def test_a_late_take_off_is_dropped_said_audited_and_a_late_stop_goes_thro
                     "issued": fresh,
                 }
             )
-            _until(lambda: ("/ardrone/takeoff", fresh) in seen, "the take-off in time")
+            until(lambda: ("/ardrone/takeoff", fresh) in seen, 10.0, "the take-off in time")
         assert [t for t, _ in seen].count("/ardrone/takeoff") == 1
         assert [t for t, _ in seen].count("/console/reply") == 1
-        [(commands, _, outcome)] = _until(
-            lambda: _expired_rows(tmp_path / "audit.db"), "the audit row"
+        [(commands, _, outcome)] = until(
+            lambda: _expired_rows(tmp_path / "audit.db"), 10.0, "the audit row"
         )
         assert json.loads(commands) == [{"action": "takeoff"}]
         assert outcome.startswith("expired: delivered 5.") and "past the 2 s deadline" in outcome
@@ -228,7 +222,7 @@ async def test_a_late_jog_is_dropped_but_the_end_of_a_jog_is_not(tmp_path: Path)
                     "issued": old,
                 }
             )
-            _until(lambda: ("/cmd_vel", old) in seen, "the late end of the jog")
+            until(lambda: ("/cmd_vel", old) in seen, 10.0, "the late end of the jog")
             status = await pilot.status("jog0")
             assert "Not flown: 'jog'" in status["msg"]
         cmd_vel = [t for t, _ in seen if t == "/cmd_vel"]
@@ -312,5 +306,5 @@ async def test_a_bad_stamp_refuses_a_motion_command_but_never_holds_a_stop_back(
             )
             warned = await pilot.status("down2")
             assert warned["level"] == "warning" and "judged from its arrival" in warned["msg"]
-            _until(lambda: [t for t, _ in seen].count("/ardrone/land") == 2, "both landings")
+            until(lambda: [t for t, _ in seen].count("/ardrone/land") == 2, 10.0, "both landings")
         assert [t for t, _ in seen].count("/ardrone/takeoff") == 0

@@ -38,7 +38,8 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 
 from server.rosbridge.encode import PNG_SIGNATURE, png_encode
-from tests.loopback import for_worker, free_port
+from tests.support.loopback import for_worker, free_port
+from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
@@ -250,8 +251,7 @@ async def test_health_answers_while_every_role_sends_the_attack(
     try:
         async with httpx.AsyncClient(timeout=120) as h, asyncio.timeout(120):
             # 120 s bounds the test only; nothing is timed
-            while "answered" not in events:  # the attack is under way
-                await asyncio.sleep(0.01)
+            await until_async(lambda: "answered" in events, 120, "the attack under way")
             while answers < 5:
                 r = await h.get(f"http://{host}:{port}/api/v1/health")
                 assert r.status_code == 200
@@ -261,8 +261,9 @@ async def test_health_answers_while_every_role_sends_the_attack(
                 assert not stopped, f"a flood stopped: {stopped!r}"
             # and the attack goes on after the last answer: /health was served during it
             seen = len(events)
-            while "answered" not in events[seen:]:
-                await asyncio.sleep(0.01)
+            await until_async(
+                lambda: "answered" in events[seen:], 120, "an answer after the last /health"
+            )
     finally:
         stop.set()
         for t in attackers:

@@ -19,7 +19,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import base64
 import json
 import struct
@@ -31,6 +30,7 @@ import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from server.rosbridge.encode import PNG_SIGNATURE, png_encode
+from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
@@ -165,7 +165,9 @@ async def test_concurrent_calls_are_capped_per_connection(srv14: RunningServer) 
         await provider.send(
             {"op": "advertise_service", "service": "/slow", "type": "std_srvs/Trigger"}
         )
-        await asyncio.sleep(0.2)
+        await until_async(
+            lambda: srv14.graph.service_type("/slow") is not None, 10.0, "/slow advertised"
+        )
         for i in range(9):
             await caller.send({"op": "call_service", "id": f"c{i}", "service": "/slow"})
         refused = await caller.expect_op("service_response", id="c8")
@@ -247,10 +249,7 @@ async def test_connections_per_ip_are_capped(tmp_path: Path) -> None:
             for c in clients:
                 await c.close()
         # closed ones free their slots
-        for _ in range(50):
-            if not srv.ctx.connections:
-                break
-            await asyncio.sleep(0.05)
+        await until_async(lambda: not srv.ctx.connections, 10.0, "the closed slots freed")
         async with await RawClient.open(srv.url()) as again:
             await again.send({"op": "call_service", "id": "t", "service": "/rosapi/topics"})
             assert (await again.expect_op("service_response", id="t"))["result"] is True
@@ -282,10 +281,7 @@ async def test_closed_connections_free_their_buffers(tmp_path: Path) -> None:
                 await c.expect_op("service_response", id="t")
             for c in clients:
                 await c.close()
-            for _ in range(100):
-                if not srv.ctx.connections:
-                    break
-                await asyncio.sleep(0.05)
+            await until_async(lambda: not srv.ctx.connections, 10.0, "every connection closed")
         assert not srv.ctx.connections
         held = [
             o
@@ -337,10 +333,8 @@ async def test_drone_commands_over_rosbridge_are_audited(tmp_path: Path) -> None
             return [e.action for e in reversed(log.recent(100))]
 
         async def wait_for(n: int) -> list[str]:
-            for _ in range(500):  # rows are written off the loop (generous: a loaded machine)
-                if len(actions()) >= n:
-                    break
-                await asyncio.sleep(0.02)
+            """The audit's actions once it holds ``n`` (rows are written off the loop)."""
+            await until_async(lambda: len(actions()) >= n, 10.0, f"{n} audit rows")
             return actions()
 
         async with await RawClient.open(srv.url()) as c:

@@ -19,7 +19,7 @@ from websockets.frames import Frame
 from websockets.uri import parse_uri
 
 from server.ws_guard import CappedServerProtocol, InflateLimits
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient

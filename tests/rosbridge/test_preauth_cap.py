@@ -25,6 +25,8 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import Frame, Opcode
 
+from tests.support.polling import until_async
+
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
 
@@ -77,11 +79,8 @@ async def trickle_until_closed(c: RawClient, limit: int) -> tuple[int, int | Non
 
 
 async def received(srv: RunningServer, topic: str, got: list[Any]) -> Any:
-    for _ in range(500):
-        if got:
-            return got[0]
-        await asyncio.sleep(0.02)
-    raise AssertionError(f"nothing published on {topic}")
+    await until_async(lambda: got, 10.0, f"a message published on {topic}")
+    return got[0]
 
 
 def publish_frames(topic: str, size: int) -> list[str]:

@@ -48,7 +48,7 @@ def test_roslibjs_scenarios(srv: RunningServer, node: str) -> None:
         while True:
             n += 1
             srv.graph.publish("/py/ticker", {"data": n})
-            await asyncio.sleep(0.02)
+            await asyncio.sleep(0.02)  # a 50 Hz topic: the rate is the test's input
 
     tick = asyncio.run_coroutine_threadsafe(ticker(), srv.loop)
     try:

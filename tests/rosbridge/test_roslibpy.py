@@ -9,6 +9,7 @@ import pytest
 import roslibpy
 
 from tests.inbox import Inbox
+from tests.support.polling import until, until_async
 
 from .server_fixture import RunningServer
 
@@ -34,15 +35,14 @@ def test_publish_from_graph_reaches_roslibpy(srv: RunningServer, ros: roslibpy.R
 
 
 async def _publish_until(srv: RunningServer, inbox: Inbox, topic: str, msg: dict[str, Any]) -> None:
-    """Publish every 50 ms until the (asynchronously subscribing) client got one message."""
-    import asyncio
+    """Publish until the (asynchronously subscribing) client got one message."""
 
-    for _ in range(200):
+    def received() -> bool:
         if srv.graph.subscribers(topic):
             srv.graph.publish(topic, msg)
-        if inbox.items:
-            return
-        await asyncio.sleep(0.05)
+        return bool(inbox.items)
+
+    await until_async(received, TIMEOUT, f"a message on {topic}")
 
 
 def test_roslibpy_publish_reaches_graph(srv: RunningServer, ros: roslibpy.Ros) -> None:
@@ -59,11 +59,7 @@ def test_latched_topic_reaches_late_subscriber(srv: RunningServer, ros: roslibpy
     second = roslibpy.Ros(srv.url())
     second.run(timeout=TIMEOUT)
     try:
-        import time
-
-        deadline = time.monotonic() + TIMEOUT
-        while srv.graph.latched("/latched") is None and time.monotonic() < deadline:
-            time.sleep(0.01)
+        until(lambda: srv.graph.latched("/latched") is not None, TIMEOUT, "the latched message")
         inbox = Inbox()
         roslibpy.Topic(second, "/latched", "std_msgs/String").subscribe(inbox)
         assert inbox.wait(1)[0] == {"data": "kept"}
@@ -98,11 +94,11 @@ def test_client_provided_service_called_by_other_client(
     caller = roslibpy.Ros(srv.url())
     caller.run(timeout=TIMEOUT)
     try:
-        import time
-
-        deadline = time.monotonic() + TIMEOUT
-        while srv.graph.service_type("/client_add") is None and time.monotonic() < deadline:
-            time.sleep(0.01)
+        until(
+            lambda: srv.graph.service_type("/client_add") is not None,
+            TIMEOUT,
+            "/client_add advertised",
+        )
         svc = roslibpy.Service(caller, "/client_add", "example/AddTwoInts")
         assert svc.call(roslibpy.ServiceRequest({"a": 3, "b": 4}), timeout=TIMEOUT) == {"sum": 7}
         # the graph sees the provider too

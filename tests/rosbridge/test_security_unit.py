@@ -17,7 +17,7 @@ from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge_port
 from server.security import LeaseHeld, PilotLease, Role, Security, TokenStore, require_role
 from server.settings import Settings
-from tests.loopback import free_port
+from tests.support.loopback import free_port
 
 from .wsclient import RawClient
 

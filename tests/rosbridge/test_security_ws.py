@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 
 import httpx
 import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
@@ -99,10 +100,26 @@ async def test_cross_site_origin_is_refused(srv: RunningServer) -> None:
         assert (await c.expect_op("service_response", id="t"))["result"] is True
 
 
-async def test_allow_origin_setting(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "origin",
+    [
+        "https://other.example",  # another site
+        "http://console.example",  # the allowed host over another scheme
+        "https://console.example:8443",  # ... or on another port
+        "https://console.example.evil.example",  # a name that starts like it
+        "https://evil.example/https://console.example",  # ... or ends like it
+    ],
+)
+async def test_allow_origin_setting(tmp_path: Path, origin: str) -> None:
+    """``allow_origins`` admits exactly the origins it names, and refuses every other."""
     with running_server(tmp_path, allow_origins=("https://console.example",)) as srv:
-        c = await RawClient.open(srv.url(), origin="https://console.example")  # type: ignore[arg-type]
-        await c.close()
+        allowed = "https://console.example"
+        async with await RawClient.open(srv.url(), origin=allowed) as c:  # type: ignore[arg-type]
+            await c.send({"op": "call_service", "id": "t", "service": "/rosapi/nodes"})
+            assert (await c.expect_op("service_response", id="t"))["result"] is True
+        with pytest.raises(InvalidStatus) as info:
+            await RawClient.open(srv.url(), origin=origin)  # type: ignore[arg-type]
+        assert info.value.response.status_code == 403
 
 
 async def test_pilot_lease_takeover_tells_the_first(srv: RunningServer) -> None:
@@ -160,9 +177,10 @@ async def test_disconnect_cleans_up(srv: RunningServer) -> None:
         await c.send({"op": "call_service", "id": "t", "service": "/rosapi/topics"})
         await c.expect_op("service_response", id="t")
         assert srv.graph.service_type("/my_srv") == "a/B"
-    for _ in range(100):
-        if srv.graph.service_type("/my_srv") is None and "/mine" not in srv.graph.topics():
-            break
-        await asyncio.sleep(0.02)
+    await until_async(
+        lambda: srv.graph.service_type("/my_srv") is None and "/mine" not in srv.graph.topics(),
+        10.0,
+        "the closed client's service and topic gone",
+    )
     assert srv.graph.service_type("/my_srv") is None
     assert "/mine" not in srv.graph.topics()

@@ -11,16 +11,10 @@ import asyncio
 import json
 from typing import Any
 
+from tests.support.polling import until_async
+
 from .server_fixture import RunningServer
 from .wsclient import RawClient
-
-
-async def _wait_for(cond: Any, timeout: float = 5.0) -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while not cond():
-        assert loop.time() < deadline, "condition not met in time"
-        await asyncio.sleep(0.01)
 
 
 async def test_smoke(srv: RunningServer) -> None:
@@ -34,13 +28,17 @@ async def test_smoke(srv: RunningServer) -> None:
             {"op": "subscribe", "topic": b_topic, "type": "std_msgs/String", "queue_length": 0}
         )
         await ws.send({"op": "advertise", "topic": a_topic, "type": "std_msgs/String"})
-        await _wait_for(lambda: srv.graph.subscribers(b_topic) and srv.graph.publishers(a_topic))
+        await until_async(
+            lambda: srv.graph.subscribers(b_topic) and srv.graph.publishers(a_topic),
+            5.0,
+            "srv.graph.subscribers(b_topic) and srv.graph.publishers(a_topic)",
+        )
         for _ in range(n):
             await ws.send({"op": "publish", "topic": a_topic, "msg": {"data": "A" * 10}})
         for _ in range(n):
             srv.graph.publish(b_topic, {"data": "B" * 10})
         got = [await ws.expect_op("publish") for _ in range(n)]
-        await _wait_for(lambda: len(ros_received) == n)
+        await until_async(lambda: len(ros_received) == n, 5.0, "len(ros_received) == n")
     assert all(m == {"op": "publish", "topic": b_topic, "msg": {"data": "B" * 10}} for m in got)
     assert ros_received == [{"data": "A" * 10}] * n
 
@@ -78,7 +76,11 @@ async def test_advertise_service(srv: RunningServer) -> None:
         await ws.send(
             {"op": "advertise_service", "type": "std_srvs/SetBool", "service": "/test_service"}
         )
-        await _wait_for(lambda: srv.graph.service_type("/test_service") == "std_srvs/SetBool")
+        await until_async(
+            lambda: srv.graph.service_type("/test_service") == "std_srvs/SetBool",
+            5.0,
+            "srv.graph.service_type('/test_service') == 'std_srvs/SetBool'",
+        )
         future = asyncio.run_coroutine_threadsafe(
             srv.graph.call_service("/test_service", {"data": True}, timeout=5), srv.loop
         )
@@ -102,7 +104,11 @@ async def test_advertise_service_failure_and_disconnect(srv: RunningServer) -> N
     """A provider answering result false, and one that disconnects mid-call."""
     async with await RawClient.open(srv.url()) as ws, await RawClient.open(srv.url()) as caller:
         await ws.send({"op": "advertise_service", "type": "a/B", "service": "flaky"})
-        await _wait_for(lambda: srv.graph.service_type("/flaky") is not None)
+        await until_async(
+            lambda: srv.graph.service_type("/flaky") is not None,
+            5.0,
+            "srv.graph.service_type('/flaky') is not None",
+        )
         await caller.send({"op": "call_service", "id": "c1", "service": "/flaky", "args": []})
         req = await ws.expect_op("call_service")
         assert req["service"] == "flaky"  # as the provider spelled it
@@ -124,7 +130,11 @@ async def test_multiple_subscribers(srv: RunningServer) -> None:
     async with await RawClient.open(srv.url()) as c1, await RawClient.open(srv.url()) as c2:
         for c in (c1, c2):
             await c.send({"op": "subscribe", "topic": "/a_topic", "type": "std_msgs/String"})
-        await _wait_for(lambda: len(srv.graph.subscribers("/a_topic")) == 2)
+        await until_async(
+            lambda: len(srv.graph.subscribers("/a_topic")) == 2,
+            5.0,
+            "len(srv.graph.subscribers('/a_topic')) == 2",
+        )
         srv.graph.publish("/a_topic", {"data": "hello"})
         for c in (c1, c2):
             m = await c.expect_op("publish")
@@ -161,7 +171,11 @@ async def test_transient_local_publisher(srv: RunningServer) -> None:
     """transient_local_publisher.test.py: three later subscribers each get the last message."""
     srv.call(lambda: srv.graph.advertise("/a_topic", "std_msgs/String", latch=True))
     srv.graph.publish("/a_topic", {"data": "hello"})
-    await _wait_for(lambda: srv.graph.latched("/a_topic") is not None)
+    await until_async(
+        lambda: srv.graph.latched("/a_topic") is not None,
+        5.0,
+        "srv.graph.latched('/a_topic') is not None",
+    )
     for _ in range(3):
         async with await RawClient.open(srv.url()) as ws:
             await ws.send({"op": "subscribe", "topic": "/a_topic", "type": "std_msgs/String"})
@@ -179,7 +193,7 @@ async def test_rapid_disconnect_smoke(srv: RunningServer) -> None:
         while not stop:
             for _ in range(20):
                 srv.graph.publish("/a_topic", payload)
-            await asyncio.sleep(0.005)
+            await asyncio.sleep(0.005)  # the publishing rate: the test's input
 
     pub = asyncio.create_task(publish_many())
     try:
@@ -206,7 +220,11 @@ async def test_rapid_disconnect_smoke(srv: RunningServer) -> None:
         await ws.expect_op("service_response", id="sync")
         srv.graph.publish("/a_topic", {"data": "alive"})
         await ws.expect(lambda m: m.get("msg") == {"data": "alive"})
-        await _wait_for(lambda: len(srv.graph.subscribers("/a_topic")) == 1)
+        await until_async(
+            lambda: len(srv.graph.subscribers("/a_topic")) == 1,
+            5.0,
+            "len(srv.graph.subscribers('/a_topic')) == 1",
+        )
 
 
 async def test_event_loop_starvation(srv: RunningServer) -> None:
@@ -226,7 +244,7 @@ async def test_event_loop_starvation(srv: RunningServer) -> None:
         while not stop:
             for i in range(n_topics):
                 srv.graph.publish(f"/load_{i}", blob)
-            await asyncio.sleep(0.005)
+            await asyncio.sleep(0.005)  # the load's rate: the test's input
 
     sent: list[float] = []
 
@@ -235,7 +253,7 @@ async def test_event_loop_starvation(srv: RunningServer) -> None:
         while not stop:
             sent.append(loop.time())
             srv.graph.publish("/probe", {"data": str(len(sent))})
-            await asyncio.sleep(0.1)
+            await asyncio.sleep(0.1)  # the probe's 10 Hz: the test's input
 
     loader = asyncio.create_task(load())
     try:
@@ -243,11 +261,13 @@ async def test_event_loop_starvation(srv: RunningServer) -> None:
             for i in range(n_topics):
                 await load_client.send({"op": "subscribe", "topic": f"/load_{i}"})
             drain = asyncio.create_task(_drain(load_client))
-            await asyncio.sleep(0.5)
+            await asyncio.sleep(0.5)  # the flood runs before the probe connects (deliberate)
             probe = await asyncio.wait_for(RawClient.open(srv.url()), 5)  # handshake not starved
             async with probe:
                 await probe.send({"op": "subscribe", "topic": "/probe"})
-                await _wait_for(lambda: srv.graph.subscribers("/probe"))
+                await until_async(
+                    lambda: srv.graph.subscribers("/probe"), 5.0, "srv.graph.subscribers('/probe')"
+                )
                 beats = asyncio.create_task(probe_beats())
                 got = 0
                 loop = asyncio.get_running_loop()
@@ -308,7 +328,11 @@ async def test_values_on_the_wire(srv: RunningServer) -> None:
     srv.call(lambda: srv.graph.subscribe("/img", got.append))
     async with await RawClient.open(srv.url()) as c:
         await c.send({"op": "subscribe", "topic": "/img"})
-        await _wait_for(lambda: len(srv.graph.subscribers("/img")) == 2)
+        await until_async(
+            lambda: len(srv.graph.subscribers("/img")) == 2,
+            5.0,
+            "len(srv.graph.subscribers('/img')) == 2",
+        )
         await c.send(
             {
                 "op": "publish",
@@ -331,7 +355,7 @@ async def test_values_on_the_wire(srv: RunningServer) -> None:
         assert m["msg"]["header"]["stamp"]["sec"] > 1_600_000_000 and m["msg"]["data"] == ""
         srv.call(srv.graph.advertise, "/f", "std_msgs/Float64")
         await c.send({"op": "subscribe", "topic": "/f"})
-        await _wait_for(lambda: srv.graph.subscribers("/f"))
+        await until_async(lambda: srv.graph.subscribers("/f"), 5.0, "srv.graph.subscribers('/f')")
         srv.graph.publish("/f", {"data": float("nan")})
         raw = await c.expect_op("publish", topic="/f")
         assert raw["msg"] == {"data": None}

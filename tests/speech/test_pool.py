@@ -9,6 +9,7 @@ import pytest
 
 from server.speech.errors import Busy
 from server.speech.pool import DecoderPool
+from tests.support.polling import until_async
 
 
 async def test_at_most_workers_run_and_the_queue_is_bounded() -> None:
@@ -29,8 +30,7 @@ async def test_at_most_workers_run_and_the_queue_is_bounded() -> None:
         return i
 
     tasks = [asyncio.create_task(pool.run(job, i)) for i in range(4)]
-    await asyncio.sleep(0.05)
-    assert pool.load == (2, 2)
+    await until_async(lambda: pool.load == (2, 2), 10.0, "two running, two queued")
     with pytest.raises(Busy, match="busy"):
         await pool.run(job, 99)  # a fifth: refused at once, not queued
     assert await pool.try_run(job, 98) is None  # interims never queue

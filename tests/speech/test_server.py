@@ -31,8 +31,8 @@ from websockets.exceptions import ConnectionClosed
 
 from server.speech.audio import read_wav, to_wav
 from server.tls import fingerprint
-from tests.loopback import free_port
 from tests.speech.conftest import HAVE_TTS, synthesise
+from tests.support.loopback import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "speech-pilot-token"
