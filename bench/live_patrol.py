@@ -92,7 +92,7 @@ def tree_cpu_s(root: int) -> float:
 @contextlib.contextmanager
 def served(args: argparse.Namespace, data: Path) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
     """``serve --fleet N --world outdoor`` with vehicle processes, until its drones are up."""
-    from tests.loopback import free_port
+    from tests.support.loopback import free_port
 
     port = free_port()
     cmd = [sys.executable, "-m", "server", "serve", "--host", "127.0.0.1", "--port", str(port)]

@@ -31,8 +31,8 @@ from server.vehicles.central import bus_tls
 from server.vehicles.host import join_bus
 from tests.isolation.conftest import HOST, ROOT, serve
 from tests.isolation.conftest import wait_for as poll
-from tests.loopback import for_worker, free_port
-from tests.polling import wait_for
+from tests.support.loopback import for_worker, free_port
+from tests.support.polling import wait_for
 
 SCRIPT = textwrap.dedent(
     """

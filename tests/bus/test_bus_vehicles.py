@@ -22,7 +22,7 @@ from websockets.sync.client import connect as ws_connect
 
 from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
 from tests.isolation.conftest import serve as serve_quick
-from tests.loopback import for_worker, free_port
+from tests.support.loopback import for_worker, free_port
 
 NAME = "uav7"
 

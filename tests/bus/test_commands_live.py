@@ -24,8 +24,8 @@ from drone.bus.errors import NoReply
 from drone.bus.lease import VehicleLease
 from drone.bus.payloads import Status
 from drone.bus.session import open_session
-from tests.loopback import free_port
-from tests.polling import wait_for
+from tests.support.loopback import free_port
+from tests.support.polling import wait_for
 
 
 @pytest.fixture

@@ -23,8 +23,8 @@ import pytest
 from server import timewarp
 from server.fleet.patrol import PatrolConfig, PatrolExperiment
 from tests.e2e.served import ROOT, serve
-from tests.loopback import for_worker
-from tests.polling import wait_for
+from tests.support.loopback import for_worker
+from tests.support.polling import wait_for
 
 SPEED = 4.0  # ten simulated minutes (the first handoff at ~8) in about 150 s of wall time
 COVERAGE_PP = 1.0

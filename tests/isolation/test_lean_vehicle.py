@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from tests.loopback import for_worker
+from tests.support.loopback import for_worker
 
 ROOT = Path(__file__).resolve().parents[2]
 
