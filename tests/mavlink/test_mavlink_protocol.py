@@ -10,7 +10,6 @@ from typing import Any
 
 import pytest
 
-from drone.mavlink.autopilot import SimAutopilot
 from drone.mavlink.client import (
     CommandResult,
     GcsProtocol,
@@ -23,6 +22,7 @@ from drone.mavlink.client import (
 )
 from drone.mavlink.codec import Codec, mav
 from drone.mavlink.link import MavlinkMemoryLink
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.sim.world import load_world
 
 DT = 0.02

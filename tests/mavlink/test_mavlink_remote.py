@@ -19,7 +19,7 @@ import pytest
 import uvicorn
 from fastapi import FastAPI
 
-from drone.mavlink.autopilot import SimAutopilot
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
 from server.fleet.ctm import CentralTaskManager

@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from drone.mavlink.autopilot import SimAutopilot
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
 
