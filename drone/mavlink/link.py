@@ -12,7 +12,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from drone.mavlink.client import GcsProtocol
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.sim.autopilot import SimAutopilot
 
 LINK_ID = "memory"

@@ -12,8 +12,9 @@ from typing import Any
 
 import pytest
 
-from drone.mavlink.client import CommandResult, GcsProtocol, MissionResult, StatusText
 from drone.mavlink.codec import mav
+from drone.mavlink.gcs.events import CommandResult, MissionResult, StatusText
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.link import MavlinkMemoryLink
 from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.sim.world import load_world

@@ -139,7 +139,7 @@ def test_connection_strings_as_mavutil_writes_them() -> None:
 @settings(max_examples=150, deadline=None)
 @given(st.binary(max_size=400))
 def test_protocol_and_autopilot_survive_arbitrary_bytes(data: bytes) -> None:
-    from drone.mavlink.client import GcsProtocol
+    from drone.mavlink.gcs.protocol import GcsProtocol
     from drone.mavlink.sim.autopilot import SimAutopilot
 
     p = GcsProtocol()
