@@ -379,8 +379,8 @@ def _mavlink_target() -> Target:
     from types import SimpleNamespace
 
     from drone.control.clock import VirtualClock
-    from drone.mavlink.client import GcsProtocol
     from drone.mavlink.codec import Codec, Message
+    from drone.mavlink.gcs.protocol import GcsProtocol
     from drone.mavlink.vehicle import MavlinkVehicle
 
     world = SimpleNamespace(gps_origin=SimpleNamespace(lat_deg=47.397, lon_deg=8.545, alt_m=488.0))

@@ -35,10 +35,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drone.mavlink.autopilot import SimAutopilot
-from drone.mavlink.client import STREAMS_HZ, CommandResult, GcsProtocol
 from drone.mavlink.codec import Codec, mav
 from drone.mavlink.driver import MavlinkDriver
+from drone.mavlink.gcs.events import CommandResult
+from drone.mavlink.gcs.heartbeat import STREAMS_HZ
+from drone.mavlink.gcs.protocol import GcsProtocol
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.vehicle import MavlinkVehicle
 from drone.sim.world import load_world
 from server.fleet.patrol import PatrolConfig, PatrolExperiment

@@ -23,10 +23,10 @@ from pathlib import Path
 from typing import Any
 
 from drone.mavlink import signing
-from drone.mavlink.autopilot import SimAutopilot
-from drone.mavlink.client import GcsProtocol
 from drone.mavlink.driver import MavlinkDriver, parse_connection
 from drone.mavlink.errors import ConnectionStringError, MavlinkError
+from drone.mavlink.gcs.protocol import GcsProtocol
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer, run_mavlink_sim
 from drone.mavlink.vehicle import MavlinkVehicle
 from drone.sim.server import sim_endpoint

@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from drone.mavlink.client import Telemetry
+from drone.mavlink.gcs.events import Telemetry
 from drone.mavlink.geo import yaw_ned_to_enu
 from server.msgs import header
 from server.vehicle_node import EMPTY, POSE, TASK, TWIST, VehicleNode

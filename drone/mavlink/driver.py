@@ -1,4 +1,4 @@
-"""``MavlinkDriver``: asyncio transport around :class:`~drone.mavlink.client.GcsProtocol`.
+"""``MavlinkDriver``: asyncio transport around :class:`~drone.mavlink.gcs.protocol.GcsProtocol`.
 
 Connection strings are written as mavutil and MAVProxy write them (pymavlink ``mavutil.py``
 ``mavlink_connection``):
@@ -27,8 +27,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from drone.mavlink.client import GcsProtocol
 from drone.mavlink.errors import ConnectionStringError
+from drone.mavlink.gcs.protocol import GcsProtocol
 
 log = logging.getLogger(__name__)
 

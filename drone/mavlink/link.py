@@ -12,8 +12,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from drone.mavlink.autopilot import SimAutopilot
-from drone.mavlink.client import GcsProtocol
+from drone.mavlink.gcs.protocol import GcsProtocol
+from drone.mavlink.sim.autopilot import SimAutopilot
 
 LINK_ID = "memory"
 MAX_SUBSTEP_S = 0.02

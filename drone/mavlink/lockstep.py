@@ -14,9 +14,9 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from drone.control.clock import VirtualClock
-from drone.mavlink.autopilot import SimAutopilot
-from drone.mavlink.client import GcsProtocol
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.link import MavlinkMemoryLink
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.vehicle import MavlinkVehicle
 
 Stepper = Callable[[float, float], None]

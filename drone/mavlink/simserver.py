@@ -15,7 +15,7 @@ frame), at most 8 waiting ones (the longest waiting is closed when another arriv
 that sends only refused bytes for 5 s is closed — so a flood of connections costs a fixed
 number of links and never displaces a ground station that has the key.
 
-The autopilot (``drone.mavlink.autopilot.SimAutopilot``) steps in real time × ``speed`` in
+The autopilot (``drone.mavlink.sim.autopilot.SimAutopilot``) steps in real time × ``speed`` in
 sub-steps of at most 10 ms of simulated time; its bytes for each link are written after every
 turn. ``inject_fault("link_loss", duration_s=…)`` drops every byte both ways for that long.
 """
@@ -32,8 +32,8 @@ from pathlib import Path
 from typing import Any
 
 from drone.mavlink.admission import Admission
-from drone.mavlink.autopilot import SimAutopilot
 from drone.mavlink.errors import InsecureLinkError
+from drone.mavlink.sim.autopilot import SimAutopilot
 
 log = logging.getLogger(__name__)
 

@@ -38,9 +38,9 @@ from typing import Any
 
 from drone.control.clock import Clock, MonotonicClock
 from drone.control.pid import Setpoint
-from drone.mavlink.client import (
+from drone.mavlink.codec import mav
+from drone.mavlink.gcs.events import (
     CommandResult,
-    GcsProtocol,
     LinkLost,
     LinkRestored,
     MissionItemReached,
@@ -50,7 +50,7 @@ from drone.mavlink.client import (
     Telemetry,
     VehicleFound,
 )
-from drone.mavlink.codec import mav
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.geo import Origin, enu_to_ned, ned_to_enu, yaw_enu_to_ned, yaw_ned_to_enu
 from drone.vehicle import VehicleMode, VehicleSnapshot
 

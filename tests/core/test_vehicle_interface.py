@@ -8,7 +8,7 @@ import inspect
 
 from drone.ardrone.vehicle import ARDroneVehicle
 from drone.control.clock import VirtualClock
-from drone.mavlink.client import GcsProtocol
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.vehicle import MavlinkVehicle
 from drone.sim.world import load_world
 from drone.supervisor import Phase, supervise

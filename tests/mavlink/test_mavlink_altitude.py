@@ -12,10 +12,11 @@ from typing import Any
 
 import pytest
 
-from drone.mavlink.autopilot import SimAutopilot
-from drone.mavlink.client import CommandResult, GcsProtocol, MissionResult, StatusText
 from drone.mavlink.codec import mav
+from drone.mavlink.gcs.events import CommandResult, MissionResult, StatusText
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.link import MavlinkMemoryLink
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.sim.world import load_world
 
 DT = 0.02

@@ -139,8 +139,8 @@ def test_connection_strings_as_mavutil_writes_them() -> None:
 @settings(max_examples=150, deadline=None)
 @given(st.binary(max_size=400))
 def test_protocol_and_autopilot_survive_arbitrary_bytes(data: bytes) -> None:
-    from drone.mavlink.autopilot import SimAutopilot
-    from drone.mavlink.client import GcsProtocol
+    from drone.mavlink.gcs.protocol import GcsProtocol
+    from drone.mavlink.sim.autopilot import SimAutopilot
 
     p = GcsProtocol()
     p.receive(data, 0.0)
@@ -165,7 +165,7 @@ _ANY_FLOAT = st.one_of(
 def test_autopilot_answers_every_command_once_whatever_its_params(
     command: int, params: list[float], as_int: bool
 ) -> None:
-    from drone.mavlink.autopilot import SimAutopilot
+    from drone.mavlink.sim.autopilot import SimAutopilot
 
     ap = SimAutopilot(None)
     gcs = Codec(255, 190)

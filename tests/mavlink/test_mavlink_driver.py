@@ -14,10 +14,11 @@ from typing import Any
 
 import pytest
 
-from drone.mavlink.autopilot import SimAutopilot
-from drone.mavlink.client import CommandResult, GcsProtocol
 from drone.mavlink.driver import MavlinkDriver
 from drone.mavlink.errors import ConnectionStringError
+from drone.mavlink.gcs.events import CommandResult
+from drone.mavlink.gcs.protocol import GcsProtocol
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
 from tests.support.polling import until, until_async

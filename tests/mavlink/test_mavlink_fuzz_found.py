@@ -17,8 +17,9 @@ from typing import Any
 import pytest
 
 from drone.control.clock import VirtualClock
-from drone.mavlink.client import GcsProtocol, MissionResult
 from drone.mavlink.codec import Codec, mav
+from drone.mavlink.gcs.events import MissionResult
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.vehicle import MavlinkVehicle
 
 WORLD = SimpleNamespace(gps_origin=SimpleNamespace(lat_deg=47.397, lon_deg=8.545, alt_m=488.0))

@@ -10,10 +10,9 @@ from typing import Any
 
 import pytest
 
-from drone.mavlink.autopilot import SimAutopilot
-from drone.mavlink.client import (
+from drone.mavlink.codec import Codec, mav
+from drone.mavlink.gcs.events import (
     CommandResult,
-    GcsProtocol,
     LinkLost,
     LinkRestored,
     MissionItemReached,
@@ -21,8 +20,9 @@ from drone.mavlink.client import (
     OtherVehicle,
     StatusText,
 )
-from drone.mavlink.codec import Codec, mav
+from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.link import MavlinkMemoryLink
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.sim.world import load_world
 
 DT = 0.02

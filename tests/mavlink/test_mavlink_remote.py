@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from fastapi import FastAPI
 
-from drone.mavlink.autopilot import SimAutopilot
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
 from server.fleet.ctm import CentralTaskManager

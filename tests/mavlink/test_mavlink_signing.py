@@ -35,8 +35,8 @@ import pytest
 
 from drone.mavlink import signing
 from drone.mavlink.admission import Admission
-from drone.mavlink.autopilot import SimAutopilot
 from drone.mavlink.errors import InsecureLinkError, SigningKeyError
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
 from tests.support.polling import until_async, wait_for

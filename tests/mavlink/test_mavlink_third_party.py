@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from drone.mavlink.autopilot import SimAutopilot
+from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.simserver import MavlinkSimServer
 from drone.sim.world import load_world
 from tests.support.polling import until_async

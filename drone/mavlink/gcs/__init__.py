@@ -1,0 +1,1 @@
+"""The ground-station side of a MAVLink link, one module per MAVLink microservice."""

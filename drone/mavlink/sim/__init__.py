@@ -1,0 +1,1 @@
+"""The simulated PX4-like autopilot, one module per MAVLink service."""
