@@ -149,7 +149,8 @@ class AltitudeMonitor:
 
 @dataclass
 class LinkMonitor:
-    """No navdata: alert (the AR.Drone's own watchdog hovers it); tell when it comes back."""
+    """No navdata: alert; tell when it comes back. In flight the AR.Drone's own watchdog hovers
+    it, which the alarm says; on the ground there is nothing to hover and it says so."""
 
     period_s: float = 0.25
     name: str = "link"
@@ -160,6 +161,10 @@ class LinkMonitor:
             self._lost = True
             if snap.failsafe:  # an autopilot (MAVLink): its own data-link failsafe acts (issue 16)
                 return Alarm(self.name, "alert", f"I lost the link to the drone. {snap.failsafe}.")
+            if not snap.flying:
+                return Alarm(
+                    self.name, "alert", "I lost the link to the drone. It was on the ground."
+                )
             return Alarm(
                 self.name, "alert", "I lost the link to the drone. It will hover on its own."
             )

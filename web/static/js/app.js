@@ -9,6 +9,7 @@ import { CameraPanel } from "./camera.js";
 import { Controls } from "./controls.js";
 import { DialogPanel } from "./dialog.js";
 import { DOOR_DEAD_MS, Doors } from "./door.js";
+import { Freshness, TICK_MS as FRESHNESS_TICK_MS } from "./freshness.js";
 import { MapPanel } from "./map.js";
 import { RosbridgeClient, STATES, rosbridgeUrl } from "./rosbridge.js";
 import {
@@ -29,6 +30,8 @@ import { TelemetryPanel } from "./telemetry.js";
 import { droneTopic, quaternionYaw, stampSeconds } from "./util.js";
 
 const $ = (id) => document.getElementById(id);
+// Flight labels (status.js flightLabel) in which a take-off has nothing to do.
+const AIRBORNE = ["Flying", "Hovering", "Taking off"];
 const STATUS_POLL_MS = 1000;
 const ROADS_CHECK_MS = 250;
 // The console's own heartbeat on rosbridge (server/vehicles/central.py, 10 Hz): the page calls
@@ -69,7 +72,13 @@ class Console {
       { img: $("camera"), empty: $("camera-empty"), fps: $("cam-fps"), latency: $("cam-latency") },
       () => Date.now() / 1000 + this.clockOffset,
     );
+    this.camera.onFrame = () => this.freshness.beat("camera");
     this.telemetry = new TelemetryPanel(document);
+    // Navdata streams (~15 Hz): from its first message the vehicle is judged as a stream.
+    this.telemetry.onNavdataSeen = () => {
+      this.freshness.setPeriod("vehicle", 0);
+      this.freshness.beat("vehicle");
+    };
     this.status = new StatusBar(document);
     this.telemetry.onFlight = (label, battery) => {
       this.status.setFlight(label);
@@ -81,6 +90,9 @@ class Console {
       { banner: $("alert-banner"), text: $("alert-text"), ack: $("alert-ack") },
       { onAck: (text) => this.dialog.addSystem(`Acknowledged: ${text}`) },
     );
+    // Age on every value: one rule for every panel (freshness.js).
+    this.freshness = new Freshness({ alarms: this.alertBanner });
+    this.defineSources();
     this.beforeDrop = null; // what the status bar showed when the connection dropped
     this.map = new MapPanel(
       $("map"),
@@ -156,8 +168,14 @@ class Console {
     this.ros.addEventListener("callback-error", (ev) => console.warn("panel error", ev.detail));
 
     this.subscribeGlobal();
+    this.registerPanels();
     this.layoutDock();
     window.addEventListener("resize", () => this.layoutDock());
+    if (window.ResizeObserver) {
+      const ro = new ResizeObserver(() => this.layoutDock());
+      for (const id of ["dock", "messages"]) ro.observe($(id));
+      ro.observe(document.querySelector(".topbar"));
+    }
   }
 
   async start() {
@@ -178,13 +196,65 @@ class Console {
     this.recordings = new RecordingsMenu(
       this.api,
       { pill: $("rec"), menu: $("recordings"), list: $("recordings-list") },
-      this.token,
     );
     this.recordings.start();
     this.ros.connect();
     this.checkVoice();
     setInterval(() => this.pollDrone(), STATUS_POLL_MS);
     setInterval(() => this.checkRoads(), ROADS_CHECK_MS);
+    setInterval(() => this.checkFreshness(), FRESHNESS_TICK_MS);
+  }
+
+  // ---- age on every value ---------------------------------------------------------------------
+  /** The sources whose silence the page watches: the server, the selected drone's vehicle and
+   *  camera (redefined when another drone is selected), the fleet status (fleets only). */
+  defineSources(drone = this.drone) {
+    const f = this.freshness;
+    if (!f.sources.has("server")) {
+      f.source("server", {
+        alarm: (age) => `No word from the server for ${age}: everything shown is ${age} old.`,
+        back: (age) => `The server answers again (it was silent for ${age}).`,
+      });
+    }
+    if (!drone) return;
+    const name = drone;
+    f.source("vehicle", {
+      upstream: "server",
+      periodS: STATUS_POLL_MS / 1000, // the REST snapshot; a stream once navdata flows
+      key: `fresh:vehicle:${name}`,
+      alarm: (age, why) => `${name}: no telemetry for ${age}${why ? ` (${why})` : ""}.`,
+      back: (age) => `${name}: telemetry is back (it was silent for ${age}).`,
+    });
+    f.source("camera", {
+      upstream: "vehicle",
+      key: `fresh:camera:${name}`,
+      alarm: (age) => `${name}: no picture from the camera for ${age}.`,
+      back: (age) => `${name}: the camera is back (it was silent for ${age}).`,
+    });
+  }
+
+  /** Which panel shows what: each greys out and says its age when a source it needs stops. */
+  registerPanels() {
+    const f = this.freshness;
+    const drone = ["server", "vehicle"];
+    f.panel($("telemetry-panel"), drone);
+    f.panel($("map-panel"), [...drone, "fleet"]);
+    f.panel($("camera-panel"), ["server", "vehicle", "camera"], {
+      show: (age) => this.camera.showAge(age),
+    });
+    f.panel($("statusbar"), ["server"], { show: (age) => this.status.showAge(age) });
+    for (const id of ["sb-flight", "sb-battery", "sb-task"]) f.panel($(id), drone, { badge: null });
+    f.panel($("fleet-list"), ["server", "fleet"], { badge: null });
+    f.panel($("rec"), ["server"], { badge: null });
+  }
+
+  checkFreshness() {
+    // `uav-console replay` plays recorded time: a paused replay is not a silent source.
+    this.freshness.suspend(!$("replay-bar").hidden);
+    this.freshness.tick();
+    document.body.dataset.stale = [...this.freshness.sources.keys()]
+      .filter((n) => this.freshness.staleAge(n) !== null)
+      .join(" ");
   }
 
   /** World and drones: fetched at start and again after every reconnection. */
@@ -405,6 +475,15 @@ class Console {
     const sel = $("drone-select");
     sel.replaceChildren(...list.map((n) => new Option(n, n)));
     $("drone-select-wrap").hidden = !this.fleet;
+    if (this.fleet && !this.freshness.sources.has("fleet")) {
+      // The central's fleet status, once a second (server/fleet/node.py publish_period_s).
+      this.freshness.source("fleet", {
+        upstream: "server",
+        periodS: 1,
+        alarm: (age) => `No fleet status for ${age}: the other drones are shown as they were.`,
+        back: (age) => `The fleet status is back (it was silent for ${age}).`,
+      });
+    }
     $("fleet-list").hidden = !this.fleet;
     const stored = window.localStorage.getItem("uavc.drone");
     const want = list.includes(this.drone) ? this.drone : list.includes(stored) ? stored : list[0];
@@ -422,6 +501,7 @@ class Console {
     this.controls.releaseAll(true);
     for (const s of this.droneSubs) s.unsubscribe();
     this.camera.reset();
+    this.defineSources(name);
     this.map.setSelected(name);
     this.status.setDrone(name);
     const t = (n) => droneTopic(n, name, this.fleet);
@@ -466,6 +546,7 @@ class Console {
 
   onServerBeat() {
     this.serverBeatAt = performance.now();
+    this.freshness.beat("server");
     if (this.serverStalled) this.checkRoads();
   }
 
@@ -516,6 +597,7 @@ class Console {
   }
 
   onFleet(msg) {
+    this.freshness.beat("fleet");
     this.map.onFleet(msg);
     const ul = $("fleet-list");
     const items = (msg.drones || []).map((d) => {
@@ -525,6 +607,10 @@ class Console {
       const flight = d.name === this.drone && this.status.view.flight ? this.status.view.flight : flightLabel(d.state);
       const role = ["patrolling", "relieving", "returning"].includes(d.role) ? ` · ${d.role}` : "";
       li.textContent = `${d.name} · ${flight}${role} · ${bat}`;
+      if (d.link === false) {
+        li.dataset.stale = "true";
+        li.textContent += " · no link";
+      }
       return li;
     });
     ul.replaceChildren(...items);
@@ -534,7 +620,9 @@ class Console {
     // While the socket is down the server is too: no REST polling (and no console noise).
     if (!this.drone || (document.hidden && !force) || this.ros.state !== STATES.OPEN) return;
     try {
-      const status = await this.api.drone(this.drone);
+      const asked = this.drone;
+      const status = await this.api.drone(asked);
+      if (asked === this.drone) this.judgeSnapshot(status);
       // A drone in its own vehicle process has a safety door: stops that no web traffic delays.
       this.learnDoor(this.drone, status.vehicle);
       this.telemetry.onDroneStatus(status);
@@ -543,7 +631,10 @@ class Console {
       this.status.setTask(status.task || null);
       if (Number.isFinite(status.battery_pct)) this.status.setBattery(status.battery_pct);
       // The dialog's link alarm says it first; this covers a server without one (a replay).
-      const ansSaidIt = this.alertBanner.active.some((x) => x.key === `${this.drone}:link`);
+      // The freshness alarm names the cause (a vehicle process that does not answer) already.
+      const ansSaidIt = this.alertBanner.active.some(
+        (x) => x.key === `${this.drone}:link` || x.key === `fresh:vehicle:${this.drone}`,
+      );
       if (status.link_ok === false && !ansSaidIt) {
         this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`);
       } else if (status.link_ok === true) {
@@ -552,6 +643,24 @@ class Console {
     } catch {
       /* the connection pill already tells the operator */
     }
+  }
+
+  /**
+   * The REST snapshot's own age: fresh data from the vehicle counts as a word from it (a drone
+   * with no navdata topic, a MAVLink one, has no other); and why it is silent, when it is.
+   */
+  judgeSnapshot(status) {
+    if (!status || typeof status !== "object") return;
+    const v = status.vehicle && typeof status.vehicle === "object" ? status.vehicle : null;
+    const gone = v?.connected === false;
+    let why = "";
+    if (gone) why = "its vehicle process does not answer";
+    else if (status.link_ok === false) why = "the link to the drone is lost";
+    this.freshness.setWhy("vehicle", why);
+    const nav = Number(status.navdata_age_s);
+    const hop = Number(v?.age_s);
+    const age = (Number.isFinite(nav) ? nav : 0) + (Number.isFinite(hop) ? hop : 0);
+    if (!gone && status.link_ok !== false) this.freshness.beat("vehicle", performance.now() / 1000 - age);
   }
 
   // ---- commands ----------------------------------------------------------------------------
@@ -594,6 +703,12 @@ class Console {
       this.stops.send(this.drone, action, source);
       return;
     }
+    if (action === "takeoff" && this.airborne()) {
+      // As the dialog answers a typed "take off": said on the button, nothing sent.
+      this.controls.say("btn-takeoff", "I am already flying.");
+      this.dialog.addSystem(`Take off (${source}): I am already flying.`);
+      return;
+    }
     this.supersedeStops();
     try {
       const res = await this.api.action(this.drone, action, source);
@@ -604,6 +719,12 @@ class Console {
       this.flash(`${action} failed: ${err.message}`, "alert");
       if (err.status === 403) this.onStatus({ level: "error", msg: err.message });
     }
+  }
+
+  /** In the air by the page's fresh word on it (a stale state decides nothing). */
+  airborne() {
+    if (this.freshness.staleAge("vehicle") !== null) return false;
+    return AIRBORNE.includes(this.status.view.flight);
   }
 
   /** A newer operator command: stops still pending are dropped (the page says so). */
@@ -780,10 +901,15 @@ class Console {
     }, source === "refusal" ? 12000 : 5000);
   }
 
-  /** Phones: keep the fixed dock's height in --dock-h so the last panel is not hidden under it. */
+  /** Phones: the fixed dock's and the floating messages' heights in --dock-h and --msgs-h, so
+   *  the last panel is not hidden under them; the top bar's in --top-h. */
   layoutDock() {
-    const h = $("dock").getBoundingClientRect().height;
-    document.documentElement.style.setProperty("--dock-h", `${Math.ceil(h)}px`);
+    const root = document.documentElement.style;
+    const px = (el) => `${Math.ceil(el.getBoundingClientRect().height)}px`;
+    root.setProperty("--dock-h", px($("dock")));
+    const msgs = $("messages");
+    root.setProperty("--msgs-h", getComputedStyle(msgs).position === "fixed" ? px(msgs) : "0px");
+    root.setProperty("--top-h", px(document.querySelector(".topbar")));
   }
 }
 

@@ -1,8 +1,9 @@
 // Flight recordings in the top bar: a "● REC" pill while a flight is being recorded, and a
 // "Recordings" menu listing GET /api/v1/flights with a download link (MCAP) for each.
 //
-// Downloads are plain links carrying the page's token (?token=…, which the REST door accepts
-// like a bearer token), so the browser saves the file under the server's Content-Disposition name.
+// Downloads are plain links with no credential in them: the browser sends the HttpOnly cookie the
+// console's first load set (server/http_guard.py), streams the file to disk and saves it under the
+// server's Content-Disposition name. A token in a URL would end up in history and logs.
 
 const POLL_MS = 5000;
 
@@ -24,12 +25,10 @@ export class RecordingsMenu {
   /**
    * @param {import("./api.js").Api} api
    * @param {{pill: HTMLElement, menu: HTMLDetailsElement, list: HTMLElement}} els
-   * @param {string|null} token the page's token, for the download links
    */
-  constructor(api, els, token) {
+  constructor(api, els) {
     this.api = api;
     this.els = els;
-    this.token = token;
     this.flights = [];
     els.menu.addEventListener("toggle", () => {
       if (els.menu.open) this.poll();
@@ -73,8 +72,7 @@ export class RecordingsMenu {
         li.textContent = `${label} · recording…`;
       } else {
         const a = document.createElement("a");
-        const q = this.token ? `?token=${encodeURIComponent(this.token)}` : "";
-        a.href = `/api/v1/flights/${encodeURIComponent(f.id)}${q}`;
+        a.href = `/api/v1/flights/${encodeURIComponent(f.id)}`;
         a.download = `uav-console-${f.id}.mcap`;
         a.textContent = label;
         a.title = `${f.messages} messages; open in Foxglove or with uav-console replay`;
