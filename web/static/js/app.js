@@ -385,8 +385,23 @@ class Console {
     if (observer) $("text-input").placeholder = "Observers watch only";
   }
 
-  /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over. */
-  async claimLease() {
+  /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over.
+   *  While the claim is in flight the page's REST commands wait for it (api.js leaseClaim). */
+  claimLease() {
+    return this.whileClaiming(this.claimLeaseNow());
+  }
+
+  /** Run ``claim`` (never rejects) as the page's lease claim in flight. */
+  async whileClaiming(claim) {
+    this.api.leaseClaim = claim;
+    try {
+      await claim;
+    } finally {
+      if (this.api.leaseClaim === claim) this.api.leaseClaim = null;
+    }
+  }
+
+  async claimLeaseNow() {
     try {
       let lease = await this.ros.callService(LEASE_SERVICE, { action: "status" });
       if (!lease.held_by_me && !lease.holder) {
@@ -409,7 +424,11 @@ class Console {
     }
   }
 
-  async takeOver() {
+  takeOver() {
+    return this.whileClaiming(this.takeOverNow());
+  }
+
+  async takeOverNow() {
     try {
       const lease = await this.ros.callService(LEASE_SERVICE, { action: "acquire", take_over: true });
       this.setLease(!!lease.held_by_me);
