@@ -56,6 +56,7 @@ class Console {
     this.everOpened = false;
     this.serverBeatAt = null; // performance.now() of the server's last heartbeat
     this.serverStalled = false;
+    this.vehiclePid = null; // {drone, pid} of the selected drone's vehicle process, once known
     // Stops go down two roads (docs/safety-door.md): REST and each drone's safety door.
     this.doors = new Doors();
     this.stops = new StopSender({
@@ -223,7 +224,7 @@ class Console {
       periodS: STATUS_POLL_MS / 1000, // the REST snapshot; a stream once navdata flows
       key: `fresh:vehicle:${name}`,
       alarm: (age, why) => `${name}: no telemetry for ${age}${why ? ` (${why})` : ""}.`,
-      back: (age) => `${name}: telemetry is back (it was silent for ${age}).`,
+      back: (age, why) => `${name}: telemetry is back (it was silent for ${age}${why ? `; ${why}` : ""}).`,
     });
     f.source("camera", {
       upstream: "vehicle",
@@ -666,11 +667,21 @@ class Console {
 
   /**
    * The REST snapshot's own age: fresh data from the vehicle counts as a word from it (a drone
-   * with no navdata topic, a MAVLink one, has no other); and why it is silent, when it is.
+   * with no navdata topic, a MAVLink one, has no other); and why it is silent, when it is. A
+   * new vehicle process (another pid: the old one died and serve restarted it) is said even
+   * when it spoke again before the page's alarm was due.
    */
   judgeSnapshot(status) {
     if (!status || typeof status !== "object") return;
     const v = status.vehicle && typeof status.vehicle === "object" ? status.vehicle : null;
+    const pid = Number.isInteger(v?.pid) ? v.pid : null;
+    if (pid !== null) {
+      const known = this.vehiclePid;
+      if (known && known.drone === this.drone && known.pid !== pid) {
+        this.freshness.replaced("vehicle", "its vehicle process was restarted");
+      }
+      this.vehiclePid = { drone: this.drone, pid };
+    }
     const gone = v?.connected === false;
     let why = "";
     if (gone) why = "its vehicle process does not answer";

@@ -13,6 +13,10 @@
 // enough for a stopped upstream to show too (so the alarm names the cause); when it speaks
 // again the alarm says so and stays until acknowledged, like every alarm (alerts.js). A source
 // never heard from is "waiting", not stale: a drone without a camera raises nothing.
+//
+// A source the page learns was replaced (a vehicle process that died and was restarted: a new
+// pid) raises its alarm even when the new one spoke before the alarm was due, since the
+// silence was no hiccup (replaced()); it says at once that the source is back.
 
 export const STALE_MIN_S = 1.0;
 export const STALE_PERIODS = 2.5;
@@ -44,7 +48,8 @@ export function ageText(ageS) {
  * @property {number} [periodS] how often it speaks when well (0: a stream, 1 s rule)
  * @property {string|null} [upstream] the source it reaches the page through ("server")
  * @property {(age: string, why: string) => string} [alarm] the alarm while it is silent
- * @property {(age: string) => string} [back] the alarm's text once it speaks again
+ * @property {(age: string, why: string) => string} [back] the alarm's text once it speaks
+ *   again (why: what the page learnt of the silence meanwhile, "" when nothing)
  * @property {string} [key] the alarm's key (default "fresh:NAME"; a drone's name in it keeps
  *   one drone's alarm apart from the next one's)
  */
@@ -74,6 +79,8 @@ export class Freshness {
       why: "",
       alarmed: false,
       staleSince: null,
+      gap: null,
+      note: "",
     });
     return this;
   }
@@ -82,7 +89,28 @@ export class Freshness {
   beat(name, at = this.now()) {
     const s = this.sources.get(name);
     if (!s) return;
+    if (s.heardAt !== null && at - s.heardAt > staleAfterS(s.spec.periodS)) {
+      s.gap = { from: s.heardAt, to: at }; // its last silence, for replaced()
+    }
     if (s.heardAt === null || at > s.heardAt) s.heardAt = at;
+  }
+
+  /**
+   * ``name`` was replaced by a new one (``why`` says how): its alarm is raised now if the rule
+   * has not raised it (the new one spoke first) and, once it is fresh, says it is back.
+   */
+  replaced(name, why, now = this.now()) {
+    const s = this.sources.get(name);
+    if (!s || this.suspended || !this.alarms || !s.spec.alarm) return;
+    s.note = why;
+    if (s.alarmed) return;
+    const stillSilent = this.ownStale(name, now);
+    const from = stillSilent || !s.gap ? s.heardAt : s.gap.from;
+    const silentS = stillSilent || !s.gap ? this.age(name, now) : s.gap.to - s.gap.from;
+    if (from === null) return;
+    s.alarmed = true;
+    s.staleSince = from;
+    this.alarms.raise(this.alarmKey(name), s.spec.alarm(ageWords(silentS), why));
   }
 
   /** How often ``name`` speaks when well (a drone whose navdata flows, or REST only). */
@@ -204,8 +232,11 @@ export class Freshness {
       this.alarms.update(key, s.spec.alarm(age, s.why)); // only while not yet acknowledged
     } else if (!own && s.alarmed) {
       s.alarmed = false;
-      const silent = s.staleSince !== null && s.heardAt !== null ? s.heardAt - s.staleSince : null;
-      const back = s.spec.back ? s.spec.back(ageWords(silent)) : "";
+      // Silent from its last word before the alarm to the first word after it.
+      const first = s.gap && s.gap.from === s.staleSince ? s.gap.to : s.heardAt;
+      const silent = s.staleSince !== null && first !== null ? first - s.staleSince : null;
+      const back = s.spec.back ? s.spec.back(ageWords(silent), s.note) : "";
+      s.note = "";
       if (this.suspended) this.alarms.drop?.(key);
       else this.alarms.clear(key, back);
     }
