@@ -46,12 +46,15 @@ BODY_LIMITS: tuple[tuple[str, int], ...] = (
 )
 
 
-def content_security_policy(connect: Iterable[str] = ()) -> str:
+def content_security_policy(connect: Iterable[str] = (), images: Iterable[str] = ()) -> str:
     """The policy, with ``connect`` (e.g. ``ws://127.0.0.1:41234``, a safety door) allowed
-    besides this origin. Sources with characters a policy cannot carry are left out."""
+    besides this origin, and ``images`` (the map's tile host, ``https://tile.openstreetmap.org``)
+    besides this origin's. Sources with characters a policy cannot carry are left out."""
     extra = "".join(f" {src}" for src in connect if _SOURCE_RE.match(src))
+    tiles = "".join(f" {src}" for src in images if _IMAGE_SOURCE_RE.match(src))
     return (
-        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
+        "default-src 'self'; script-src 'self'; style-src 'self'; "
+        f"img-src 'self' data: blob:{tiles}; "
         f"media-src 'self' blob:; connect-src 'self'{extra}; object-src 'none'; "
         "base-uri 'none'; form-action 'self'; frame-ancestors 'none'"
     )
@@ -59,6 +62,10 @@ def content_security_policy(connect: Iterable[str] = ()) -> str:
 
 # A host-source of CSP Level 3 §2.3.1 with scheme and port: wss://host:port (no paths).
 _SOURCE_RE = re.compile(r"^(ws|wss|http|https)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):\d{1,5}$")
+# A tile host: scheme, host (``*.`` for subdomains), an optional port (no paths).
+_IMAGE_SOURCE_RE = re.compile(
+    r"^https?://(\*\.)?([A-Za-z0-9-]+(\.[A-Za-z0-9-]+)*|\[[0-9A-Fa-f:.]+\])(:\d{1,5})?$"
+)
 CSP = content_security_policy()
 # FastAPI's /docs and /redoc pages load Swagger UI / ReDoc from a CDN with inline scripts: they
 # keep every header but a CSP that would break them (they are no place to type a token into).

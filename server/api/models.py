@@ -6,6 +6,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
+from drone.sim.battery import MAX_LEAK_PCT_S
 from server.api.strict import StrictBody
 
 # Wind a simulator fault may blow: well beyond what an AR.Drone survives (Beaufort 11,
@@ -63,9 +64,15 @@ class Health(BaseModel):
 
 
 class FaultRequest(StrictBody):
-    kind: Literal["link_loss", "battery", "wind", "clear"]
+    """A simulator fault (docs/flying.md, "Training"): ``link_loss`` (``duration_s``),
+    ``battery`` (a cliff to ``battery_pct``), ``battery_drain`` (``drain_pct_s`` more per
+    second), ``wind`` (``wind_mps``; with ``duration_s`` a gust), ``lost_markers``
+    (``duration_s``) or ``clear``."""
+
+    kind: Literal["link_loss", "battery", "battery_drain", "wind", "lost_markers", "clear"]
     duration_s: float | None = Field(default=None, ge=0, le=3600)
     battery_pct: float | None = Field(default=None, ge=0, le=100)
+    drain_pct_s: float | None = Field(default=None, ge=0, le=MAX_LEAK_PCT_S)
     wind_mps: tuple[WindComponent, WindComponent] | None = None
 
 

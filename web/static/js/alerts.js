@@ -29,17 +29,18 @@ export class AlertBanner {
     els.ack.addEventListener("click", () => this.acknowledge());
   }
 
-  /** Raise (or refresh) an alert keyed by ``key`` (e.g. "link", "battery", "ans:geofence"). */
-  raise(key, text) {
+  /** Raise (or refresh) an alert keyed by ``key`` (e.g. "link", "battery", "ans:geofence");
+   *  ``at``: when it was raised (a replay's alarms carry the recording's time). */
+  raise(key, text, at = new Date()) {
     const known = this.active.find((a) => a.key === key);
     if (known && known.over) {
       // It came back before anyone acknowledged that it was over: a new episode.
-      Object.assign(known, { text, at: new Date(), over: false });
+      Object.assign(known, { text, at, over: false });
       this.tone();
     } else if (known) {
       known.text = text;
     } else {
-      this.active.push({ key, text, at: new Date() });
+      this.active.push({ key, text, at });
       this.tone();
     }
     this.render();

@@ -6,6 +6,7 @@
 import { AlertBanner, checkVoices } from "./alerts.js";
 import { Api, ApiError } from "./api.js";
 import { CameraPanel } from "./camera.js";
+import { CameraFeed } from "./camera_feed.js";
 import { Controls } from "./controls.js";
 import { DialogPanel } from "./dialog.js";
 import { DOOR_DEAD_MS, Doors } from "./door.js";
@@ -22,11 +23,12 @@ import {
   roleFromStatus,
 } from "./session.js";
 import { RecordingsMenu } from "./recordings.js";
-import { ReplayBar } from "./replay.js";
+import { ReplayBar, pageReplay, replayApiBase, replayRosbridgeUrl } from "./replay.js";
 import { StatusBar, flightLabel, lostWhileAway } from "./status.js";
 import { STOP_ACTIONS, StopSender, stopText } from "./stops.js";
 import { VoiceInput } from "./voice.js";
 import { TelemetryPanel } from "./telemetry.js";
+import { TrainingPanel } from "./training.js";
 import { droneTopic, quaternionYaw, stampSeconds } from "./util.js";
 
 const $ = (id) => document.getElementById(id);
@@ -44,8 +46,16 @@ class Console {
     this.clockOffset = 0; // server time - local time, seconds
     // Commands say when they were issued, on the server's clock (deadlines: docs/deadlines.md).
     this.serverNow = () => Date.now() / 1000 + this.clockOffset;
-    this.api = new Api("/api/v1", this.token, this.serverNow);
-    this.ros = new RosbridgeClient(rosbridgeUrl(window.location, this.token));
+    // ?replay=FLIGHT: a recorded flight, read-only, on a graph of its own (replay.js).
+    this.replayId = pageReplay();
+    const base = this.replayId ? replayApiBase(this.replayId) : "/api/v1";
+    this.api = new Api(base, this.token, this.serverNow);
+    this.liveApi = this.replayId ? new Api("/api/v1", this.token) : this.api;
+    this.ros = new RosbridgeClient(
+      this.replayId
+        ? replayRosbridgeUrl(window.location, this.replayId)
+        : rosbridgeUrl(window.location, this.token),
+    );
     this.serverSpeaking = 0; // replies the server's voice is playing now (serverSpeak)
     this.drones = [];
     this.fleet = false;
@@ -74,6 +84,7 @@ class Console {
       () => Date.now() / 1000 + this.clockOffset,
     );
     this.camera.onFrame = () => this.freshness.beat("camera");
+    this.cameraFeed = new CameraFeed(this.ros, this.camera, () => Date.now() / 1000 + this.clockOffset);
     this.telemetry = new TelemetryPanel(document);
     // Navdata streams (~15 Hz): from its first message the vehicle is judged as a stream.
     this.telemetry.onNavdataSeen = () => {
@@ -116,6 +127,8 @@ class Console {
       lastReply: $("last-reply"),
     }, {
       serverSpeak: (text) => this.serverSpeak(text),
+      now: () => this.pageNow(),
+      replay: () => Boolean(this.replayId),
       // "Did you say …?" answered by a button: to the drone that asked (dialog.js addAnswers).
       onAnswer: (answer, drone) => this.sendUtterance(answer, "button", 1, drone || this.drone),
     });
@@ -152,6 +165,14 @@ class Console {
       describe: () => this.describe(),
     });
     $("describe").addEventListener("click", () => this.describe());
+    // Simulator faults for operator training: a pilot with the lease, a simulated drone, live.
+    this.training = new TrainingPanel($("training"), this.api, {
+      drone: () => this.drone,
+      role: () => this.role,
+      lease: () => this.haveLease,
+      replay: () => document.body.dataset.replay === "1",
+      say: (text) => this.dialog.addSystem(text),
+    });
 
     $("input-form").addEventListener("submit", (ev) => {
       ev.preventDefault();
@@ -191,11 +212,16 @@ class Console {
       return;
     }
     await this.loadServerInfo();
-    // `uav-console replay`: a timeline bar; a seek clears the trails drawn so far.
-    this.replay = new ReplayBar(this.api, $("replay-bar"), () => this.map.clearTrails());
-    this.replay.start();
+    // A replay: a timeline bar; a seek clears the trails and the dialog shown so far.
+    this.replay = new ReplayBar(this.api, $("replay-bar"), () => {
+      this.map.clearTrails();
+      this.dialog.clear();
+    });
+    this.replay.start().then((on) => {
+      if (on && this.replayId) document.title = `uav-console — replay of ${this.replayId}`;
+    });
     this.recordings = new RecordingsMenu(
-      this.api,
+      this.liveApi,
       { pill: $("rec"), menu: $("recordings"), list: $("recordings-list") },
     );
     this.recordings.start();
@@ -384,6 +410,7 @@ class Console {
     document.body.dataset.role = this.role || "";
     document.body.dataset.connected = String(connected);
     if (observer) $("text-input").placeholder = "Observers watch only";
+    this.training?.refresh();
   }
 
   /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over.
@@ -492,6 +519,7 @@ class Console {
     const list = names.length ? names : ["uav1"];
     this.drones = list;
     this.fleet = list.length > 1;
+    this.dialog.setFleet(this.fleet);
     const sel = $("drone-select");
     sel.replaceChildren(...list.map((n) => new Option(n, n)));
     $("drone-select-wrap").hidden = !this.fleet;
@@ -519,6 +547,7 @@ class Console {
       /* private mode */
     }
     this.controls.releaseAll(true);
+    this.training?.refresh();
     for (const s of this.droneSubs) s.unsubscribe();
     this.camera.reset();
     this.defineSources(name);
@@ -528,7 +557,8 @@ class Console {
     const sub = (topic, cb, opts) => this.ros.subscribe(t(topic), TOPIC_TYPES[topic], cb, opts);
     this.droneSubs = [
       sub("/ardrone/navdata", (m) => this.telemetry.onNavdata(m), { throttle_rate: 50, queue_length: 1 }),
-      sub("/ardrone/image_raw/compressed", (m) => this.camera.onImage(m), { queue_length: 1 }),
+      // throttled to what this page can show, so frames never queue (camera_feed.js)
+      this.cameraFeed.attach(t("/ardrone/image_raw/compressed"), TOPIC_TYPES["/ardrone/image_raw/compressed"]),
       sub("/uav/pose", (m) => {
         this.map.onPose(name, m);
         this.telemetry.onPoseYaw(quaternionYaw(m?.pose?.orientation));
@@ -542,9 +572,16 @@ class Console {
     document.body.dataset.drone = name;
   }
 
+  /** Unix seconds of "now" as the page shows times: the recording's in a replay. */
+  pageNow() {
+    const recorded = this.replay?.active ? this.replay.now() : null;
+    return recorded ?? Date.now() / 1000 + this.clockOffset;
+  }
+
   subscribeGlobal() {
     // Every operator input, whatever its door (other consoles, REST, speech, rosbridge, a
-    // replay), before the replies: a latched one arrives first, then the reply it annotates.
+    // replay: the operator's, as recorded), before the replies: a latched one arrives first,
+    // then the reply it annotates.
     this.ros.subscribe("/console/utterance", TOPIC_TYPES["/console/utterance"], (m) =>
       this.dialog.onUtterance(m),
     );
@@ -612,7 +649,9 @@ class Console {
     if (!alarm || (this.fleet && m.drone && m.drone !== this.drone && m.level !== "alert")) return;
     const who = this.fleet && m.drone ? `${m.drone}: ` : "";
     if (alarm === "link") this.alertBanner.drop(`${m.drone}:link-rest`); // one banner per event
-    if (m.level === "alert" || m.level === "warn") this.alertBanner.raise(`${m.drone}:${alarm}`, `${who}${m.text}`);
+    // Stamped when the drone raised it (a replay's: the recording's time, not today's).
+    const at = new Date((stampSeconds(m.header?.stamp) ?? this.pageNow()) * 1000);
+    if (m.level === "alert" || m.level === "warn") this.alertBanner.raise(`${m.drone}:${alarm}`, `${who}${m.text}`, at);
     else this.alertBanner.clear(`${m.drone}:${alarm}`, `${who}${m.text}`);
   }
 
@@ -646,6 +685,7 @@ class Console {
       // A drone in its own vehicle process has a safety door: stops that no web traffic delays.
       this.learnDoor(this.drone, status.vehicle);
       this.telemetry.onDroneStatus(status);
+      this.training.setSimulated(this.drone, status.simulated);
       this.map.onSnapshot(this.drone, status);
       this.map.setLocalised(this.drone, status.localised);
       this.status.setTask(status.task || null);
@@ -656,7 +696,8 @@ class Console {
         (x) => x.key === `${this.drone}:link` || x.key === `fresh:vehicle:${this.drone}`,
       );
       if (status.link_ok === false && !ansSaidIt) {
-        this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`);
+        const at = new Date(this.pageNow() * 1000);
+        this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`, at);
       } else if (status.link_ok === true) {
         this.alertBanner.clear(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is back.`);
       }
@@ -706,7 +747,7 @@ class Console {
       this.flash("Not connected: the command was not sent.", "alert");
       return false;
     }
-    this.dialog.addUtterance(text, { source, confidence });
+    this.dialog.addUtterance(text, { source, confidence, drone: drone || "" });
     return true;
   }
 
@@ -796,7 +837,7 @@ class Console {
   async goToMarker(id) {
     const text = `go to marker ${id}`;
     this.supersedeStops();
-    this.dialog.addUtterance(text, { source: "map" });
+    this.dialog.addUtterance(text, { source: "map", drone: this.drone || "" });
     try {
       const res = await this.api.command(text, { drone: this.drone || undefined });
       // The reply also arrives on /console/reply; show REST-only refusals here.
