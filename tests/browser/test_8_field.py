@@ -360,3 +360,83 @@ def test_dialog_log_takes_focus_on_a_phone_held_landscape(browser: Any, srv: Ser
         assert _axe(page) == []
     finally:
         ctx.close()
+
+
+def _stops_and_camera(name: str, w: int, h: int, m: dict[str, Any], live: bool = True) -> None:
+    """The camera whole and uncovered on the first screen; live, the stops on it, uncovered,
+    and a phone on its side gives the camera half the screen (a replay's timeline takes room
+    above it)."""
+    cam = m["camera"]
+    assert cam["uncovered"], (name, cam)
+    assert cam["x"] >= 0 and cam["y"] >= 0 and cam["x"] + cam["w"] <= w + 0.5, (name, cam)
+    assert cam["y"] + cam["h"] <= h + 0.5, (name, cam)
+    if w < h:
+        assert cam["x"] == 0 and abs(cam["w"] - w) < 0.5, (name, cam)
+    elif live:
+        assert cam["w"] * cam["h"] >= 0.5 * w * h, (name, cam)
+    if live:
+        for sel, b in m["stops"].items():
+            assert b["x"] >= 0 and b["y"] >= 0, (name, sel, b)
+            assert b["x"] + b["w"] <= w and b["y"] + b["h"] <= h, (name, sel, b)
+            assert b["w"] >= 44 and b["h"] >= 44 and b["top"], (name, sel, b)
+    assert not m["scrollX"], name
+
+
+def test_phones_keep_the_stops_and_camera_with_the_map_training_and_a_replay(
+    pilot: ConsolePage, srv: ServerProcess
+) -> None:
+    """At 390×844 and 844×390 the pilot's page with the Leaflet map, the training panel open
+    and the page scrolled to it, and a replay opened from the Recordings menu: the stops and
+    the whole camera stay on the first screen (screenshots in docs/screenshots/)."""
+    page = pilot.page
+    phones = {"phone": SIZES["phone"], "phone-landscape": SIZES["phone-landscape"]}
+    page.wait_for_selector("#map.leaflet-container .leaflet-pane", state="attached")
+    page.wait_for_selector("#training:not([hidden])", timeout=15_000)
+    page.click("#training > summary")
+    page.wait_for_selector("#training[open] button[data-fault='link_loss']", timeout=5_000)
+    for name, (w, h) in phones.items():
+        top = at_size(page, w, h)
+        _stops_and_camera(f"{name} training", w, h, top)
+        page.screenshot(path=str(SCREENSHOTS / f"tools-{name}.png"))
+        page.eval_on_selector("#training", "el => el.scrollIntoView({block: 'center'})")
+        there = dict(page.evaluate(MEASURE))
+        for sel in STOPS:  # scrolled to the training panel: the stops stay put
+            b = there["stops"][sel]
+            assert b["top"] and {k: b[k] for k in "xywh"} == {
+                k: top["stops"][sel][k] for k in "xywh"
+            }, (name, sel)
+        page.screenshot(path=str(SCREENSHOTS / f"tools-{name}-training.png"))
+
+    # A replay from the Recordings menu (a flight of this file's server; fly one if none).
+    def ended() -> list[dict[str, Any]]:
+        return [f for f in srv.api("GET", "/flights").json()["flights"] if f["ended"]]
+
+    page.set_viewport_size({"width": 1280, "height": 800})
+    if not ended():
+        page.click("#btn-takeoff")
+        ok, truth, _ = wait_until(srv.truth, lambda t: position(t)[2] > 0.5, timeout_s=30)
+        assert ok, truth
+        land(srv)
+    ok, flights, _ = wait_until(ended, bool, timeout_s=90, period_s=1.0)
+    assert ok, flights
+    page.click("#recordings > summary")
+    button = f"#recordings-list button[data-replay='{flights[0]['id']}']"
+    page.wait_for_selector(button, timeout=15_000)
+    with page.context.expect_page() as opened:
+        page.click(button)
+    replay = opened.value
+    try:
+        replay.wait_for_selector("#replay-bar:not([hidden])", timeout=30_000)
+        replay.wait_for_selector("#map.leaflet-container .leaflet-pane", state="attached")
+        for name, (w, h) in phones.items():
+            m = at_size(replay, w, h)
+            # nothing flies in a replay: the camera whole, the timeline on the first screen
+            _stops_and_camera(f"{name} replay", w, h, m, live=False)
+            bar = replay.eval_on_selector(
+                "#replay-bar",
+                "e => { const r = e.getBoundingClientRect(); return [r.y, r.bottom]; }",
+            )
+            assert bar[0] >= 0 and bar[1] <= h, (name, bar)
+            replay.screenshot(path=str(SCREENSHOTS / f"tools-{name}-replay.png"))
+    finally:
+        replay.close()

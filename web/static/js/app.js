@@ -195,7 +195,7 @@ class Console {
     window.addEventListener("resize", () => this.layoutDock());
     if (window.ResizeObserver) {
       const ro = new ResizeObserver(() => this.layoutDock());
-      for (const id of ["dock", "messages"]) ro.observe($(id));
+      for (const id of ["dock", "messages", "replay-bar"]) ro.observe($(id));
       ro.observe(document.querySelector(".topbar"));
     }
   }
@@ -973,7 +973,8 @@ class Console {
   }
 
   /** Phones: the fixed dock's and the floating messages' heights in --dock-h and --msgs-h, so
-   *  the last panel is not hidden under them; the top bar's in --top-h. */
+   *  the last panel is not hidden under them; the top bar's in --top-h, a replay's timeline's
+   *  in --replay-h (a phone on its side fits the camera under both). */
   layoutDock() {
     const root = document.documentElement.style;
     const px = (el) => `${Math.ceil(el.getBoundingClientRect().height)}px`;
@@ -981,6 +982,7 @@ class Console {
     const msgs = $("messages");
     root.setProperty("--msgs-h", getComputedStyle(msgs).position === "fixed" ? px(msgs) : "0px");
     root.setProperty("--top-h", px(document.querySelector(".topbar")));
+    root.setProperty("--replay-h", $("replay-bar").hidden ? "0px" : px($("replay-bar")));
   }
 }
 
