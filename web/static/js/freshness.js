@@ -104,11 +104,18 @@ export class Freshness {
     if (!s || this.suspended || !this.alarms || !s.spec.alarm) return;
     s.note = why;
     if (s.alarmed) return;
+    if (s.saidBack && s.gap && s.gap.from === s.staleSince) {
+      // The rule raised it and said it back already: the back line names the restart too.
+      this.alarms.clear(this.alarmKey(name), s.spec.back?.(ageWords(s.gap.to - s.gap.from), why));
+      s.note = "";
+      return;
+    }
     const stillSilent = this.ownStale(name, now);
     const from = stillSilent || !s.gap ? s.heardAt : s.gap.from;
     const silentS = stillSilent || !s.gap ? this.age(name, now) : s.gap.to - s.gap.from;
     if (from === null) return;
     s.alarmed = true;
+    s.saidBack = false;
     s.staleSince = from;
     this.alarms.raise(this.alarmKey(name), s.spec.alarm(ageWords(silentS), why));
   }
@@ -226,6 +233,7 @@ export class Freshness {
     const age = ageWords(this.age(name, now));
     if (own && !s.alarmed && !upstream && s.spec.alarm && this.causeKnown(name, now)) {
       s.alarmed = true;
+      s.saidBack = false;
       s.staleSince = s.heardAt;
       this.alarms.raise(key, s.spec.alarm(age, s.why));
     } else if (own && s.alarmed && s.spec.alarm) {
@@ -237,6 +245,7 @@ export class Freshness {
       const silent = s.staleSince !== null && first !== null ? first - s.staleSince : null;
       const back = s.spec.back ? s.spec.back(ageWords(silent), s.note) : "";
       s.note = "";
+      s.saidBack = true;
       if (this.suspended) this.alarms.drop?.(key);
       else this.alarms.clear(key, back);
     }
