@@ -21,6 +21,9 @@ from server.api.models import add_command_schemas
 from server.audit_trail import RestAuditMiddleware
 from server.deadlines import CommandExpired
 from server.http_guard import HttpGuard, content_security_policy
+from server.map_tiles import tile_source
+from server.recorder import replay_live
+from server.recorder.replay_live import ReplayHub
 from server.runtime import Runtime
 from server.settings import Settings
 from server.vehicles.door import advertised_url
@@ -39,6 +42,14 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     settings = settings or Settings.from_env()
     runtime = Runtime(settings)
 
+    # Recorded flights replayed in the page, read-only, on graphs of their own.
+    replays = ReplayHub(
+        lambda: runtime.flight_index,
+        runtime.recording_id,
+        runtime.security,
+        lambda: runtime.world.to_dict(),
+    )
+
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         await runtime.start()
@@ -48,6 +59,7 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         try:
             yield
         finally:
+            await replays.close()
             await runtime.stop()
 
     app = FastAPI(
@@ -58,6 +70,7 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         lifespan=lifespan,
     )
     app.state.runtime = runtime
+    app.state.replays = replays
     # Intent/outcome audit rows of REST actions, inside the guard (issue 14).
     app.add_middleware(RestAuditMiddleware, security=runtime.security, trail=runtime.trail)
     # Host allowlist, body limits before parsing, security headers, the token cookie (issue 14).
@@ -96,6 +109,7 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         flights.router,
     ):
         app.include_router(router, prefix="/api/v1")
+    app.include_router(replay_live.router, prefix="/api/v1")
     for router in (speech.router, tls.router):  # issue 15: speech, HTTPS for phones
         app.include_router(router, prefix="/api/v1")
     fleet_deps = [Depends(fleet_access), Depends(fleet_deadline)]
@@ -116,7 +130,9 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         # request named (a phone on the LAN): its policy names exactly those doors.
         host = request.headers.get("host")
         doors = [advertised_url(url, host) for url in runtime.vehicles.door_urls()]
-        csp = content_security_policy(d for d in doors if d)
+        # and the outdoor map's tiles, from the one tile host the operator set
+        tiles = tile_source(settings.tile_url)
+        csp = content_security_policy((d for d in doors if d), [tiles] if tiles else [])
         page.headers["content-security-policy"] = csp
         return page
 

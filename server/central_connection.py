@@ -105,6 +105,8 @@ class CentralConnection:
         from websockets.asyncio.client import connect
         from websockets.exceptions import InvalidHandshake, WebSocketException
 
+        from server.ws_deflate import PlainLargeClientFactory
+
         delay = self.backoff_s[0]
         while not stop.is_set():
             try:
@@ -112,6 +114,9 @@ class CentralConnection:
                     self.url,
                     additional_headers=self.headers,
                     max_size=None,
+                    # camera frames go uncompressed; telemetry stays deflated (server.ws_deflate)
+                    compression=None,
+                    extensions=[PlainLargeClientFactory()],
                     open_timeout=self.open_timeout_s,
                     ssl=self.ssl,
                 ) as ws:

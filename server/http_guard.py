@@ -12,7 +12,9 @@ Before any route, token check or body parsing runs:
   connections from this origin only; no framing), ``X-Frame-Options``, ``Referrer-Policy:
   no-referrer`` (the first-load ``?token=`` never leaks in a Referer) and ``nosniff``. A
   response that sets its own policy keeps it: the console page names, in ``connect-src``, the
-  vehicles' safety doors it holds connections to (:func:`content_security_policy`).
+  vehicles' safety doors it holds connections to (:func:`content_security_policy`). Served over
+  TLS, every response also carries ``Strict-Transport-Security`` (:data:`HSTS`): a browser
+  that has met the console over HTTPS never falls back to plain HTTP for its name.
 - The console's first load with a valid ``?token=`` sets an HttpOnly, SameSite=Strict cookie,
   so the page can drop the token from its address (``history.replaceState``) and REST and the
   WebSocket keep working with the cookie.
@@ -44,12 +46,15 @@ BODY_LIMITS: tuple[tuple[str, int], ...] = (
 )
 
 
-def content_security_policy(connect: Iterable[str] = ()) -> str:
+def content_security_policy(connect: Iterable[str] = (), images: Iterable[str] = ()) -> str:
     """The policy, with ``connect`` (e.g. ``ws://127.0.0.1:41234``, a safety door) allowed
-    besides this origin. Sources with characters a policy cannot carry are left out."""
+    besides this origin, and ``images`` (the map's tile host, ``https://tile.openstreetmap.org``)
+    besides this origin's. Sources with characters a policy cannot carry are left out."""
     extra = "".join(f" {src}" for src in connect if _SOURCE_RE.match(src))
+    tiles = "".join(f" {src}" for src in images if _IMAGE_SOURCE_RE.match(src))
     return (
-        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
+        "default-src 'self'; script-src 'self'; style-src 'self'; "
+        f"img-src 'self' data: blob:{tiles}; "
         f"media-src 'self' blob:; connect-src 'self'{extra}; object-src 'none'; "
         "base-uri 'none'; form-action 'self'; frame-ancestors 'none'"
     )
@@ -57,6 +62,10 @@ def content_security_policy(connect: Iterable[str] = ()) -> str:
 
 # A host-source of CSP Level 3 §2.3.1 with scheme and port: wss://host:port (no paths).
 _SOURCE_RE = re.compile(r"^(ws|wss|http|https)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):\d{1,5}$")
+# A tile host: scheme, host (``*.`` for subdomains), an optional port (no paths).
+_IMAGE_SOURCE_RE = re.compile(
+    r"^https?://(\*\.)?([A-Za-z0-9-]+(\.[A-Za-z0-9-]+)*|\[[0-9A-Fa-f:.]+\])(:\d{1,5})?$"
+)
 CSP = content_security_policy()
 # FastAPI's /docs and /redoc pages load Swagger UI / ReDoc from a CDN with inline scripts: they
 # keep every header but a CSP that would break them (they are no place to type a token into).
@@ -68,6 +77,10 @@ SECURITY_HEADERS: tuple[tuple[bytes, bytes], ...] = (
     (b"cross-origin-opener-policy", b"same-origin"),
 )
 COOKIE_MAX_AGE_S = 30 * 24 * 3600
+# RFC 6797 §6.1: one year, the usual max-age. No includeSubDomains: the console answers for its
+# own name only. Browsers keep no HSTS for IP literals (§8.1.1), so a console reached by its
+# address is unaffected; over plain HTTP the header means nothing (§7.2) and is not sent.
+HSTS: tuple[bytes, bytes] = (b"strict-transport-security", b"max-age=31536000")
 
 
 def body_limit(path: str) -> int:
@@ -98,7 +111,7 @@ class HttpGuard:
             if kind == "websocket":
                 await send({"type": "websocket.close", "code": 1008, "reason": detail[:120]})
             else:
-                await _reply(send, status, detail)
+                await _reply(send, status, detail, https)
             return
         if kind == "websocket":
             await self.app(scope, receive, send)
@@ -110,10 +123,10 @@ class HttpGuard:
             try:
                 length = int(declared)
             except ValueError:
-                await _reply(send, 400, "Content-Length is not a number")
+                await _reply(send, 400, "Content-Length is not a number", https)
                 return
             if length > limit:
-                await _reply(send, 413, _too_large(path, limit))
+                await _reply(send, 413, _too_large(path, limit), https)
                 return
         await self._guarded(scope, receive, send, path, limit, https)
 
@@ -150,7 +163,7 @@ class HttpGuard:
                     # here into a 400 "error parsing the body").
                     refused = True
                     if not started:
-                        await _reply(send, 413, _too_large(path, limit))
+                        await _reply(send, 413, _too_large(path, limit), https)
                     return {"type": "http.disconnect"}
             return message
 
@@ -163,6 +176,8 @@ class HttpGuard:
             if message["type"] == "http.response.start":
                 started = True
                 extra = list(SECURITY_HEADERS)
+                if https:
+                    extra.append(HSTS)
                 own = any(
                     k.lower() == b"content-security-policy" for k, _ in message.get("headers", [])
                 )
@@ -199,7 +214,7 @@ def _too_large(path: str, limit: int) -> str:
     return f"request body over the limit of {limit} bytes for {path[:100]}"
 
 
-async def _reply(send: Send, status: int, detail: str) -> None:
+async def _reply(send: Send, status: int, detail: str, https: bool = False) -> None:
     body = json.dumps({"detail": detail}).encode()
     await send(
         {
@@ -209,6 +224,7 @@ async def _reply(send: Send, status: int, detail: str) -> None:
                 (b"content-type", b"application/json"),
                 (b"content-length", str(len(body)).encode()),
                 *SECURITY_HEADERS,
+                *((HSTS,) if https else ()),
             ],
         }
     )

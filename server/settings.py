@@ -17,6 +17,7 @@ from pydantic_settings import BaseSettings, EnvSettingsSource, NoDecode, Setting
 
 from drone.deadline import DEFAULT_DEADLINE_S, check_deadline_s
 from drone.share import SOURCE_ROOT, share_dir
+from server.map_tiles import DEFAULT_TILE_URL, check_tile_url
 
 ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
 ENV_PREFIX = "UAVC_"
@@ -159,6 +160,11 @@ class Settings(BaseSettings):
     recognizer: Literal["server", "browser", "auto"] = Field(
         "auto", description="The page's default recogniser."
     )
+    tile_url: str = Field(
+        DEFAULT_TILE_URL,
+        description="Outdoor map tiles, fetched by the browser (Leaflet template: {z}/{x}/{y}, "
+        "{s} subdomains); empty: the plain local grid. docs/map.md.",
+    )
     # -- TLS -----------------------------------------------------------------------------------
     tls: bool = Field(
         True, description="HTTPS on a non-loopback host (a local CA unless cert/key are set)."
@@ -253,6 +259,11 @@ class Settings(BaseSettings):
     @classmethod
     def _expand(cls, value: Path | None) -> Path | None:
         return value.expanduser() if value is not None else None
+
+    @field_validator("tile_url")
+    @classmethod
+    def _tile_url(cls, value: str) -> str:
+        return check_tile_url(value)
 
     @model_validator(mode="after")
     def _check(self) -> Settings:

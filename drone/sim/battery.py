@@ -31,6 +31,9 @@ IDLE_DRAIN_PCT_S = 0.005  # motors off (Wi-Fi, cameras, CPU)
 CLIMB_EXTRA = 0.5  # extra drain fraction at full climb rate
 MAX_SAG_PCT_AT_HOVER = 15.0  # a worn pack's sag at hover load, percentage points (see above)
 MAX_DRAIN_PCT_S = 100.0 / FLIGHT_TIME_S * (1.0 + CLIMB_EXTRA)  # full climb: ≈ 0.21 %/s
+# The fastest injected leak: with the fastest drain it stays under the 2 %/s a real pack's
+# reading may fall (drone/ardrone/plausibility.py), so the drone believes it and acts.
+MAX_LEAK_PCT_S = 1.5
 
 
 def load_factor(motors_on: bool, climb_fraction: float = 0.0) -> float:
@@ -49,12 +52,13 @@ class Battery:
     low_pct: float = LOW_PCT
     sag_pct_at_hover: float = 0.0  # extra sag of this pack at hover load (0: healthy)
     load: float = 0.0  # current relative to hover at the last step (see load_factor)
+    leak_pct_s: float = 0.0  # extra drain of a failing pack (fault injection), %/s
 
     def step(self, dt: float, motors_on: bool, climb_fraction: float = 0.0) -> None:
         """Drain for ``dt`` seconds; ``climb_fraction`` is vz_up / control_vz_max (clipped 0..1)."""
         self.load = load_factor(motors_on, climb_fraction)
         rate = 100.0 / self.flight_time_s * self.load if motors_on else IDLE_DRAIN_PCT_S
-        self.pct = max(0.0, self.pct - rate * dt)
+        self.pct = max(0.0, self.pct - (rate + self.leak_pct_s) * dt)
 
     @property
     def reading_pct(self) -> float:
@@ -82,6 +86,11 @@ class Battery:
     def drain_to(self, pct: float) -> None:
         """Set the charge (fault injection); clipped to 0..100."""
         self.pct = min(100.0, max(0.0, float(pct)))
+
+    def leak(self, pct_s: float) -> None:
+        """Drain this much more per second, flying or not (fault injection: a pack failing
+        fast); 0 ends it. Clipped to 0..MAX_LEAK_PCT_S."""
+        self.leak_pct_s = min(MAX_LEAK_PCT_S, max(0.0, float(pct_s)))
 
     def wear(self, sag_pct_at_hover: float) -> None:
         """Make the pack sag this much at hover load (fault injection: a cell going bad);

@@ -41,7 +41,7 @@ from drone.ardrone.navdata import (
     PressureRaw,
     encode_navdata,
 )
-from drone.sim.battery import Battery
+from drone.sim.battery import MAX_LEAK_PCT_S, Battery
 from drone.sim.errors import FaultError, SimConfigError
 from drone.sim.people import PersonPose, people_at
 from drone.sim.physics import Body, FlightParams, Physics, as_box
@@ -106,7 +106,16 @@ class Truth:
     temperature_c: float = 0.0  # what the barometer reads in the hull (drone/sim/thermal.py)
 
 
-FAULT_KINDS = ("link_loss", "battery", "wind_gust", "wind", "payload", "clear")
+FAULT_KINDS = (
+    "link_loss",
+    "battery",
+    "battery_drain",
+    "wind_gust",
+    "wind",
+    "lost_markers",
+    "payload",
+    "clear",
+)
 
 
 class SimDrone:
@@ -182,13 +191,20 @@ class SimDrone:
         self._navdata_options = 0
         self._next_nav = 0.0
         self._link_down_until = -math.inf
+        self._markers_lost_until = -math.inf
         self._renderer: Any | None = None
+        self._renderer_no_markers: Any | None = None
 
     # ---------------------------------------------------------------- wire input
     @property
     def link_down(self) -> bool:
         """True while an injected ``link_loss`` fault drops every datagram."""
         return self.time < self._link_down_until
+
+    @property
+    def markers_lost(self) -> bool:
+        """True while an injected ``lost_markers`` fault hides every marker from the camera."""
+        return self.time < self._markers_lost_until
 
     def receive_at(self, data: bytes, now: float) -> None:
         """Feed one AT datagram (UDP 5556). Malformed datagrams are ignored (``rejected_at``)."""
@@ -501,26 +517,33 @@ class SimDrone:
 
         Kinds and parameters (aliases in brackets, as the REST body names them):
             ``link_loss(duration_s)``: drop every datagram both ways for that long.
-            ``battery(pct [battery_pct])``: set the charge to ``pct`` (0..100).
+            ``battery(pct [battery_pct])``: set the charge to ``pct`` (0..100) at once.
+            ``battery_drain(pct_s [drain_pct_s])``: the pack leaks this much more per second
+            (0..``MAX_LEAK_PCT_S``; 0 ends it).
             ``wind_gust(vx, vy, duration_s)``: extra wind in m/s (map frame) for that long.
             ``wind(vx [wind_x], vy [wind_y])``: steady wind in m/s (map frame); with
             ``duration_s`` it is a gust instead.
+            ``lost_markers(duration_s)``: the camera sees no marker for that long (covered,
+            glare), so the estimator runs on dead reckoning.
             ``payload(kg)``: carry ``kg`` (0..0.25; 0 removes it): the motors draw more and
             heat the hull more (drone/sim/thermal.py); the flight itself is unchanged.
-            ``clear()``: end link loss, wind and gusts (the battery keeps its charge).
+            ``clear()``: end link loss, wind, gusts, the leak and lost markers (the battery
+            keeps its charge).
 
         Raises:
             FaultError: unknown kind, missing/extra parameter, or a value out of range.
         """
-        aliases = {"battery_pct": "pct", "wind_x": "vx", "wind_y": "vy"}
+        aliases = {"battery_pct": "pct", "drain_pct_s": "pct_s", "wind_x": "vx", "wind_y": "vy"}
         params = {aliases.get(k, k): v for k, v in params.items()}
         if kind == "wind" and "duration_s" in params:
             kind = "wind_gust"
         required = {
             "link_loss": {"duration_s"},
             "battery": {"pct"},
+            "battery_drain": {"pct_s"},
             "wind_gust": {"vx", "vy", "duration_s"},
             "wind": {"vx", "vy"},
+            "lost_markers": {"duration_s"},
             "payload": {"kg"},
             "clear": set(),
         }
@@ -543,6 +566,12 @@ class SimDrone:
                 raise FaultError(f"battery pct must be in 0..100, got {vals['pct']}")
             self.physics.battery.drain_to(vals["pct"])
             self._pad = None  # the charge the fault sets stays until the next landing
+        elif kind == "battery_drain":
+            if not 0.0 <= vals["pct_s"] <= MAX_LEAK_PCT_S:
+                raise FaultError(f"battery drain must be in 0..{MAX_LEAK_PCT_S} %/s")
+            self.physics.battery.leak(vals["pct_s"])
+        elif kind == "lost_markers":
+            self._markers_lost_until = self.time + vals["duration_s"]
         elif kind == "wind_gust":
             self.physics.gust(vals["vx"], vals["vy"], vals["duration_s"])
         elif kind == "wind":
@@ -554,8 +583,10 @@ class SimDrone:
                 raise FaultError(str(exc)) from exc
         else:
             self._link_down_until = -math.inf
+            self._markers_lost_until = -math.inf
             self.physics.wind = (0.0, 0.0)
             self.physics.clear_gusts()
+            self.physics.battery.leak(0.0)
 
     # ---------------------------------------------------------------- camera
     def render_frame(self, truth: Truth | None = None) -> np.ndarray | None:
@@ -563,16 +594,24 @@ class SimDrone:
 
         Uses ``drone.sim.camera.Renderer`` (seeded like the simulator); counts ``frames`` for the
         demo option's ``num_frames``. Passing a ``truth`` snapshot lets a worker thread render
-        while the owner keeps stepping.
+        while the owner keeps stepping. While markers are lost (fault) the scene is drawn
+        without them.
         """
         if self.world is None:
             return None
-        if self._renderer is None:
-            from drone.sim.camera import Renderer
+        from drone.sim.camera import Renderer
 
-            self._renderer = Renderer(self.world, seed=self.config.seed)
+        if self.markers_lost:
+            if self._renderer_no_markers is None:
+                bare = replace(self.world, markers=())
+                self._renderer_no_markers = Renderer(bare, seed=self.config.seed)
+            renderer = self._renderer_no_markers
+        else:
+            if self._renderer is None:
+                self._renderer = Renderer(self.world, seed=self.config.seed)
+            renderer = self._renderer
         pose = self.truth if truth is None else truth
-        img: np.ndarray = self._renderer.render(pose, frame=self.frames)
+        img: np.ndarray = renderer.render(pose, frame=self.frames)
         self.frames += 1
         return img
 

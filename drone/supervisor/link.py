@@ -11,7 +11,9 @@ from drone.vehicle import VehicleSnapshot
 
 @dataclass
 class LinkMonitor:
-    """No navdata: alert; an autopilot (MAVLink) says what its own data-link failsafe does."""
+    """No navdata: alert; an autopilot (MAVLink) says what its own data-link failsafe does. In
+    flight the AR.Drone's own watchdog hovers it, which the alarm says; on the ground there is
+    nothing to hover and it says so."""
 
     period_s: float = 0.25
     name: str = "link"
@@ -24,6 +26,10 @@ class LinkMonitor:
             if failsafe:
                 return Alarm(
                     self.name, Severity.ALERT, f"I lost the link to the drone. {failsafe}."
+                )
+            if not snap.flying:
+                return Alarm(
+                    self.name, Severity.ALERT, "I lost the link to the drone. It was on the ground."
                 )
             return Alarm(
                 self.name, Severity.ALERT, "I lost the link to the drone. It will hover on its own."

@@ -8,6 +8,7 @@ from fastapi import FastAPI
 from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema
 
 from drone.commands import COMMAND_ADAPTER
+from drone.sim.battery import MAX_LEAK_PCT_S
 from server.api.strict import StrictBody
 
 COMMAND_SCHEMA_PREFIX = "Command"
@@ -101,9 +102,15 @@ class Health(BaseModel):
 
 
 class FaultRequest(StrictBody):
-    kind: Literal["link_loss", "battery", "wind", "clear"]
+    """A simulator fault (docs/flying.md, "Training"): ``link_loss`` (``duration_s``),
+    ``battery`` (a cliff to ``battery_pct``), ``battery_drain`` (``drain_pct_s`` more per
+    second), ``wind`` (``wind_mps``; with ``duration_s`` a gust), ``lost_markers``
+    (``duration_s``) or ``clear``."""
+
+    kind: Literal["link_loss", "battery", "battery_drain", "wind", "lost_markers", "clear"]
     duration_s: float | None = Field(default=None, ge=0, le=3600)
     battery_pct: float | None = Field(default=None, ge=0, le=100)
+    drain_pct_s: float | None = Field(default=None, ge=0, le=MAX_LEAK_PCT_S)
     wind_mps: tuple[WindComponent, WindComponent] | None = None
 
 

@@ -222,7 +222,7 @@ class Recorder:
                 self._stamp_ns(),
                 chunk_size=self.config.chunk_size,
                 opener=self._opener,
-                metadata={"world": self.config.world},
+                metadata={"world": self.config.world, "preroll_s": str(self.config.preroll_s)},
             )
         except OSError as exc:
             self._file = None
@@ -231,12 +231,17 @@ class Recorder:
         self._last_flush = now
         log.info("flight session %s: recording to %s", fid, path)
         # Latest message of every topic not in the pre-roll (state a replay starts from),
-        # then the pre-roll itself, in time order.
+        # then the pre-roll itself, in time order. The state is logged at the recording's
+        # first instant, not when it was published (a dialog state latched at start-up, 12
+        # minutes before the take-off, would stretch the flight's timeline by 12 minutes);
+        # the messages keep their own header stamps.
         pre = list(self._preroll)
         self._preroll.clear()
         in_pre = {i[1] for i in pre}
+        t0 = min(pre[0][0], self._file.started_ns) if pre else self._file.started_ns
         snapshot = sorted((i for t, i in self._latest.items() if t not in in_pre), key=_t)
-        for item in snapshot + pre:
+        state: list[Item] = [(t0, topic, typ, msg) for _, topic, typ, msg in snapshot]
+        for item in state + pre:
             if self._file is None:
                 break
             self._write(item)

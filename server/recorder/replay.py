@@ -28,6 +28,7 @@ from server.recorder.mcapfile import Recording, read_recording
 
 log = logging.getLogger("uav_console.replay")
 OWNER = "replay"
+DEFAULT_PREROLL_S = 10.0  # RecorderConfig.preroll_s of recordings that do not name theirs
 
 
 @dataclass(frozen=True)
@@ -41,13 +42,20 @@ class Played:
 class Timeline:
     """Playback position over a recording's messages (times in ns of the recording)."""
 
-    def __init__(self, messages: list[Played], speed: float = 1.0) -> None:
+    def __init__(
+        self, messages: list[Played], speed: float = 1.0, *, start_ns: int | None = None
+    ) -> None:
+        """``start_ns``: where the timeline starts when that is after the first message (the
+        flight's start, :func:`flight_start_ns`); earlier messages are the state at the
+        start, published at once."""
         if speed <= 0:
             raise ValueError("speed must be positive")
         self.messages = sorted(messages, key=lambda p: p.t_ns)
         self._times = [p.t_ns for p in self.messages]
         self.start_ns = self._times[0] if self._times else 0
         self.end_ns = self._times[-1] if self._times else 0
+        if start_ns is not None:
+            self.start_ns = min(max(self.start_ns, start_ns), self.end_ns)
         self.speed = speed
         self.playing = False
         self.position_ns = self.start_ns
@@ -131,6 +139,22 @@ class Timeline:
         }
 
 
+def flight_start_ns(recording: Recording) -> int | None:
+    """Where the flight's timeline starts: its start less the recorder's pre-roll.
+
+    The recorder logs the state it starts from at that instant; recordings made before it
+    did logged it when it was published, maybe minutes before the flight, so the timeline is
+    cut here rather than at the first message. None when the file does not say.
+    """
+    meta = recording.metadata.get("flight", {})
+    try:
+        started = int(meta["started_ns"])
+        preroll_s = float(meta.get("preroll_s", DEFAULT_PREROLL_S))
+    except (KeyError, ValueError):
+        return None
+    return started - int(max(0.0, preroll_s) * 1e9)
+
+
 def load(path: Path, *, recover: bool = False) -> tuple[Recording, list[Played]]:
     """Read and decode a recording for replay.
 
@@ -154,6 +178,7 @@ class Player:
         self._clock = clock
         self._wake = asyncio.Event()
         self.latest: dict[str, dict[str, Any]] = {}
+        self.latest_ns: dict[str, int] = {}  # when (recording time) each was logged
 
     def now(self) -> float:
         return self._clock() if self._clock is not None else time.monotonic()
@@ -168,6 +193,7 @@ class Player:
     def publish(self, items: list[Played]) -> None:
         for p in items:
             self.latest[p.topic] = p.msg
+            self.latest_ns[p.topic] = p.t_ns
             try:
                 self.graph.publish(p.topic, p.msg, type=p.type)
             except Exception as exc:  # a topic the live graph types differently

@@ -25,12 +25,13 @@ from pydantic import BaseModel, ConfigDict, Field
 from server.api.deps import RoleDep
 from server.recorder.index import drones_of, iso
 from server.recorder.mcapfile import Recording
-from server.recorder.replay import Played, Player, Timeline
+from server.recorder.replay import Played, Player, Timeline, flight_start_ns
 from server.settings import Settings
 from server.vehicles.stack import DroneStack
 
 IMAGE = "sensor_msgs/CompressedImage"
 NAVDATA = "ardrone_autonomy/Navdata"
+LINK_LOST_NS = 500_000_000  # no navdata for 0.5 s: the link is lost (DESIGN §5)
 
 
 class _RecordedCamera:
@@ -71,7 +72,17 @@ class ReplayDrone(DroneStack):
         return self.player.latest.get(f"{self.prefix}{topic}")
 
     def link_ok(self) -> bool:
-        return self._latest("/ardrone/navdata") is not None
+        return self._link() is True
+
+    def _link(self) -> bool | None:
+        """Whether the drone's navdata was flowing at this moment of the recording (DESIGN §5:
+        lost after 0.5 s without); None before its first navdata."""
+        t = self.player.latest_ns.get(f"{self.prefix}/ardrone/navdata")
+        if t is None:
+            return None
+        tl = self.player.timeline
+        tl.update(self.player.now())
+        return tl.position_ns - t <= LINK_LOST_NS
 
     def telemetry(self) -> dict[str, Any]:
         nav = self._latest("/ardrone/navdata") or {}
@@ -80,7 +91,7 @@ class ReplayDrone(DroneStack):
             "name": self.name,
             "simulated": False,
             "replay": True,
-            "link_ok": bool(nav),
+            "link_ok": self._link(),
             "task": self._latest("/uav/task"),
         }
         if nav:
@@ -193,7 +204,7 @@ def create_replay_app(
     settings = base.with_(drone="none", recorder=False, world=world)
     app = create_app(settings)
     runtime = app.state.runtime
-    timeline = Timeline(played, speed)
+    timeline = Timeline(played, speed, start_ns=flight_start_ns(recording))
     names = drones_of(list(recording.topics)) or ["uav1"]
     # A drone's topics are prefixed /NAME in a fleet and bare for a single drone (DESIGN §4).
     prefixes = {

@@ -14,7 +14,7 @@ def replay_main(args: argparse.Namespace) -> int:
     """Serve the console on a recording; 2 with a clear message for a bad file or speed."""
     import uvicorn
 
-    from server.recorder.replay import load
+    from server.recorder.replay import flight_start_ns, load
     from server.recorder.replay_app import create_replay_app
     from server.settings import Settings
 
@@ -43,7 +43,8 @@ def replay_main(args: argparse.Namespace) -> int:
     app = create_replay_app(args.file, recording, played, speed=args.speed, settings=settings)
     if args.paused:
         app.state.start_paused = True
-    timeline = played[-1].t_ns - played[0].t_ns
+    start = max(played[0].t_ns, flight_start_ns(recording) or played[0].t_ns)
+    timeline = played[-1].t_ns - min(start, played[-1].t_ns)
     print(
         f"replaying {args.file} ({len(played)} messages, {timeline / 1e9:.1f} s, "
         f"{len(recording.channels)} topics) at {args.speed:g}×",

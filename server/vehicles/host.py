@@ -536,6 +536,7 @@ class VehicleHost:
                 kind=str(args.get("kind")),
                 duration_s=args.get("duration_s"),
                 battery_pct=args.get("battery_pct"),
+                drain_pct_s=args.get("drain_pct_s"),
                 wind_mps=tuple(wind) if isinstance(wind, list | tuple) else None,
             )
             try:

@@ -330,7 +330,7 @@ class RemoteDroneStack(DroneStack):
     def inject_fault(self, body: Any) -> None:
         """Apply a simulator fault in the vehicle (raises ``ValueError`` if it refuses)."""
         args: dict[str, Any] = {"op": "fault", "kind": body.kind}
-        for key in ("duration_s", "battery_pct"):
+        for key in ("duration_s", "battery_pct", "drain_pct_s"):
             value = getattr(body, key, None)
             if value is not None:
                 args[key] = float(value)

@@ -110,6 +110,8 @@ class DroneStack:
             params["duration_s"] = body.duration_s
         if body.battery_pct is not None:
             params["battery_pct"] = body.battery_pct
+        if body.drain_pct_s is not None:
+            params["drain_pct_s"] = body.drain_pct_s
         if body.wind_mps is not None:
             params["wind_x"], params["wind_y"] = body.wind_mps
         self.sim.inject_fault(body.kind, **params)

@@ -396,20 +396,22 @@ def test_map_draws_the_outdoor_gps_field(console: ConsolePage) -> None:
     page.wait_for_function("uavConsole.map.dirty === false", timeout=3000)
     assert "outdoor" in (page.text_content("#map-caption") or "")
     assert page.evaluate("uavConsole.map.drones.get('uav2').role") == "charging"
-    # Waypoints are drawn where the world says: the pixel at wp1 is not the background.
+    # Waypoints are drawn where the world says: wp1's diamond sits on wp1's map point, on the
+    # Web Mercator map around the world's GPS origin (map.js Frame).
     wp = outdoor["waypoints"][0]["position"]
-    colour = page.evaluate(
-        """([x, y]) => { const m = uavConsole.map, T = m.transform();
-            const k = window.devicePixelRatio || 1;
-            const d = m.ctx.getImageData(Math.round(T.px(x) * k), Math.round(T.py(y) * k), 1, 1);
-            return [...d.data]; }""",
+    where = page.evaluate(
+        """([x, y]) => { const m = uavConsole.map, p = m.pixelOf(x, y);
+            const box = m.container.getBoundingClientRect();
+            const r = document.querySelector('.map-waypoint').getBoundingClientRect();
+            return [p.x, p.y, r.left + r.width / 2 - box.left, r.top + r.height / 2 - box.top,
+                    m.container.dataset.crs]; }""",
         [wp["x"], wp["y"]],
     )
-    background = page.evaluate(
-        """() => { const m = uavConsole.map; const d = m.ctx.getImageData(3, 3, 1, 1);
-                   return [...d.data]; }"""
+    assert where[0] == pytest.approx(where[2], abs=1.5) and where[1] == pytest.approx(
+        where[3], abs=1.5
     )
-    assert colour != background
+    assert where[4] == "geo"
+    assert page.locator(".map-label[data-drone='uav1']").text_content().startswith("uav1")
     assert console.console_errors() == []
 
 

@@ -74,7 +74,9 @@ def test_a_typed_yes_answers_the_drone_that_asked(
         page.click("#mic")
         asked = page.locator("#dialog .msg-bot").nth(n)
         asked.wait_for(timeout=8000)
-        assert asked.locator(".text").text_content().startswith('uav1: Did you say "take off"?')
+        # the line says which drone once: in its tag, not again in its text
+        assert asked.locator(".who").text_content() == "uav1"
+        assert asked.locator(".text").text_content().startswith('Did you say "take off"?')
         assert asked.locator(".answers").get_attribute("data-drone") == "uav1"
         page.fill("#text-input", "yes")
         page.press("#text-input", "Enter")

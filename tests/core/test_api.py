@@ -98,6 +98,22 @@ async def test_link_loss_fault_is_seen_and_recovers(api: httpx.AsyncClient) -> N
     await wait_for(api, "/api/v1/drones/uav1", lambda d: d["link_ok"])
 
 
+async def test_training_faults_drain_and_lost_markers(api: httpx.AsyncClient) -> None:
+    """The training panel's faults (docs/flying.md): a leak, lost markers, and their bounds."""
+    await wait_for(api, "/api/v1/drones/uav1", lambda d: d["link_ok"])
+    before = (await api.get("/api/v1/sim/uav1/truth")).json()["battery_pct"]
+    drain = {"kind": "battery_drain", "drain_pct_s": 1.5}
+    assert (await api.post("/api/v1/sim/uav1/fault", json=drain)).status_code == 200
+    await wait_for(api, "/api/v1/sim/uav1/truth", lambda t: t["battery_pct"] < before - 1.0)
+    lost = {"kind": "lost_markers", "duration_s": 2.0}
+    assert (await api.post("/api/v1/sim/uav1/fault", json=lost)).status_code == 200
+    assert (await api.post("/api/v1/sim/uav1/fault", json={"kind": "clear"})).status_code == 200
+    too_fast = {"kind": "battery_drain", "drain_pct_s": 50}
+    assert (await api.post("/api/v1/sim/uav1/fault", json=too_fast)).status_code == 422
+    no_rate = {"kind": "battery_drain"}
+    assert (await api.post("/api/v1/sim/uav1/fault", json=no_rate)).status_code == 422
+
+
 async def test_openapi_documents_the_interface(api: httpx.AsyncClient) -> None:
     spec = (await api.get("/openapi.json")).json()
     paths = set(spec["paths"])

@@ -260,3 +260,38 @@ def test_a_crash_cut_file_is_repaired_at_start(tmp_path: Path, clock: Clock) -> 
     assert stat.S_IMODE(path.stat().st_mode) == 0o600
     rec.stop()
     assert json.loads(json.dumps(row.as_json()))["id"] == path.stem
+
+
+def test_state_from_long_before_the_flight_does_not_stretch_its_timeline(tmp_path: Path) -> None:
+    """A dialog state latched at start-up, 12 minutes before the take-off, is in the recording
+    (the state a replay starts from) but logged at the recording's start: the recording spans
+    the flight (pre-roll included), not the 12 minutes before it."""
+    graph, clock = Graph(), Clock(1_780_000_000.0)
+    config = RecorderConfig(tmp_path / "flights", idle_s=2.0, preroll_s=10.0)
+    rec = Recorder(graph, config, clock=clock, stamp_ns=lambda: int(clock.t * 1e9))
+    rec.start(background=False)
+    graph.advertise("/console/state", "uav_console/DialogState", latch=True)
+    state = {
+        "header": {"stamp": {"sec": 1_780_000_000, "nanosec": 0}, "frame_id": ""},
+        "state": "landed",
+        "grammars": ["main"],
+        "drone": "uav1",
+    }
+    graph.publish("/console/state", state)
+    rec.step()
+    clock.t += 720.0
+    for i in range(350):  # 35 s: take off, fly, land
+        graph.publish("/ardrone/navdata", navdata(LANDED if i >= 340 else FLYING), type=NAVDATA)
+        clock.t += 0.1
+        rec.step()
+    clock.t += 5.0
+    rec.step()
+    rec.stop()
+    (row,) = rec.flights()
+    recording = read_recording(rec.index.path_for(row.id))
+    times = [t for _ch, t, _m in recording.decoded()]
+    assert (max(times) - min(times)) / 1e9 < 35.0 + 1.0
+    first_topic, first_msg = next((ch.topic, m) for ch, _t, m in recording.decoded())
+    assert first_topic == "/console/state"
+    assert first_msg["header"]["stamp"]["sec"] == 1_780_000_000  # the message as published
+    assert recording.metadata["flight"]["preroll_s"] == "10.0"

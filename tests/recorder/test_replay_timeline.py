@@ -47,3 +47,16 @@ def test_pause_seek_and_speed() -> None:
     assert [p.msg["n"] for p in tl.due(60.25)] == [0, 1]  # 1 s of recording in 0.25 s
     with pytest.raises(ValueError, match="positive"):
         tl.set_speed(0.0, 61.0)
+
+
+def test_a_start_after_the_first_message_cuts_the_timeline_there() -> None:
+    """An older recording logged its opening state when it was published, minutes before the
+    flight: the timeline starts at the flight, and that state is published at the start."""
+    early = [Played(10 * S, "/console/state", "t/D", {"n": -1})]
+    tl = Timeline(early + msgs(), start_ns=100 * S)
+    assert tl.duration_s == 9.5 and tl.status()["position_s"] == 0.0
+    first = tl.play(now=0.0)
+    assert [(p.topic, p.msg["n"]) for p in first] == [("/console/state", -1), ("/state", 0)]
+    assert tl.seek(tl.start_ns, now=1.0)[0].topic == "/console/state"
+    assert Timeline(msgs(), start_ns=0).start_ns == 100 * S  # never before the first message
+    assert Timeline(msgs(), start_ns=10**12 * S).start_ns == tl.end_ns  # nor after the last

@@ -189,6 +189,9 @@ def test_gps_only_when_asked_and_only_with_an_origin() -> None:
         ("battery", {"pct": float("nan")}),
         ("wind_gust", {"vx": 1.0, "vy": 0.0}),
         ("wind", {"vx": "strong", "vy": 0.0}),
+        ("battery_drain", {"pct_s": 9.0}),
+        ("battery_drain", {"pct_s": -1.0}),
+        ("lost_markers", {}),
     ],
 )
 def test_bad_faults_raise_fault_error(kind: str, params: dict[str, object]) -> None:
@@ -209,6 +212,54 @@ def test_fault_aliases_used_by_the_rest_body_and_clear() -> None:
     sim.inject_fault("clear")
     assert not sim.link_down and sim.physics.air() == (0.0, 0.0)
     assert sim.truth.battery_pct == 42.0
+
+
+def test_battery_drain_fault_leaks_until_cleared() -> None:
+    sim = SimDrone()
+    sim.inject_fault("battery_drain", drain_pct_s=1.0)  # the REST body's name
+    for _ in range(1000):
+        sim.step(DT)
+    assert sim.truth.battery_pct == pytest.approx(100.0 - 10.0 - 10 * 0.005, abs=0.01)
+    sim.inject_fault("clear")
+    before = sim.truth.battery_pct
+    for _ in range(1000):
+        sim.step(DT)
+    assert before - sim.truth.battery_pct == pytest.approx(10 * 0.005, abs=0.001)  # idle only
+
+
+def test_lost_markers_fault_hides_every_marker_from_the_camera_for_its_duration() -> None:
+    import cv2
+
+    from drone.sim.world import load_world
+
+    world = load_world("indoor")
+    m = world.markers[0]
+    # 1.5 m in front of the marker, at its height, facing it
+    nx, ny = float(m.normal[0]), float(m.normal[1])
+    pose = (
+        m.position[0] + 1.5 * nx,
+        m.position[1] + 1.5 * ny,
+        m.position[2],
+        0.0,
+        0.0,
+        math.atan2(-ny, -nx),
+    )
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+
+    def seen() -> set[int]:
+        _, ids, _ = detector.detectMarkers(sim.render_frame(pose))  # type: ignore[arg-type]
+        return set() if ids is None else {int(i) for i in ids.ravel()}
+
+    sim = SimDrone(world, seed=1)
+    assert m.id in seen()
+    sim.inject_fault("lost_markers", duration_s=0.5)
+    assert sim.markers_lost and seen() == set()
+    for _ in range(60):
+        sim.step(DT)
+    assert not sim.markers_lost and m.id in seen()
+    sim.inject_fault("lost_markers", duration_s=10.0)
+    sim.inject_fault("clear")
+    assert m.id in seen()
 
 
 def test_bad_construction_and_dt() -> None:

@@ -94,6 +94,14 @@ def test_link_loss_and_recovery() -> None:
     assert back is not None and back.severity == "info"
 
 
+def test_link_loss_says_it_hovers_only_in_flight() -> None:
+    flying = LinkMonitor().check(snap(link_ok=False, flying=True), Phase.EXECUTING, 0)
+    assert flying is not None and "hover on its own" in flying.text
+    landed = LinkMonitor().check(snap(link_ok=False, flying=False), Phase.GROUNDED, 0)
+    assert landed is not None and landed.severity == "alert"
+    assert "hover" not in landed.text and "on the ground" in landed.text
+
+
 def test_markers_lost_after_delay_only_while_executing() -> None:
     m = MarkersLostMonitor(1.5)
     assert m.check(snap(), Phase.EXECUTING, 0.0) is None

@@ -29,17 +29,31 @@ export class AlertBanner {
     els.ack.addEventListener("click", () => this.acknowledge());
   }
 
-  /** Raise (or refresh) an alert keyed by ``key`` (e.g. "link", "battery", "ans:geofence"). */
-  raise(key, text) {
+  /** Raise (or refresh) an alert keyed by ``key`` (e.g. "link", "battery", "ans:geofence");
+   *  ``at``: when it was raised (a replay's alarms carry the recording's time). */
+  raise(key, text, at = new Date()) {
     const known = this.active.find((a) => a.key === key);
-    if (known) {
+    if (known && known.over) {
+      // It came back before anyone acknowledged that it was over: a new episode.
+      Object.assign(known, { text, at, over: false });
+      this.tone();
+    } else if (known) {
       known.text = text;
     } else {
-      this.active.push({ key, text, at: new Date() });
+      this.active.push({ key, text, at });
       this.tone();
     }
     this.render();
     if (!this.timer) this.timer = setInterval(() => this.tone(), REPEAT_MS);
+  }
+
+  /** New words for an alarm still standing (an age that grows); nothing once acknowledged. */
+  update(key, text) {
+    const a = this.active.find((x) => x.key === key);
+    if (a && !a.over && a.text !== text) {
+      a.text = text;
+      this.render();
+    }
   }
 
   /** The condition is over (link back): the banner says so until acknowledged. */
@@ -71,16 +85,33 @@ export class AlertBanner {
     this.onAck(texts.join(" "));
   }
 
+  /** One line per alarm, newest last; a line too long for the screen ends in "…" (its
+   *  whole text in its title, and in the dialog where the server said it). */
   render() {
     const b = this.els.banner;
     if (!this.active.length) {
       b.hidden = true;
-      this.els.text.textContent = "";
+      this.els.text.replaceChildren();
       delete b.dataset.keys;
       return;
     }
     const stamp = (d) => d.toLocaleTimeString([], { hour12: false });
-    this.els.text.textContent = this.active.map((a) => `${a.text} (${stamp(a.at)})`).join(" · ");
+    const lines = this.active.map((a) => {
+      const line = document.createElement("li");
+      line.className = "alert-line";
+      line.dataset.key = a.key;
+      if (a.over) line.dataset.over = "true";
+      line.title = `${a.text} (${stamp(a.at)})`;
+      const text = document.createElement("span");
+      text.className = "alert-line-text";
+      text.textContent = a.text;
+      const at = document.createElement("time");
+      at.className = "alert-line-at";
+      at.textContent = ` (${stamp(a.at)})`;
+      line.append(text, at);
+      return line;
+    });
+    this.els.text.replaceChildren(...lines);
     b.dataset.keys = this.active.map((a) => a.key).join(" ");
     b.hidden = false;
   }

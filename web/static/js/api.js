@@ -9,6 +9,9 @@ export class ApiError extends Error {
   }
 }
 
+// Any pilot may stop, lease or not (DESIGN §5): these never wait for the page's lease claim.
+const STOPS = ["land", "hover", "emergency"];
+
 export class Api {
   /**
    * @param {string} base e.g. "/api/v1"; @param {string|null} token bearer token
@@ -22,15 +25,30 @@ export class Api {
     this.clock = clock;
     /** @type {string|null} the lease holder id of this page's rosbridge session, if it holds it */
     this.leaseHolder = null;
+    /** @type {Promise<unknown>|null} this page's claim of the lease while it is in flight */
+    this.leaseClaim = null;
   }
 
-  async request(method, path, body, { timeoutMs = 8000, headers: extra = {}, signal = null } = {}) {
+  /**
+   * @param {{timeoutMs?: number, headers?: object, signal?: AbortSignal|null,
+   *          waitLease?: boolean}} [opts] waitLease: a POST sent while this page's claim of the
+   *   lease is in flight waits for its answer (one round trip), or the server would refuse the
+   *   page's own command as another pilot's; stops pass false (any pilot may stop, at once)
+   */
+  async request(
+    method,
+    path,
+    body,
+    { timeoutMs = 8000, headers: extra = {}, signal = null, waitLease = true } = {},
+  ) {
     const headers = { Accept: "application/json", ...extra };
     if (this.token) headers.Authorization = `Bearer ${this.token}`;
+    if (body !== undefined) headers["Content-Type"] = "application/json";
+    // Stamped before any wait: when the operator gave it.
+    if (method === "POST" && this.clock) headers["X-Command-Issued"] = this.clock().toFixed(3);
+    if (method === "POST" && waitLease && this.leaseClaim) await this.leaseClaim;
     // The pilot lease this page holds on its rosbridge session: REST commands speak for it.
     if (this.leaseHolder) headers["X-Pilot-Lease"] = this.leaseHolder;
-    if (body !== undefined) headers["Content-Type"] = "application/json";
-    if (method === "POST" && this.clock) headers["X-Command-Issued"] = this.clock().toFixed(3);
     const ctrl = new AbortController();
     const timer = setTimeout(() => ctrl.abort(), timeoutMs);
     if (signal?.aborted) ctrl.abort();
@@ -94,6 +112,7 @@ export class Api {
     return this.post(`/drones/${encodeURIComponent(id)}/${action}`, {}, {
       timeoutMs: 4000,
       headers: { "X-Command-Source": source },
+      waitLease: !STOPS.includes(action),
     });
   }
 
@@ -106,6 +125,7 @@ export class Api {
       timeoutMs: 3000,
       headers: { "X-Command-Source": source },
       signal,
+      waitLease: false,
     });
   }
 

@@ -6,9 +6,11 @@
 import { AlertBanner, checkVoices } from "./alerts.js";
 import { Api, ApiError } from "./api.js";
 import { CameraPanel } from "./camera.js";
+import { CameraFeed } from "./camera_feed.js";
 import { Controls } from "./controls.js";
 import { DialogPanel } from "./dialog.js";
 import { DOOR_DEAD_MS, Doors } from "./door.js";
+import { Freshness, TICK_MS as FRESHNESS_TICK_MS } from "./freshness.js";
 import { MapPanel } from "./map.js";
 import { RosbridgeClient, STATES, rosbridgeUrl } from "./rosbridge.js";
 import {
@@ -21,14 +23,17 @@ import {
   roleFromStatus,
 } from "./session.js";
 import { RecordingsMenu } from "./recordings.js";
-import { ReplayBar } from "./replay.js";
+import { ReplayBar, pageReplay, replayApiBase, replayRosbridgeUrl } from "./replay.js";
 import { StatusBar, flightLabel, lostWhileAway } from "./status.js";
 import { STOP_ACTIONS, StopSender, stopText } from "./stops.js";
 import { VoiceInput } from "./voice.js";
 import { TelemetryPanel } from "./telemetry.js";
+import { TrainingPanel } from "./training.js";
 import { droneTopic, quaternionYaw, stampSeconds } from "./util.js";
 
 const $ = (id) => document.getElementById(id);
+// Flight labels (status.js flightLabel) in which a take-off has nothing to do.
+const AIRBORNE = ["Flying", "Hovering", "Taking off"];
 const STATUS_POLL_MS = 1000;
 const ROADS_CHECK_MS = 250;
 // The console's own heartbeat on rosbridge (server/vehicles/central.py, 10 Hz): the page calls
@@ -41,8 +46,16 @@ class Console {
     this.clockOffset = 0; // server time - local time, seconds
     // Commands say when they were issued, on the server's clock (deadlines: docs/deadlines.md).
     this.serverNow = () => Date.now() / 1000 + this.clockOffset;
-    this.api = new Api("/api/v1", this.token, this.serverNow);
-    this.ros = new RosbridgeClient(rosbridgeUrl(window.location, this.token));
+    // ?replay=FLIGHT: a recorded flight, read-only, on a graph of its own (replay.js).
+    this.replayId = pageReplay();
+    const base = this.replayId ? replayApiBase(this.replayId) : "/api/v1";
+    this.api = new Api(base, this.token, this.serverNow);
+    this.liveApi = this.replayId ? new Api("/api/v1", this.token) : this.api;
+    this.ros = new RosbridgeClient(
+      this.replayId
+        ? replayRosbridgeUrl(window.location, this.replayId)
+        : rosbridgeUrl(window.location, this.token),
+    );
     this.serverSpeaking = 0; // replies the server's voice is playing now (serverSpeak)
     this.drones = [];
     this.fleet = false;
@@ -53,6 +66,7 @@ class Console {
     this.everOpened = false;
     this.serverBeatAt = null; // performance.now() of the server's last heartbeat
     this.serverStalled = false;
+    this.vehiclePid = null; // {drone, pid} of the selected drone's vehicle process, once known
     // Stops go down two roads (docs/safety-door.md): REST and each drone's safety door.
     this.doors = new Doors();
     this.stops = new StopSender({
@@ -69,7 +83,14 @@ class Console {
       { img: $("camera"), empty: $("camera-empty"), fps: $("cam-fps"), latency: $("cam-latency") },
       () => Date.now() / 1000 + this.clockOffset,
     );
+    this.camera.onFrame = () => this.freshness.beat("camera");
+    this.cameraFeed = new CameraFeed(this.ros, this.camera, () => Date.now() / 1000 + this.clockOffset);
     this.telemetry = new TelemetryPanel(document);
+    // Navdata streams (~15 Hz): from its first message the vehicle is judged as a stream.
+    this.telemetry.onNavdataSeen = () => {
+      this.freshness.setPeriod("vehicle", 0);
+      this.freshness.beat("vehicle");
+    };
     this.status = new StatusBar(document);
     this.telemetry.onFlight = (label, battery) => {
       this.status.setFlight(label);
@@ -81,6 +102,9 @@ class Console {
       { banner: $("alert-banner"), text: $("alert-text"), ack: $("alert-ack") },
       { onAck: (text) => this.dialog.addSystem(`Acknowledged: ${text}`) },
     );
+    // Age on every value: one rule for every panel (freshness.js).
+    this.freshness = new Freshness({ alarms: this.alertBanner });
+    this.defineSources();
     this.beforeDrop = null; // what the status bar showed when the connection dropped
     this.map = new MapPanel(
       $("map"),
@@ -103,6 +127,8 @@ class Console {
       lastReply: $("last-reply"),
     }, {
       serverSpeak: (text) => this.serverSpeak(text),
+      now: () => this.pageNow(),
+      replay: () => Boolean(this.replayId),
       // "Did you say …?" answered by a button: to the drone that asked (dialog.js addAnswers).
       onAnswer: (answer, drone) => this.sendUtterance(answer, "button", 1, drone || this.drone),
     });
@@ -139,6 +165,14 @@ class Console {
       describe: () => this.describe(),
     });
     $("describe").addEventListener("click", () => this.describe());
+    // Simulator faults for operator training: a pilot with the lease, a simulated drone, live.
+    this.training = new TrainingPanel($("training"), this.api, {
+      drone: () => this.drone,
+      role: () => this.role,
+      lease: () => this.haveLease,
+      replay: () => document.body.dataset.replay === "1",
+      say: (text) => this.dialog.addSystem(text),
+    });
 
     $("input-form").addEventListener("submit", (ev) => {
       ev.preventDefault();
@@ -156,8 +190,14 @@ class Console {
     this.ros.addEventListener("callback-error", (ev) => console.warn("panel error", ev.detail));
 
     this.subscribeGlobal();
+    this.registerPanels();
     this.layoutDock();
     window.addEventListener("resize", () => this.layoutDock());
+    if (window.ResizeObserver) {
+      const ro = new ResizeObserver(() => this.layoutDock());
+      for (const id of ["dock", "messages", "replay-bar"]) ro.observe($(id));
+      ro.observe(document.querySelector(".topbar"));
+    }
   }
 
   async start() {
@@ -172,19 +212,76 @@ class Console {
       return;
     }
     await this.loadServerInfo();
-    // `uav-console replay`: a timeline bar; a seek clears the trails drawn so far.
-    this.replay = new ReplayBar(this.api, $("replay-bar"), () => this.map.clearTrails());
-    this.replay.start();
+    // A replay: a timeline bar; a seek clears the trails and the dialog shown so far.
+    this.replay = new ReplayBar(this.api, $("replay-bar"), () => {
+      this.map.clearTrails();
+      this.dialog.clear();
+    });
+    this.replay.start().then((on) => {
+      if (on && this.replayId) document.title = `uav-console — replay of ${this.replayId}`;
+    });
     this.recordings = new RecordingsMenu(
-      this.api,
+      this.liveApi,
       { pill: $("rec"), menu: $("recordings"), list: $("recordings-list") },
-      this.token,
     );
     this.recordings.start();
     this.ros.connect();
     this.checkVoice();
     setInterval(() => this.pollDrone(), STATUS_POLL_MS);
     setInterval(() => this.checkRoads(), ROADS_CHECK_MS);
+    setInterval(() => this.checkFreshness(), FRESHNESS_TICK_MS);
+  }
+
+  // ---- age on every value ---------------------------------------------------------------------
+  /** The sources whose silence the page watches: the server, the selected drone's vehicle and
+   *  camera (redefined when another drone is selected), the fleet status (fleets only). */
+  defineSources(drone = this.drone) {
+    const f = this.freshness;
+    if (!f.sources.has("server")) {
+      f.source("server", {
+        alarm: (age) => `No word from the server for ${age}: everything shown is ${age} old.`,
+        back: (age) => `The server answers again (it was silent for ${age}).`,
+      });
+    }
+    if (!drone) return;
+    const name = drone;
+    f.source("vehicle", {
+      upstream: "server",
+      periodS: STATUS_POLL_MS / 1000, // the REST snapshot; a stream once navdata flows
+      key: `fresh:vehicle:${name}`,
+      alarm: (age, why) => `${name}: no telemetry for ${age}${why ? ` (${why})` : ""}.`,
+      back: (age, why) => `${name}: telemetry is back (it was silent for ${age}${why ? `; ${why}` : ""}).`,
+    });
+    f.source("camera", {
+      upstream: "vehicle",
+      key: `fresh:camera:${name}`,
+      alarm: (age) => `${name}: no picture from the camera for ${age}.`,
+      back: (age) => `${name}: the camera is back (it was silent for ${age}).`,
+    });
+  }
+
+  /** Which panel shows what: each greys out and says its age when a source it needs stops. */
+  registerPanels() {
+    const f = this.freshness;
+    const drone = ["server", "vehicle"];
+    f.panel($("telemetry-panel"), drone);
+    f.panel($("map-panel"), [...drone, "fleet"]);
+    f.panel($("camera-panel"), ["server", "vehicle", "camera"], {
+      show: (age) => this.camera.showAge(age),
+    });
+    f.panel($("statusbar"), ["server"], { show: (age) => this.status.showAge(age) });
+    for (const id of ["sb-flight", "sb-battery", "sb-task"]) f.panel($(id), drone, { badge: null });
+    f.panel($("fleet-list"), ["server", "fleet"], { badge: null });
+    f.panel($("rec"), ["server"], { badge: null });
+  }
+
+  checkFreshness() {
+    // `uav-console replay` plays recorded time: a paused replay is not a silent source.
+    this.freshness.suspend(!$("replay-bar").hidden);
+    this.freshness.tick();
+    document.body.dataset.stale = [...this.freshness.sources.keys()]
+      .filter((n) => this.freshness.staleAge(n) !== null)
+      .join(" ");
   }
 
   /** World and drones: fetched at start and again after every reconnection. */
@@ -313,10 +410,26 @@ class Console {
     document.body.dataset.role = this.role || "";
     document.body.dataset.connected = String(connected);
     if (observer) $("text-input").placeholder = "Observers watch only";
+    this.training?.refresh();
   }
 
-  /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over. */
-  async claimLease() {
+  /** A pilot takes the lease when it is free; when another pilot holds it, offers take-over.
+   *  While the claim is in flight the page's REST commands wait for it (api.js leaseClaim). */
+  claimLease() {
+    return this.whileClaiming(this.claimLeaseNow());
+  }
+
+  /** Run ``claim`` (never rejects) as the page's lease claim in flight. */
+  async whileClaiming(claim) {
+    this.api.leaseClaim = claim;
+    try {
+      await claim;
+    } finally {
+      if (this.api.leaseClaim === claim) this.api.leaseClaim = null;
+    }
+  }
+
+  async claimLeaseNow() {
     try {
       let lease = await this.ros.callService(LEASE_SERVICE, { action: "status" });
       if (!lease.held_by_me && !lease.holder) {
@@ -339,7 +452,11 @@ class Console {
     }
   }
 
-  async takeOver() {
+  takeOver() {
+    return this.whileClaiming(this.takeOverNow());
+  }
+
+  async takeOverNow() {
     try {
       const lease = await this.ros.callService(LEASE_SERVICE, { action: "acquire", take_over: true });
       this.setLease(!!lease.held_by_me);
@@ -402,9 +519,19 @@ class Console {
     const list = names.length ? names : ["uav1"];
     this.drones = list;
     this.fleet = list.length > 1;
+    this.dialog.setFleet(this.fleet);
     const sel = $("drone-select");
     sel.replaceChildren(...list.map((n) => new Option(n, n)));
     $("drone-select-wrap").hidden = !this.fleet;
+    if (this.fleet && !this.freshness.sources.has("fleet")) {
+      // The central's fleet status, once a second (server/fleet/node.py publish_period_s).
+      this.freshness.source("fleet", {
+        upstream: "server",
+        periodS: 1,
+        alarm: (age) => `No fleet status for ${age}: the other drones are shown as they were.`,
+        back: (age) => `The fleet status is back (it was silent for ${age}).`,
+      });
+    }
     $("fleet-list").hidden = !this.fleet;
     const stored = window.localStorage.getItem("uavc.drone");
     const want = list.includes(this.drone) ? this.drone : list.includes(stored) ? stored : list[0];
@@ -420,15 +547,18 @@ class Console {
       /* private mode */
     }
     this.controls.releaseAll(true);
+    this.training?.refresh();
     for (const s of this.droneSubs) s.unsubscribe();
     this.camera.reset();
+    this.defineSources(name);
     this.map.setSelected(name);
     this.status.setDrone(name);
     const t = (n) => droneTopic(n, name, this.fleet);
     const sub = (topic, cb, opts) => this.ros.subscribe(t(topic), TOPIC_TYPES[topic], cb, opts);
     this.droneSubs = [
       sub("/ardrone/navdata", (m) => this.telemetry.onNavdata(m), { throttle_rate: 50, queue_length: 1 }),
-      sub("/ardrone/image_raw/compressed", (m) => this.camera.onImage(m), { queue_length: 1 }),
+      // throttled to what this page can show, so frames never queue (camera_feed.js)
+      this.cameraFeed.attach(t("/ardrone/image_raw/compressed"), TOPIC_TYPES["/ardrone/image_raw/compressed"]),
       sub("/uav/pose", (m) => {
         this.map.onPose(name, m);
         this.telemetry.onPoseYaw(quaternionYaw(m?.pose?.orientation));
@@ -442,9 +572,16 @@ class Console {
     document.body.dataset.drone = name;
   }
 
+  /** Unix seconds of "now" as the page shows times: the recording's in a replay. */
+  pageNow() {
+    const recorded = this.replay?.active ? this.replay.now() : null;
+    return recorded ?? Date.now() / 1000 + this.clockOffset;
+  }
+
   subscribeGlobal() {
     // Every operator input, whatever its door (other consoles, REST, speech, rosbridge, a
-    // replay), before the replies: a latched one arrives first, then the reply it annotates.
+    // replay: the operator's, as recorded), before the replies: a latched one arrives first,
+    // then the reply it annotates.
     this.ros.subscribe("/console/utterance", TOPIC_TYPES["/console/utterance"], (m) =>
       this.dialog.onUtterance(m),
     );
@@ -466,6 +603,7 @@ class Console {
 
   onServerBeat() {
     this.serverBeatAt = performance.now();
+    this.freshness.beat("server");
     if (this.serverStalled) this.checkRoads();
   }
 
@@ -511,11 +649,14 @@ class Console {
     if (!alarm || (this.fleet && m.drone && m.drone !== this.drone && m.level !== "alert")) return;
     const who = this.fleet && m.drone ? `${m.drone}: ` : "";
     if (alarm === "link") this.alertBanner.drop(`${m.drone}:link-rest`); // one banner per event
-    if (m.level === "alert" || m.level === "warn") this.alertBanner.raise(`${m.drone}:${alarm}`, `${who}${m.text}`);
+    // Stamped when the drone raised it (a replay's: the recording's time, not today's).
+    const at = new Date((stampSeconds(m.header?.stamp) ?? this.pageNow()) * 1000);
+    if (m.level === "alert" || m.level === "warn") this.alertBanner.raise(`${m.drone}:${alarm}`, `${who}${m.text}`, at);
     else this.alertBanner.clear(`${m.drone}:${alarm}`, `${who}${m.text}`);
   }
 
   onFleet(msg) {
+    this.freshness.beat("fleet");
     this.map.onFleet(msg);
     const ul = $("fleet-list");
     const items = (msg.drones || []).map((d) => {
@@ -525,6 +666,10 @@ class Console {
       const flight = d.name === this.drone && this.status.view.flight ? this.status.view.flight : flightLabel(d.state);
       const role = ["patrolling", "relieving", "returning"].includes(d.role) ? ` · ${d.role}` : "";
       li.textContent = `${d.name} · ${flight}${role} · ${bat}`;
+      if (d.link === false) {
+        li.dataset.stale = "true";
+        li.textContent += " · no link";
+      }
       return li;
     });
     ul.replaceChildren(...items);
@@ -534,24 +679,59 @@ class Console {
     // While the socket is down the server is too: no REST polling (and no console noise).
     if (!this.drone || (document.hidden && !force) || this.ros.state !== STATES.OPEN) return;
     try {
-      const status = await this.api.drone(this.drone);
+      const asked = this.drone;
+      const status = await this.api.drone(asked);
+      if (asked === this.drone) this.judgeSnapshot(status);
       // A drone in its own vehicle process has a safety door: stops that no web traffic delays.
       this.learnDoor(this.drone, status.vehicle);
       this.telemetry.onDroneStatus(status);
+      this.training.setSimulated(this.drone, status.simulated);
       this.map.onSnapshot(this.drone, status);
       this.map.setLocalised(this.drone, status.localised);
       this.status.setTask(status.task || null);
       if (Number.isFinite(status.battery_pct)) this.status.setBattery(status.battery_pct);
       // The dialog's link alarm says it first; this covers a server without one (a replay).
-      const ansSaidIt = this.alertBanner.active.some((x) => x.key === `${this.drone}:link`);
+      // The freshness alarm names the cause (a vehicle process that does not answer) already.
+      const ansSaidIt = this.alertBanner.active.some(
+        (x) => x.key === `${this.drone}:link` || x.key === `fresh:vehicle:${this.drone}`,
+      );
       if (status.link_ok === false && !ansSaidIt) {
-        this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`);
+        const at = new Date(this.pageNow() * 1000);
+        this.alertBanner.raise(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is lost.`, at);
       } else if (status.link_ok === true) {
         this.alertBanner.clear(`${this.drone}:link-rest`, `${this.drone}: the link to the drone is back.`);
       }
     } catch {
       /* the connection pill already tells the operator */
     }
+  }
+
+  /**
+   * The REST snapshot's own age: fresh data from the vehicle counts as a word from it (a drone
+   * with no navdata topic, a MAVLink one, has no other); and why it is silent, when it is. A
+   * new vehicle process (another pid: the old one died and serve restarted it) is said even
+   * when it spoke again before the page's alarm was due.
+   */
+  judgeSnapshot(status) {
+    if (!status || typeof status !== "object") return;
+    const v = status.vehicle && typeof status.vehicle === "object" ? status.vehicle : null;
+    const pid = Number.isInteger(v?.pid) ? v.pid : null;
+    if (pid !== null) {
+      const known = this.vehiclePid;
+      if (known && known.drone === this.drone && known.pid !== pid) {
+        this.freshness.replaced("vehicle", "its vehicle process was restarted");
+      }
+      this.vehiclePid = { drone: this.drone, pid };
+    }
+    const gone = v?.connected === false;
+    let why = "";
+    if (gone) why = "its vehicle process does not answer";
+    else if (status.link_ok === false) why = "the link to the drone is lost";
+    this.freshness.setWhy("vehicle", why);
+    const nav = Number(status.navdata_age_s);
+    const hop = Number(v?.age_s);
+    const age = (Number.isFinite(nav) ? nav : 0) + (Number.isFinite(hop) ? hop : 0);
+    if (!gone && status.link_ok !== false) this.freshness.beat("vehicle", performance.now() / 1000 - age);
   }
 
   // ---- commands ----------------------------------------------------------------------------
@@ -567,7 +747,7 @@ class Console {
       this.flash("Not connected: the command was not sent.", "alert");
       return false;
     }
-    this.dialog.addUtterance(text, { source, confidence });
+    this.dialog.addUtterance(text, { source, confidence, drone: drone || "" });
     return true;
   }
 
@@ -594,6 +774,12 @@ class Console {
       this.stops.send(this.drone, action, source);
       return;
     }
+    if (action === "takeoff" && this.airborne()) {
+      // As the dialog answers a typed "take off": said on the button, nothing sent.
+      this.controls.say("btn-takeoff", "I am already flying.");
+      this.dialog.addSystem(`Take off (${source}): I am already flying.`);
+      return;
+    }
     this.supersedeStops();
     try {
       const res = await this.api.action(this.drone, action, source);
@@ -604,6 +790,12 @@ class Console {
       this.flash(`${action} failed: ${err.message}`, "alert");
       if (err.status === 403) this.onStatus({ level: "error", msg: err.message });
     }
+  }
+
+  /** In the air by the page's fresh word on it (a stale state decides nothing). */
+  airborne() {
+    if (this.freshness.staleAge("vehicle") !== null) return false;
+    return AIRBORNE.includes(this.status.view.flight);
   }
 
   /** A newer operator command: stops still pending are dropped (the page says so). */
@@ -645,7 +837,7 @@ class Console {
   async goToMarker(id) {
     const text = `go to marker ${id}`;
     this.supersedeStops();
-    this.dialog.addUtterance(text, { source: "map" });
+    this.dialog.addUtterance(text, { source: "map", drone: this.drone || "" });
     try {
       const res = await this.api.command(text, { drone: this.drone || undefined });
       // The reply also arrives on /console/reply; show REST-only refusals here.
@@ -780,10 +972,17 @@ class Console {
     }, source === "refusal" ? 12000 : 5000);
   }
 
-  /** Phones: keep the fixed dock's height in --dock-h so the last panel is not hidden under it. */
+  /** Phones: the fixed dock's and the floating messages' heights in --dock-h and --msgs-h, so
+   *  the last panel is not hidden under them; the top bar's in --top-h, a replay's timeline's
+   *  in --replay-h (a phone on its side fits the camera under both). */
   layoutDock() {
-    const h = $("dock").getBoundingClientRect().height;
-    document.documentElement.style.setProperty("--dock-h", `${Math.ceil(h)}px`);
+    const root = document.documentElement.style;
+    const px = (el) => `${Math.ceil(el.getBoundingClientRect().height)}px`;
+    root.setProperty("--dock-h", px($("dock")));
+    const msgs = $("messages");
+    root.setProperty("--msgs-h", getComputedStyle(msgs).position === "fixed" ? px(msgs) : "0px");
+    root.setProperty("--top-h", px(document.querySelector(".topbar")));
+    root.setProperty("--replay-h", $("replay-bar").hidden ? "0px" : px($("replay-bar")));
   }
 }
 

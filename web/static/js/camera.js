@@ -1,7 +1,11 @@
 // Camera panel: live JPEG frames from sensor_msgs/CompressedImage (tracking overlay drawn by the
-// server), with frames per second and camera-to-screen latency.
+// server), with frames per second and camera-to-screen latency. When the picture stops the last
+// frame stays, greyed, and says how old it is (freshness.js calls showAge).
 
+import { ageText } from "./freshness.js";
 import { setText, stampSeconds } from "./util.js";
+
+const PAUSED_MS = 1000; // no frame for this long: paused (fps() says 0 from then on too)
 
 export class CameraPanel {
   /**
@@ -17,6 +21,9 @@ export class CameraPanel {
     this.lastUrl = null;
     this.decoding = false;
     this.pending = null;
+    this.staleAge = null; // seconds, while the picture is stale (freshness.js)
+    /** Called on every frame shown: a word from the camera. */
+    this.onFrame = () => {};
     this.timer = setInterval(() => this.render(), 500);
   }
 
@@ -46,6 +53,7 @@ export class CameraPanel {
         if (this.latencies.length > 30) this.latencies.shift();
       }
       this.els.empty.hidden = true;
+      this.onFrame();
       if (this.pending) this.showNext();
     };
     img.onload = done;
@@ -69,16 +77,27 @@ export class CameraPanel {
     return sorted[Math.floor(sorted.length / 2)];
   }
 
+  /** The picture's age while it is stale (null: fresh), from the page's one rule. */
+  showAge(ageS) {
+    this.staleAge = ageS;
+    this.render();
+  }
+
   render() {
     const fps = this.fps();
+    const stale = this.staleAge !== null;
     setText(this.els.fps, `${fps.toFixed(fps < 10 ? 1 : 0)} fps`);
-    const lat = this.latencyMs();
+    const lat = stale ? null : this.latencyMs();
     setText(this.els.latency, lat === null ? "– ms" : `${Math.max(0, Math.round(lat))} ms`);
     this.els.img.dataset.frames = String(this.frames);
     if (this.frames === 0) {
       setText(this.els.empty, "No video yet");
       this.els.empty.hidden = false;
-    } else if (fps === 0) {
+    } else if (stale) {
+      setText(this.els.empty, `Picture ${ageText(this.staleAge)}`);
+      this.els.empty.hidden = false;
+    } else if (performance.now() - (this.frameTimes.at(-1) ?? 0) > PAUSED_MS) {
+      // A replay paused (the page's rule is off then): the picture is the recording's.
       setText(this.els.empty, "Video paused");
       this.els.empty.hidden = false;
     } else {

@@ -6,6 +6,7 @@
 // linear.y left, linear.z up, angular.z counter-clockwise (docs/CONVENTIONS.md, protocols.md).
 
 export const JOG_PERIOD_MS = 100; // ~10 Hz, well inside the drone's 2 s command watchdog
+const SAID_MS = 4000; // how long a button says why it did nothing
 
 export const JOG_AXES = Object.freeze({
   forward: ["linear", "x", 1],
@@ -79,6 +80,7 @@ export class Controls {
     this.enabled = true;
     this.stopsEnabled = true; // Land and Hover (Space, L): any pilot, lease or not
     this.armed = false; // keyboard flying: off at every page load
+    this.saidTimers = new Map(); // button id -> timer of what it says (say)
     this.armButton = root.querySelector("#arm-keys");
     this.armButton?.addEventListener("click", () => this.setArmed(!this.armed));
     this.speedInput = root.querySelector("#jog-speed");
@@ -156,6 +158,22 @@ export class Controls {
     document.addEventListener("visibilitychange", () => {
       if (document.hidden) this.releaseAll(true);
     });
+  }
+
+  /** Say ``text`` on button ``id`` for a few seconds (console.css shows data-said under it). */
+  say(id, text, ms = SAID_MS) {
+    const btn = this.root.querySelector(`#${id}`);
+    if (!btn) return;
+    btn.dataset.said = text;
+    btn.setAttribute("aria-description", text);
+    clearTimeout(this.saidTimers.get(id));
+    this.saidTimers.set(
+      id,
+      setTimeout(() => {
+        delete btn.dataset.said;
+        btn.removeAttribute("aria-description");
+      }, ms),
+    );
   }
 
   strength() {

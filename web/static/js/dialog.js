@@ -4,6 +4,9 @@
 
 const MAX_ENTRIES = 200;
 const MAX_SENT = 20; // own inputs awaiting their echo (a lost echo must not hide later ones forever)
+// A second drone's reply to the same sentence ("all drones land") joins the operator's line
+// when it comes this soon after the first; later it is another console's.
+export const SAME_COMMAND_MS = 10000;
 // How long the Yes / No buttons of "Did you say …?" stay usable: the server drops the question
 // after 15 s (server/dialog/confirm.py MAX_AGE_S), and a later yes would run nothing.
 export const ANSWER_TTL_MS = 15000;
@@ -21,6 +24,30 @@ export function describeCommands(commands) {
     .join(" → ");
 }
 
+/** "12:03:04" of Unix seconds, in local time. */
+export function clockText(unixS) {
+  const d = new Date(unixS * 1000);
+  if (Number.isNaN(d.getTime())) return "";
+  return d.toLocaleTimeString([], { hour12: false });
+}
+
+/** A reply's text without the drone's name in front ("uav1: Taking off." → "Taking off."):
+ *  the line's tag says which drone, once. */
+export function withoutDrone(text, drone) {
+  if (!drone || typeof text !== "string") return text || "";
+  const m = new RegExp(`^${drone.replace(/[.*+?^${}()|[\]\\]/g, "\\$&")}\\s*[:,]\\s*`, "i").exec(text);
+  return m ? text.slice(m[0].length) : text;
+}
+
+/** The drone a typed sentence names itself ("uav2 land", "drone 2, …", "all drones …"), or
+ *  null: then it goes to the selected drone and its line says so. */
+export function namedTarget(text) {
+  const t = String(text || "").toLowerCase();
+  if (/\b(all|every|both)\s+(the\s+)?drones?\b|\beveryone\b|\bfleet\b/.test(t)) return "all";
+  const m = /\b(?:uav\s?|drone\s)(\d+)\b/.exec(t);
+  return m ? `uav${m[1]}` : null;
+}
+
 function parseCommands(raw) {
   if (Array.isArray(raw)) return raw;
   if (typeof raw !== "string" || raw === "") return null;
@@ -32,16 +59,32 @@ function parseCommands(raw) {
   }
 }
 
+/** Unix seconds of a reply's header stamp, or undefined (the line takes "now"). */
+function replyTime(msg) {
+  const s = msg?.header?.stamp;
+  if (!s) return undefined;
+  const sec = s.sec ?? s.secs;
+  const nsec = s.nanosec ?? s.nsecs ?? 0;
+  return typeof sec === "number" && sec > 0 ? sec + nsec / 1e9 : undefined;
+}
+
 export class DialogPanel {
   /**
    * @param {{log: HTMLElement, alerts: HTMLElement, mute: HTMLButtonElement, state: HTMLElement,
    *          voiceNote?: HTMLElement}} els
    * @param {{speechSynthesis?: SpeechSynthesis, storage?: Storage,
    *          serverSpeak?: (text: string) => Promise<boolean>,
-   *          onAnswer?: (answer: "yes" | "no", drone: string) => boolean}} env
+   *          onAnswer?: (answer: "yes" | "no", drone: string) => boolean,
+   *          now?: () => number, replay?: () => boolean}} env
+   *   ``now``: Unix seconds of "now" for the lines' times (a replay's: the recording's);
+   *   ``replay``: the log is a recording's (what the operator said is theirs, not another
+   *   console's)
    */
   constructor(els, env = {}) {
     this.els = els;
+    this.now = env.now ?? (() => Date.now() / 1000);
+    this.replay = env.replay ?? (() => false);
+    this.fleet = false; // several drones: each line says which drone
     this.synth = env.speechSynthesis ?? window.speechSynthesis ?? null;
     this.storage = env.storage ?? window.localStorage;
     this.serverSpeak = env.serverSpeak ?? null;
@@ -103,10 +146,29 @@ export class DialogPanel {
     b.dataset.voice = this.voice;
   }
 
+  /** Several drones: every line names its drone (a tag), and the operator's its target. */
+  setFleet(fleet) {
+    this.fleet = Boolean(fleet);
+  }
+
   add(kind, text, extra = {}) {
     // div entries in a div role=log: a log is not a list (axe: listitem outside a list).
     const li = document.createElement("div");
     li.className = `msg msg-${kind}`;
+    const at = Number.isFinite(extra.at) ? extra.at : this.now();
+    const time = document.createElement("time");
+    time.className = "at";
+    time.dateTime = new Date(at * 1000).toISOString();
+    time.textContent = clockText(at);
+    li.append(time);
+    li.dataset.at = String(at);
+    if (extra.who) {
+      const who = document.createElement("span");
+      who.className = "who";
+      who.textContent = extra.who;
+      li.append(who);
+      li.dataset.drone = extra.drone ?? extra.who;
+    }
     const body = document.createElement("span");
     body.className = "text";
     body.textContent = text;
@@ -127,25 +189,32 @@ export class DialogPanel {
   }
 
   /** The operator said or typed something here (shown at once, annotated when the reply
-   *  comes); its copy on /console/utterance is then not shown again. */
+   *  comes); its copy on /console/utterance is then not shown again. ``opts`` as
+   *  showUtterance's. */
   addUtterance(text, opts = {}) {
     this.sent.push(text);
     this.sent.splice(0, this.sent.length - MAX_SENT);
     return this.showUtterance(text, opts);
   }
 
-  /** uav_console/Utterance: an input from any door; this page's own are already shown. */
+  /** uav_console/Utterance: an input from any door (in a replay: the operator's, as
+   *  recorded); this page's own are already shown. */
   onUtterance(msg) {
     const own = this.sent.indexOf(msg.text);
     if (own >= 0) {
       this.sent.splice(own, 1);
       return;
     }
-    this.showUtterance(msg.text, { source: msg.source, confidence: msg.confidence });
+    this.showUtterance(msg.text, { source: msg.source, confidence: msg.confidence, drone: msg.drone });
   }
 
-  showUtterance(text, { source = "text", confidence = 1 } = {}) {
-    const meta =
+  /**
+   * One line of what an operator said (annotated when the reply comes). ``drone``: the
+   * selected drone it goes to when the sentence names none (fleets); ``at``: when (default:
+   * the page's now, a replay's recording time).
+   */
+  showUtterance(text, { source = "text", confidence = 1, drone = "", at } = {}) {
+    let meta =
       source === "speech"
         ? `spoken · confidence ${Math.round(confidence * 100)} %`
         : source === "map"
@@ -155,25 +224,43 @@ export class DialogPanel {
             : source === "rest" || source === "rosbridge"
               ? `sent over ${source === "rest" ? "REST" : "rosbridge"}`
               : "typed";
-    const li = this.add("user", text, { meta });
+    if (this.replay()) meta = `operator · ${meta}`;
+    const named = namedTarget(text);
+    const who = this.fleet && !named && drone ? `→ ${drone}` : "";
+    const li = this.add("user", text, { meta, at, who, drone: named || drone });
     li.dataset.utterance = text;
     li.dataset.pending = "1";
     return li;
   }
 
-  addSystem(text) {
-    return this.add("system", text);
+  /** Empty the log (a replay jumped in time: what was shown belongs to another moment). */
+  clear() {
+    this.els.log.replaceChildren();
   }
 
-  /** uav_console/Reply: text, level, speak, utterance, commands (JSON string), expects. */
+  addSystem(text, at) {
+    return this.add("system", text, { at });
+  }
+
+  /**
+   * uav_console/Reply: text, level, speak, utterance, commands (JSON string), expects, drone,
+   * header (its stamp is the line's time: a replay shows the recording's).
+   */
   onReply(msg) {
     const level = msg.level || "info";
     const commands = parseCommands(msg.commands);
-    if (msg.utterance) this.annotate(msg.utterance, commands);
+    const drone = msg.drone || "";
+    const at = replyTime(msg);
+    if (msg.utterance) this.annotate(msg.utterance, commands, drone, at);
     // Any later reply of the same drone settles (or replaces) the question it asked.
-    if (msg.utterance || msg.expects) this.closeQuestions(msg.drone || "");
-    const li = this.add("bot", msg.text || "", { level });
+    if (msg.utterance || msg.expects) this.closeQuestions(drone);
+    const text = this.fleet ? withoutDrone(msg.text || "", drone) : msg.text || "";
+    const folded = this.fold(drone, text, level, msg, at);
+    if (folded) return folded;
+    const who = this.fleet && drone ? drone : "";
+    const li = this.add("bot", text, { level, at, who, drone });
     li.dataset.level = level;
+    li.dataset.reply = text;
     if (msg.expects === "confirm" && this.onAnswer) this.addAnswers(li, msg.drone || "");
     if (this.els.lastReply) {
       this.els.lastReply.textContent = msg.text || "";
@@ -186,6 +273,44 @@ export class DialogPanel {
     }
     if (msg.speak !== false && msg.text) this.speak(msg.text, level);
     return li;
+  }
+
+  /**
+   * The same state line again from the same drone ("Hovering" ×12): counted on the line it
+   * repeats, which moves to the bottom with the new time, and not spoken again. Only plain
+   * information folds, and only while the operator said nothing since; alarms, questions and
+   * answers to a command always get their own line.
+   */
+  fold(drone, text, level, msg, at) {
+    if (level !== "info" || msg.utterance || msg.expects || !text) return null;
+    let last = null;
+    for (let el = this.els.log.lastElementChild; el; el = el.previousElementSibling) {
+      if (el.classList.contains("msg-user")) return null;
+      if (el.classList.contains("msg-bot") && (el.dataset.drone || "") === drone) {
+        last = el;
+        break;
+      }
+    }
+    if (!last || last.dataset.reply !== text || last.dataset.level !== "info") return null;
+    if (last.querySelector(".answers")) return null;
+    const count = Number(last.dataset.count || "1") + 1;
+    last.dataset.count = String(count);
+    let times = last.querySelector(".count");
+    if (!times) {
+      times = document.createElement("span");
+      times.className = "count";
+      last.querySelector(".text").after(times);
+    }
+    times.textContent = ` ×${count}`;
+    const time = last.querySelector("time.at");
+    time.dateTime = new Date(at * 1000).toISOString();
+    time.textContent = clockText(at);
+    last.dataset.at = String(at);
+    const log = this.els.log;
+    const stick = log.scrollHeight - log.scrollTop - log.clientHeight < 40;
+    log.append(last); // newest at the bottom
+    if (stick) last.scrollIntoView({ block: "end" });
+    return last;
   }
 
   /** Yes / No buttons under a "Did you say …?" reply: the answer goes to the drone that
@@ -232,18 +357,47 @@ export class DialogPanel {
     }
   }
 
-  /** Attach "understood as …" to the newest pending entry with this text (or add one). */
-  annotate(utterance, commands) {
-    const pending = [...this.els.log.querySelectorAll(".msg-user[data-pending='1']")];
-    let li = pending.reverse().find((el) => el.dataset.utterance === utterance);
+  /**
+   * Attach "understood: …" to the operator's line this reply answers: the newest pending one
+   * with this text, or the one another drone answered a moment ago ("all drones land": one
+   * line, both drones' understanding). Otherwise the sentence came from another console (in a
+   * replay: from the operator) and gets its own line.
+   */
+  annotate(utterance, commands, drone = "", at = undefined) {
+    const users = [...this.els.log.querySelectorAll(".msg-user")].reverse();
+    const mine = (el) => el.dataset.utterance === utterance;
+    let li = users.find((el) => mine(el) && el.dataset.pending === "1");
+    if (!li && drone) {
+      const now = performance.now();
+      li = users.find(
+        (el) =>
+          mine(el) &&
+          now - Number(el.dataset.answeredAt || -Infinity) < SAME_COMMAND_MS &&
+          !(el.dataset.answeredBy || "").split(" ").includes(drone),
+      );
+    }
     if (!li) {
-      li = this.add("user", utterance, { meta: "from another console" });
+      const meta = this.replay() ? "operator" : "from another console";
+      li = this.add("user", utterance, { meta, at, drone });
     }
     li.dataset.pending = "0";
-    const u = document.createElement("span");
-    u.className = "understood";
-    u.textContent = commands ? `understood: ${describeCommands(commands)}` : "understood: —";
-    li.append(u);
+    li.dataset.answeredAt = String(performance.now());
+    const by = (li.dataset.answeredBy || "").split(" ").filter(Boolean);
+    if (drone && !by.includes(drone)) by.push(drone);
+    li.dataset.answeredBy = by.join(" ");
+    const words = commands ? `understood: ${describeCommands(commands)}` : "understood: —";
+    const same = [...li.querySelectorAll(".understood")].find((u) => u.dataset.words === words);
+    const u = same || document.createElement("span");
+    if (!same) {
+      u.className = "understood";
+      u.dataset.words = words;
+      u.dataset.drones = "";
+      li.append(u);
+    }
+    const drones = (u.dataset.drones || "").split(" ").filter(Boolean);
+    if (drone && !drones.includes(drone)) drones.push(drone);
+    u.dataset.drones = drones.join(" ");
+    u.textContent = this.fleet && drones.length ? `${words} · ${drones.join(", ")}` : words;
   }
 
   speak(text, level) {

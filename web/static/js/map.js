@@ -1,64 +1,395 @@
-// Map panel: a top-down canvas of the world (room walls and markers, or the GPS field with
-// waypoints and stations) with every drone's estimated pose, heading, trail and current target.
-// Map frame per docs/CONVENTIONS.md: x east / along the room, y north / across it, metres; the
-// canvas draws +y upwards.
+// Map panel on Leaflet (web/static/vendor/leaflet, 1.9.4): the world (the room's plan indoors;
+// outdoors a basemap from the operator's tile server, or the plain local grid when no tiles
+// load) with every drone's estimated pose, heading, trail and current target. Zoom and pan by
+// wheel, pinch, the +/- buttons or keys; "Fit" frames the fleet and its route.
+//
+// Map frame per docs/CONVENTIONS.md: x east / along the room, y north / across it, metres.
+// Indoors (and outdoors without a GPS origin) Leaflet's CRS.Simple in metres: LatLng(y, x).
+// Outdoors with a GPS origin, Web Mercator: the local east/north offsets become latitude and
+// longitude on the WGS-84 ellipsoid's local radii (exact to millimetres over a 1 km field),
+// so the drones sit on the tiles where they are.
+//
+// Labels never overlap: after every move, zoom or change, each label (drones first, then the
+// target, markers, stations, waypoints) takes the first of a few places beside its point that
+// no placed label covers, or is hidden until there is room (zoom in).
 
+import * as L from "../vendor/leaflet/leaflet-src.esm.js";
 import { flightLabel } from "./status.js";
 import { quaternionYaw } from "./util.js";
 
 const TRAIL_LEN = 400;
 const HIT_PX = 16;
+// WGS-84 (NIMA TR8350.2): semi-major axis and first eccentricity squared.
+const WGS84_A = 6378137.0;
+const WGS84_E2 = 6.69437999014e-3;
+const OSM_HOST = "tile.openstreetmap.org";
+// Where a label may sit, relative to its point (px): right, left, above, below, diagonals.
+const SPOTS = [
+  [13, -7],
+  [-13, -7, "left"],
+  [0, -25, "center"],
+  [0, 12, "center"],
+  [11, -22],
+  [-11, -22, "left"],
+  [11, 8],
+  [-11, 8, "left"],
+];
+const ICON_HALF_PX = { drone: 10, marker: 6 }; // what a label may not cover of a drone, a marker
+const DECLUTTER_MS = 150;
+
+/** The tile URL template the server set (``UAVC_TILE_URL``; "" = tiles off). */
+export function pageTileUrl(doc = document) {
+  return doc.querySelector('meta[name="uavc-tile-url"]')?.content?.trim() || "";
+}
+
+/**
+ * Local east/north metres <-> LatLng for a world: CRS.Simple metres, or geodetic around the
+ * world's GPS origin (meridian and prime-vertical radii of curvature at its latitude).
+ */
+export class Frame {
+  constructor(world) {
+    const o = world?.gps_origin;
+    this.geo = !!o && Number.isFinite(o.lat) && Number.isFinite(o.lon);
+    if (this.geo) {
+      const phi = (o.lat * Math.PI) / 180;
+      const w = 1 - WGS84_E2 * Math.sin(phi) ** 2;
+      this.lat0 = o.lat;
+      this.lon0 = o.lon;
+      this.mPerDegLat = ((WGS84_A * (1 - WGS84_E2)) / w ** 1.5) * (Math.PI / 180);
+      this.mPerDegLon = (WGS84_A / Math.sqrt(w)) * Math.cos(phi) * (Math.PI / 180);
+    }
+  }
+
+  latLng(x, y) {
+    if (!this.geo) return L.latLng(y, x);
+    return L.latLng(this.lat0 + y / this.mPerDegLat, this.lon0 + x / this.mPerDegLon);
+  }
+
+  xy(latlng) {
+    if (!this.geo) return { x: latlng.lng, y: latlng.lat };
+    return { x: (latlng.lng - this.lon0) * this.mPerDegLon, y: (latlng.lat - this.lat0) * this.mPerDegLat };
+  }
+}
 
 export class MapPanel {
   /**
-   * @param {HTMLCanvasElement} canvas
+   * @param {HTMLElement} container the #map element (Leaflet's container)
    * @param {{popover: HTMLElement, text: HTMLElement, go: HTMLButtonElement, cancel: HTMLButtonElement,
-   *          caption: HTMLElement}} els
+   *          caption: HTMLElement, focus?: HTMLElement}} els
    * @param {(markerId: number) => void} onGo called when the operator picks "Go there"
+   * @param {{tileUrl?: string}} options
    */
-  constructor(canvas, els, onGo) {
-    this.canvas = canvas;
-    this.ctx = canvas.getContext("2d");
+  constructor(container, els, onGo, options = {}) {
+    this.container = container;
     this.els = els;
     this.onGo = onGo;
+    this.tileUrl = options.tileUrl ?? pageTileUrl();
     this.world = null;
+    this.frame = new Frame(null);
     this.selected = null; // drone name whose pose comes from /uav/pose
-    /** name -> {x, y, yaw, role, battery, trail: [[x,y]...]} */
+    /** name -> {x, y, yaw, role, battery, trail: [[x,y]|null ...], layers} */
     this.drones = new Map();
     this.targetMarker = null;
     this.visibleMarkers = new Set();
     this.visibleAt = 0;
     this.popoverMarker = null;
-    this.dirty = true;
-    canvas.addEventListener("click", (ev) => this.onClick(ev));
-    // Keyboard: arrows pick a marker (the popover follows), Enter/Space fly there via the
-    // popover's button, Esc (handled by the page) closes it.
     this.keyIndex = -1;
-    canvas.addEventListener("keydown", (ev) => this.onKey(ev));
+    this.dirty = true;
+    this.labelsDirty = true;
+    this.lastDeclutter = 0;
+    this.viewTouched = false; // the operator zoomed or panned: no refit on resize
+    this.tiles = null;
+    this.tileState = "off";
+    this.map = null;
+    this.labels = []; // {el, priority, latlng}
+    this.renders = 0;
+
+    container.addEventListener("keydown", (ev) => this.onKey(ev));
     els.go.addEventListener("click", () => {
       if (this.popoverMarker !== null) this.onGo(this.popoverMarker);
       this.hidePopover();
     });
     els.cancel.addEventListener("click", () => this.hidePopover());
-    const ro = new ResizeObserver(() => {
-      this.resize();
-    });
-    ro.observe(canvas);
-    this.resize();
+    new ResizeObserver(() => this.resize()).observe(container);
     const loop = () => {
       if (this.dirty) this.draw();
+      else if (this.labelsDirty && performance.now() - this.lastDeclutter > DECLUTTER_MS) this.declutter();
       requestAnimationFrame(loop);
     };
     requestAnimationFrame(loop);
   }
 
+  // ---- world ---------------------------------------------------------------------------------
+
   setWorld(world) {
+    const key = JSON.stringify(world);
+    if (key === this.worldKey && this.map) return; // a reconnection: keep the view
+    this.worldKey = key;
     this.world = world;
+    this.frame = new Frame(world);
     const kind = world.kind || (world.gps_origin ? "outdoor" : "indoor");
     const b = world.bounds || {};
     const size = `${fmtM(b.x_max - b.x_min)} × ${fmtM(b.y_max - b.y_min)} m`;
     this.els.caption.textContent = `${world.name || kind} · ${size}`;
+    this.build();
     this.dirty = true;
+  }
+
+  get outdoor() {
+    const w = this.world || {};
+    return (w.kind || "") === "outdoor" || !!w.gps_origin;
+  }
+
+  /** (Re)create the Leaflet map and the world's layers. */
+  build() {
+    if (this.map) {
+      this.map.remove();
+      for (const d of this.drones.values()) d.layers = null;
+    }
+    this.labels = [];
+    const geo = this.frame.geo;
+    const map = L.map(this.container, {
+      crs: geo ? L.CRS.EPSG3857 : L.CRS.Simple,
+      zoomSnap: 0.25,
+      zoomDelta: 0.5,
+      wheelPxPerZoomLevel: 90,
+      minZoom: geo ? 12 : -1,
+      maxZoom: geo ? 22 : 8,
+      keyboard: false, // arrows pick markers here (onKey); +/- zoom
+      attributionControl: false,
+      zoomControl: true,
+      boxZoom: false,
+    });
+    this.map = map;
+    this.fitInterest(false); // a view first: Leaflet renders no layer before it has one
+    this.container.classList.add("uav-map");
+    this.container.dataset.crs = geo ? "geo" : "metres";
+    L.control.scale({ metric: true, imperial: false, maxWidth: 120 }).addTo(map);
+    this.addFitControl(map);
+    this.attribution = L.control.attribution({ prefix: false }).addTo(map);
+
+    // Panes: tiles < grid < world < trails < drones < labels.
+    map.createPane("grid").style.zIndex = "250";
+    map.createPane("world").style.zIndex = "400";
+    map.createPane("trails").style.zIndex = "450";
+    map.createPane("drones").style.zIndex = "600";
+    map.createPane("labels").style.zIndex = "650";
+    for (const p of ["grid", "world", "trails", "labels"]) map.getPane(p).style.pointerEvents = "none";
+
+    this.setupTiles(map);
+    this.grid = L.layerGroup([], { pane: "grid" }).addTo(map);
+    this.drawGrid();
+    this.drawWorld(map);
+    this.rings = {
+      seen: L.layerGroup().addTo(map),
+      target: L.layerGroup().addTo(map),
+    };
+    map.on("click", (ev) => this.onClick(ev));
+    map.on("zoomstart movestart", () => this.hidePopoverPosition());
+    map.on("zoomend moveend resize", () => {
+      this.labelsDirty = true;
+      this.placePopover();
+    });
+    map.on("dragstart zoomstart", () => {
+      // a zoom of our own (fit, first view) is not the operator's
+      if (!this.fitting) this.viewTouched = true;
+    });
+  }
+
+  addFitControl(map) {
+    const Fit = L.Control.extend({
+      options: { position: "topleft" },
+      onAdd: () => {
+        const bar = L.DomUtil.create("div", "leaflet-bar map-fit");
+        const a = L.DomUtil.create("a", "", bar);
+        a.href = "#";
+        a.setAttribute("role", "button");
+        a.textContent = "⤢";
+        a.title = "Fit the fleet and its route (F)";
+        a.setAttribute("aria-label", "Fit the fleet and its route");
+        L.DomEvent.disableClickPropagation(bar);
+        L.DomEvent.on(a, "click", (ev) => {
+          L.DomEvent.preventDefault(ev);
+          this.fitInterest(true);
+        });
+        return bar;
+      },
+    });
+    new Fit().addTo(map);
+  }
+
+  setupTiles(map) {
+    this.tiles = null;
+    this.tileState = "off";
+    if (this.frame.geo && this.tileUrl) {
+      const osm = this.tileUrl.includes(OSM_HOST);
+      let host = "";
+      try {
+        host = new URL(this.tileUrl.replace("{s}", "a")).host;
+      } catch {
+        /* the server checked it; a bad one simply loads nothing */
+      }
+      const attribution = osm
+        ? '© <a href="https://www.openstreetmap.org/copyright" rel="noopener">OpenStreetMap</a> contributors'
+        : `Tiles: ${escapeHtml(host)}`;
+      this.tiles = L.tileLayer(this.tileUrl, {
+        maxNativeZoom: 19,
+        maxZoom: 22,
+        attribution,
+        crossOrigin: false,
+        referrerPolicy: "no-referrer",
+      });
+      this.tileState = "loading";
+      this.tiles.on("tileload", () => this.setTileState("loaded"));
+      this.tiles.on("tileerror", () => {
+        if (this.tileState !== "loaded") this.setTileState("failed");
+      });
+      this.tiles.addTo(map);
+    }
+    this.container.dataset.tiles = this.tileState;
+  }
+
+  setTileState(state) {
+    if (this.tileState === state) return;
+    this.tileState = state;
+    this.container.dataset.tiles = state;
+    this.drawGrid();
+  }
+
+  /** The plain local grid: 1 m indoors, 10 m outdoors; outdoors only while no tiles show. */
+  drawGrid() {
+    if (!this.grid || !this.world) return;
+    this.grid.clearLayers();
+    const tilesShow = this.tileState === "loaded";
+    this.container.dataset.grid = tilesShow ? "off" : "on";
+    if (tilesShow) return;
+    const b = this.world.bounds;
+    const step = this.outdoor ? 10 : 1;
+    const f = this.frame;
+    const opts = { pane: "grid", className: "map-grid", weight: 1, interactive: false };
+    for (let x = Math.ceil(b.x_min / step) * step; x <= b.x_max + 1e-9; x += step) {
+      this.grid.addLayer(L.polyline([f.latLng(x, b.y_min), f.latLng(x, b.y_max)], opts));
+    }
+    for (let y = Math.ceil(b.y_min / step) * step; y <= b.y_max + 1e-9; y += step) {
+      this.grid.addLayer(L.polyline([f.latLng(b.x_min, y), f.latLng(b.x_max, y)], opts));
+    }
+  }
+
+  drawWorld(map) {
+    const w = this.world;
+    const f = this.frame;
+    const b = w.bounds;
+    const pane = "world";
+    const corners = [
+      f.latLng(b.x_min, b.y_min),
+      f.latLng(b.x_max, b.y_min),
+      f.latLng(b.x_max, b.y_max),
+      f.latLng(b.x_min, b.y_max),
+    ];
+    // walls (indoor) or the field's boundary (outdoor)
+    L.polygon(corners, {
+      pane,
+            className: this.outdoor ? "map-fence" : "map-wall",
+      fill: false,
+      weight: this.outdoor ? 1.5 : 3,
+      interactive: false,
+    }).addTo(map);
+    // furniture and other objects, faintly (rotated footprints)
+    for (const o of w.objects || []) {
+      if (!o.position) continue;
+      const hw = (o.size?.w ?? 0.3) / 2;
+      const hd = (o.size?.d ?? 0.3) / 2;
+      const a = ((o.yaw_deg || 0) * Math.PI) / 180;
+      const pts = [
+        [-hw, -hd],
+        [hw, -hd],
+        [hw, hd],
+        [-hw, hd],
+      ].map(([u, v]) =>
+        f.latLng(o.position.x + u * Math.cos(a) - v * Math.sin(a), o.position.y + u * Math.sin(a) + v * Math.cos(a)),
+      );
+      L.polygon(pts, { pane, className: "map-object", weight: 1, interactive: false }).addTo(map);
+    }
+    // waypoints (outdoor patrol route)
+    const wps = w.waypoints || [];
+    if (wps.length) {
+      L.polygon(
+        wps.map((p) => f.latLng(p.position.x, p.position.y)),
+        { pane, className: "map-route", fill: false, weight: 1.5, dashArray: "4 3", interactive: false },
+      ).addTo(map);
+      for (const p of wps) {
+        const ll = f.latLng(p.position.x, p.position.y);
+        L.marker(ll, { pane, icon: icon("map-waypoint", '<span class="diamond"></span>', 14), interactive: false, keyboard: false }).addTo(map);
+        this.addLabel(map, ll, String(p.id), 5, "waypoint");
+      }
+    }
+    // stations (home pads)
+    for (const s of w.stations || []) {
+      const ll = f.latLng(s.position.x, s.position.y);
+      L.marker(ll, { pane, icon: icon("map-station", "H", 16), interactive: false, keyboard: false }).addTo(map);
+      this.addLabel(map, ll, String(s.id), 4, "station");
+    }
+    // markers: a square with a tick along the direction it faces, and its id
+    this.markerIcons = new Map();
+    for (const m of w.markers || []) {
+      const ll = f.latLng(m.position.x, m.position.y);
+      const yaw = m.yaw_rad ?? ((m.yaw_deg || 0) * Math.PI) / 180;
+      const mk = L.marker(ll, {
+        pane,
+        icon: icon("map-marker", '<span class="square"></span><span class="tick"></span>', 26),
+        interactive: false,
+        keyboard: false,
+      }).addTo(map);
+      const el = mk.getElement();
+      el.dataset.marker = String(m.id);
+      el.querySelector(".tick").style.transform = `rotate(${-yaw}rad)`;
+      this.markerIcons.set(m.id, el);
+      this.addLabel(map, ll, String(m.id), 3, "marker", m.id);
+    }
+  }
+
+  addLabel(map, latlng, text, priority, kind, id = null) {
+    const m = L.marker(latlng, {
+      pane: "labels",
+      icon: L.divIcon({ className: "map-label-anchor", html: "", iconSize: [0, 0] }),
+      interactive: false,
+      keyboard: false,
+    }).addTo(map);
+    const el = document.createElement("span");
+    el.className = "map-label";
+    el.dataset.kind = kind;
+    if (id !== null) el.dataset.id = String(id);
+    el.textContent = text;
+    m.getElement().append(el);
+    const label = { el, marker: m, priority, kind, id, w: 0, h: 0 };
+    this.labels.push(label);
+    this.labelsDirty = true;
+    return label;
+  }
+
+  /** Frame the fleet and its route (drones, waypoints, stations, markers); the room indoors. */
+  fitInterest(animate = true) {
+    if (!this.map || !this.world) return;
+    const f = this.frame;
+    const pts = [];
+    if (this.outdoor) {
+      for (const d of this.drones.values()) if (d.x !== null) pts.push(f.latLng(d.x, d.y));
+      for (const p of this.world.waypoints || []) pts.push(f.latLng(p.position.x, p.position.y));
+      for (const s of this.world.stations || []) pts.push(f.latLng(s.position.x, s.position.y));
+      for (const m of this.world.markers || []) pts.push(f.latLng(m.position.x, m.position.y));
+    }
+    const b = this.world.bounds;
+    if (pts.length < 2) pts.push(f.latLng(b.x_min, b.y_min), f.latLng(b.x_max, b.y_max));
+    const bounds = L.latLngBounds(pts);
+    this.fitting = true;
+    try {
+      this.map.invalidateSize(false);
+      this.map.fitBounds(bounds.pad(this.outdoor ? 0.08 : 0.02), { animate, padding: [6, 6] });
+    } finally {
+      this.fitting = false;
+    }
+    this.viewTouched = false;
+    this.labelsDirty = true;
   }
 
   /** Forget every drone's trail (a replay jumped in time). */
@@ -75,11 +406,13 @@ export class MapPanel {
   drone(name) {
     let d = this.drones.get(name);
     if (!d) {
-      d = { x: null, y: null, yaw: 0, role: "", battery: null, trail: [] };
+      d = { x: null, y: null, yaw: 0, role: "", battery: null, trail: [], layers: null };
       this.drones.set(name, d);
     }
     return d;
   }
+
+  // ---- data in (same interface as the panels: rosbridge messages and REST snapshots) -------
 
   /** geometry_msgs/PoseStamped of ``name`` (the EKF estimate). */
   onPose(name, msg, live = true) {
@@ -105,12 +438,16 @@ export class MapPanel {
     const d = this.drone(name);
     if (performance.now() - (d.poseAt || 0) < 1500) return;
     if (!st || st.localised === false || !Number.isFinite(st.x) || !Number.isFinite(st.y)) return;
-    this.onPose(name, {
-      pose: {
-        position: { x: st.x, y: st.y, z: st.z ?? 0 },
-        orientation: { x: 0, y: 0, z: Math.sin((st.yaw_rad || 0) / 2), w: Math.cos((st.yaw_rad || 0) / 2) },
+    this.onPose(
+      name,
+      {
+        pose: {
+          position: { x: st.x, y: st.y, z: st.z ?? 0 },
+          orientation: { x: 0, y: 0, z: Math.sin((st.yaw_rad || 0) / 2), w: Math.cos((st.yaw_rad || 0) / 2) },
+        },
       },
-    }, false);
+      false,
+    );
   }
 
   /** Whether the estimator knows where the drone is (REST ``localised``); unknown is null. */
@@ -175,227 +512,162 @@ export class MapPanel {
   }
 
   resize() {
-    const dpr = window.devicePixelRatio || 1;
-    const rect = this.canvas.getBoundingClientRect();
+    if (!this.map) return;
+    const rect = this.container.getBoundingClientRect();
     if (rect.width < 2) return;
-    const w = Math.round(rect.width * dpr);
-    const h = Math.round(rect.height * dpr);
-    if (this.canvas.width !== w || this.canvas.height !== h) {
-      this.canvas.width = w;
-      this.canvas.height = h;
-    }
-    this.dirty = true;
+    this.map.invalidateSize(false);
+    if (!this.viewTouched) this.fitInterest(false);
+    this.labelsDirty = true;
   }
 
-  /** World (metres) -> canvas CSS pixels. */
-  transform() {
-    const rect = this.canvas.getBoundingClientRect();
-    const b = this.world?.bounds || { x_min: 0, x_max: 8, y_min: 0, y_max: 6 };
-    const margin = 18;
-    const sx = (rect.width - 2 * margin) / Math.max(1e-6, b.x_max - b.x_min);
-    const sy = (rect.height - 2 * margin) / Math.max(1e-6, b.y_max - b.y_min);
-    const s = Math.min(sx, sy);
-    const ox = (rect.width - s * (b.x_max - b.x_min)) / 2;
-    const oy = (rect.height - s * (b.y_max - b.y_min)) / 2;
-    return {
-      s,
-      px: (x) => ox + (x - b.x_min) * s,
-      py: (y) => rect.height - (oy + (y - b.y_min) * s),
-    };
-  }
+  // ---- drawing -------------------------------------------------------------------------------
 
   draw() {
     this.dirty = false;
-    const ctx = this.ctx;
-    const dpr = window.devicePixelRatio || 1;
-    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-    const rect = this.canvas.getBoundingClientRect();
-    ctx.clearRect(0, 0, rect.width, rect.height);
-    const css = getComputedStyle(document.documentElement);
-    const col = (name) => css.getPropertyValue(name).trim();
-    if (!this.world) {
-      ctx.fillStyle = col("--muted");
-      ctx.font = "14px system-ui";
-      ctx.fillText("Loading the world…", 12, 24);
-      return;
+    if (!this.map || !this.world) return;
+    const f = this.frame;
+    // markers the camera sees now, the target and the picked one
+    const seenFresh = performance.now() - this.visibleAt < 1000;
+    for (const [id, el] of this.markerIcons || []) {
+      el.classList.toggle("seen", seenFresh && this.visibleMarkers.has(id));
+      el.classList.toggle("target", id === this.targetMarker);
+      el.classList.toggle("picked", id === this.popoverMarker);
     }
-    const T = this.transform();
-    const b = this.world.bounds;
-    const outdoor = (this.world.kind || "") === "outdoor" || !!this.world.gps_origin;
-
-    // grid: 1 m indoors, 10 m outdoors
-    const step = outdoor ? 10 : 1;
-    ctx.strokeStyle = col("--map-grid");
-    ctx.lineWidth = 1;
-    ctx.beginPath();
-    for (let x = Math.ceil(b.x_min / step) * step; x <= b.x_max; x += step) {
-      ctx.moveTo(T.px(x), T.py(b.y_min));
-      ctx.lineTo(T.px(x), T.py(b.y_max));
-    }
-    for (let y = Math.ceil(b.y_min / step) * step; y <= b.y_max; y += step) {
-      ctx.moveTo(T.px(b.x_min), T.py(y));
-      ctx.lineTo(T.px(b.x_max), T.py(y));
-    }
-    ctx.stroke();
-
-    // walls (indoor) or field boundary (outdoor)
-    ctx.strokeStyle = col("--map-wall");
-    ctx.lineWidth = outdoor ? 1 : 3;
-    ctx.setLineDash(outdoor ? [6, 4] : []);
-    ctx.strokeRect(T.px(b.x_min), T.py(b.y_max), (b.x_max - b.x_min) * T.s, (b.y_max - b.y_min) * T.s);
-    ctx.setLineDash([]);
-
-    // furniture and other objects, faintly
-    ctx.fillStyle = col("--map-grid");
-    for (const o of this.world.objects || []) {
-      const w = o.size?.w ?? 0.3;
-      const d = o.size?.d ?? 0.3;
-      if (!o.position) continue;
-      ctx.save();
-      ctx.translate(T.px(o.position.x), T.py(o.position.y));
-      ctx.rotate(-((o.yaw_deg || 0) * Math.PI) / 180);
-      ctx.fillRect((-w / 2) * T.s, (-d / 2) * T.s, Math.max(2, w * T.s), Math.max(2, d * T.s));
-      ctx.restore();
-    }
-
-    // waypoints (outdoor patrol route)
-    const wps = this.world.waypoints || [];
-    if (wps.length) {
-      ctx.strokeStyle = col("--accent");
-      ctx.lineWidth = 1.5;
-      ctx.setLineDash([4, 3]);
-      ctx.beginPath();
-      wps.forEach((w, i) => {
-        const f = i ? ctx.lineTo.bind(ctx) : ctx.moveTo.bind(ctx);
-        f(T.px(w.position.x), T.py(w.position.y));
-      });
-      ctx.closePath();
-      ctx.stroke();
-      ctx.setLineDash([]);
-      ctx.fillStyle = col("--accent");
-      ctx.font = "11px system-ui";
-      for (const w of wps) {
-        const x = T.px(w.position.x);
-        const y = T.py(w.position.y);
-        ctx.beginPath();
-        ctx.moveTo(x, y - 6);
-        ctx.lineTo(x + 6, y);
-        ctx.lineTo(x, y + 6);
-        ctx.lineTo(x - 6, y);
-        ctx.closePath();
-        ctx.fill();
-        ctx.fillText(String(w.id), x + 8, y - 6);
+    if (seenFresh && this.visibleMarkers.size) setTimeout(() => (this.dirty = true), 1000);
+    for (const label of this.labels) {
+      if (label.kind !== "marker") continue;
+      const p = label.id === this.targetMarker || label.id === this.popoverMarker ? 2 : 3;
+      if (label.priority !== p) {
+        label.priority = p;
+        this.labelsDirty = true;
       }
     }
-
-    // stations (home pads)
-    ctx.strokeStyle = col("--ok");
-    ctx.fillStyle = col("--ok");
-    ctx.font = "10px system-ui";
-    ctx.lineWidth = 1.5;
-    for (const s of this.world.stations || []) {
-      const x = T.px(s.position.x);
-      const y = T.py(s.position.y);
-      ctx.beginPath();
-      ctx.arc(x, y, 7, 0, 2 * Math.PI);
-      ctx.stroke();
-      ctx.fillText("H", x - 3, y + 3.5);
-    }
-
-    // markers: a square on the wall with a tick along the direction it faces, and its id
-    ctx.font = "bold 11px system-ui";
-    for (const m of this.world.markers || []) {
-      const x = T.px(m.position.x);
-      const y = T.py(m.position.y);
-      const yaw = m.yaw_rad ?? ((m.yaw_deg || 0) * Math.PI) / 180;
-      const target = m.id === this.targetMarker;
-      const picked = m.id === this.popoverMarker;
-      const seen = this.visibleMarkers.has(m.id) && performance.now() - this.visibleAt < 1000;
-      if (seen) {
-        ctx.fillStyle = col("--ok");
-        ctx.globalAlpha = 0.35;
-        ctx.beginPath();
-        ctx.arc(x, y, 9, 0, 2 * Math.PI);
-        ctx.fill();
-        ctx.globalAlpha = 1;
-      }
-      ctx.fillStyle = target ? col("--warn") : col("--text");
-      ctx.fillRect(x - 5, y - 5, 10, 10);
-      ctx.strokeStyle = ctx.fillStyle;
-      ctx.lineWidth = 2;
-      ctx.beginPath();
-      ctx.moveTo(x, y);
-      ctx.lineTo(x + Math.cos(yaw) * 12, y - Math.sin(yaw) * 12);
-      ctx.stroke();
-      if (target || picked) {
-        ctx.beginPath();
-        ctx.arc(x, y, 11, 0, 2 * Math.PI);
-        ctx.stroke();
-      }
-      const lx = x + Math.cos(yaw) * 20 - 4;
-      const ly = y - Math.sin(yaw) * 20 + 4;
-      ctx.fillText(String(m.id), lx, ly);
-    }
-
-    // drones: trail, body, heading
+    // drones: trail, body (arrow along the heading), label
     for (const [name, d] of this.drones) {
       if (d.x === null) continue;
+      if (!d.layers) d.layers = this.droneLayers(name);
+      const ll = f.latLng(d.x, d.y);
       const mine = name === this.selected;
-      const colour = mine ? col("--accent") : col("--muted");
       const lost = d.localised === false;
-      ctx.strokeStyle = colour;
-      ctx.globalAlpha = 0.55;
-      ctx.lineWidth = 2;
-      ctx.beginPath();
-      let pen = false;
-      for (const pt of d.trail) {
-        if (pt === null) {
-          pen = false; // a jump (re-localisation): the trail breaks here
-          continue;
-        }
-        if (pen) ctx.lineTo(T.px(pt[0]), T.py(pt[1]));
-        else ctx.moveTo(T.px(pt[0]), T.py(pt[1]));
-        pen = true;
+      d.layers.body.setLatLng(ll);
+      const el = d.layers.body.getElement();
+      if (el) {
+        el.classList.toggle("mine", mine);
+        el.classList.toggle("lost", lost);
+        el.querySelector("svg").style.transform = `rotate(${-d.yaw}rad)`;
       }
-      ctx.stroke();
-      ctx.globalAlpha = 1;
-      const x = T.px(d.x);
-      const y = T.py(d.y);
-      ctx.save();
-      ctx.translate(x, y);
-      ctx.rotate(-d.yaw);
-      ctx.globalAlpha = lost ? 0.35 : 1;
-      ctx.fillStyle = colour;
-      ctx.beginPath();
-      ctx.moveTo(12, 0);
-      ctx.lineTo(-7, 7);
-      ctx.lineTo(-3, 0);
-      ctx.lineTo(-7, -7);
-      ctx.closePath();
-      ctx.fill();
-      ctx.restore();
-      ctx.fillStyle = colour;
-      ctx.font = "11px system-ui";
+      d.layers.trail.setLatLngs(trailLines(d.trail, f));
+      d.layers.trail.getElement?.()?.classList.toggle("mine", mine);
       // The flight state (same words as the status bar), and the patrol role only while it
       // means something: "idle" in flight or "lost" after a stop would contradict the bar.
-      let label = d.flight ? `${name} · ${d.flight}` : name;
-      if (["patrolling", "relieving", "returning"].includes(d.role)) label += ` · ${d.role}`;
-      if (lost) label += " · not localised";
-      ctx.fillText(label, x + 10, y + 16);
+      let text = d.flight ? `${name} · ${d.flight}` : name;
+      if (["patrolling", "relieving", "returning"].includes(d.role)) text += ` · ${d.role}`;
+      if (lost) text += " · not localised";
+      const label = d.layers.label;
+      label.marker.setLatLng(ll);
+      if (label.el.textContent !== text) {
+        label.el.textContent = text;
+        label.w = 0;
+      }
+      label.el.classList.toggle("mine", mine);
+      label.priority = mine ? 0 : 1;
+      this.labelsDirty = true;
     }
-    this.canvas.dataset.drawn = String((Number(this.canvas.dataset.drawn) || 0) + 1);
+    this.renders += 1;
+    this.container.dataset.drawn = String(this.renders);
+    if (performance.now() - this.lastDeclutter > DECLUTTER_MS) this.declutter();
   }
+
+  droneLayers(name) {
+    const arrow =
+      '<svg viewBox="-12 -12 24 24" width="24" height="24" aria-hidden="true">' +
+      '<path d="M12 0 L-7 7 L-3 0 L-7 -7 Z"/></svg>';
+    const body = L.marker(this.frame.latLng(0, 0), {
+      pane: "drones",
+      icon: icon("map-drone", arrow, 24),
+      interactive: false,
+      keyboard: false,
+    }).addTo(this.map);
+    body.getElement().dataset.drone = name;
+    const trail = L.polyline([], {
+      pane: "trails",
+      className: "map-trail",
+      weight: 2,
+      interactive: false,
+    }).addTo(this.map);
+    const label = this.addLabel(this.map, this.frame.latLng(0, 0), name, 1, "drone");
+    label.el.dataset.drone = name;
+    return { body, trail, label };
+  }
+
+  /**
+   * Place the labels so that none covers another: by priority, each at the first free spot
+   * beside its point (SPOTS), else hidden. Sizes are measured once per text.
+   */
+  declutter() {
+    this.labelsDirty = false;
+    this.lastDeclutter = performance.now();
+    if (!this.map) return;
+    const size = this.map.getSize();
+    // The zoom buttons, Fit, the scale and the attribution are taken already.
+    const origin = this.container.getBoundingClientRect();
+    const placed = [...this.container.querySelectorAll(".leaflet-control")].map((c) => {
+      const r = c.getBoundingClientRect();
+      return { l: r.left - origin.left, t: r.top - origin.top, r: r.right - origin.left, b: r.bottom - origin.top };
+    });
+    // Nor the drones and the markers themselves.
+    const around = (ll, half) => {
+      const p = this.map.latLngToContainerPoint(ll);
+      return { l: p.x - half, t: p.y - half, r: p.x + half, b: p.y + half };
+    };
+    for (const d of this.drones.values()) {
+      if (d.layers && d.x !== null) placed.push(around(d.layers.body.getLatLng(), ICON_HALF_PX.drone));
+    }
+    for (const m of this.world?.markers || []) {
+      placed.push(around(this.frame.latLng(m.position.x, m.position.y), ICON_HALF_PX.marker));
+    }
+    const order = [...this.labels].sort((a, b) => a.priority - b.priority);
+    for (const label of order) {
+      const el = label.el;
+      if (!label.marker._map) continue;
+      if (!label.w) {
+        el.style.transform = "none";
+        el.hidden = false;
+        label.w = el.offsetWidth;
+        label.h = el.offsetHeight;
+      }
+      const pt = this.map.latLngToContainerPoint(label.marker.getLatLng());
+      let spot = null;
+      for (const [dx, dy, align] of SPOTS) {
+        const left = align === "left" ? pt.x + dx - label.w : align === "center" ? pt.x - label.w / 2 : pt.x + dx;
+        const box = { l: left, t: pt.y + dy, r: left + label.w, b: pt.y + dy + label.h };
+        if (box.l < 0 || box.r > size.x || box.t < 0 || box.b > size.y) continue; // not all on the map
+        if (placed.some((p) => overlaps(p, box))) continue;
+        spot = box;
+        break;
+      }
+      if (spot === null) {
+        el.hidden = true;
+        el.dataset.placed = "0";
+        continue;
+      }
+      placed.push(spot);
+      el.hidden = false;
+      el.dataset.placed = "1";
+      el.style.transform = `translate(${Math.round(spot.l - pt.x)}px, ${Math.round(spot.t - pt.y)}px)`;
+    }
+  }
+
+  // ---- interaction ---------------------------------------------------------------------------
 
   onClick(ev) {
     if (!this.world) return;
-    const rect = this.canvas.getBoundingClientRect();
-    const cx = ev.clientX - rect.left;
-    const cy = ev.clientY - rect.top;
-    const T = this.transform();
+    const cp = ev.containerPoint;
     let best = null;
     let bestD = HIT_PX;
     for (const m of this.world.markers || []) {
-      const d = Math.hypot(T.px(m.position.x) - cx, T.py(m.position.y) - cy);
+      const p = this.markerPixel(m.id);
+      const d = Math.hypot(p.x - cp.x, p.y - cp.y);
       if (d <= bestD) {
         best = m;
         bestD = d;
@@ -405,7 +677,7 @@ export class MapPanel {
       this.hidePopover();
       return;
     }
-    this.showPopover(best.id, cx, cy);
+    this.showPopover(best.id, cp.x, cp.y);
   }
 
   /** Offer "go there" for a marker (also used by tests and keyboard users via the console). */
@@ -415,14 +687,42 @@ export class MapPanel {
     this.els.text.textContent = `Marker ${id}`;
     this.els.go.textContent = `Go to marker ${id}`;
     pop.hidden = false;
-    const rect = this.canvas.getBoundingClientRect();
-    pop.style.left = `${Math.min(Math.max(4, cx + 8), rect.width - pop.offsetWidth - 4)}px`;
-    pop.style.top = `${Math.min(Math.max(4, cy + 8), rect.height - pop.offsetHeight - 4)}px`;
+    this.popoverAt = { cx, cy };
+    this.placePopover();
     this.els.go.focus();
     this.dirty = true;
   }
 
+  placePopover() {
+    const pop = this.els.popover;
+    if (pop.hidden || this.popoverMarker === null) return;
+    const p = this.markerPixel(this.popoverMarker) || this.popoverAt || { x: 0, y: 0 };
+    const rect = this.container.getBoundingClientRect();
+    pop.style.visibility = "";
+    pop.style.left = `${Math.min(Math.max(4, p.x + 8), rect.width - pop.offsetWidth - 4)}px`;
+    pop.style.top = `${Math.min(Math.max(4, p.y + 8), rect.height - pop.offsetHeight - 4)}px`;
+  }
+
+  hidePopoverPosition() {
+    if (!this.els.popover.hidden) this.els.popover.style.visibility = "hidden";
+  }
+
   onKey(ev) {
+    if (ev.target !== this.container) return; // keys in the zoom buttons or the popover
+    if (["+", "="].includes(ev.key) || ["-", "_"].includes(ev.key)) {
+      ev.preventDefault();
+      ev.stopPropagation();
+      this.viewTouched = true;
+      if (ev.key === "+" || ev.key === "=") this.map?.zoomIn();
+      else this.map?.zoomOut();
+      return;
+    }
+    if (ev.key === "f" || ev.key === "F") {
+      ev.preventDefault();
+      ev.stopPropagation();
+      this.fitInterest(true);
+      return;
+    }
     const markers = [...(this.world?.markers || [])].sort((a, b) => a.id - b.id);
     if (!markers.length) return;
     if (["ArrowRight", "ArrowDown", "ArrowLeft", "ArrowUp", "Home", "End"].includes(ev.key)) {
@@ -437,7 +737,8 @@ export class MapPanel {
       }
       const m = markers[this.keyIndex];
       this.popoverMarker = m.id;
-      this.els.focus && (this.els.focus.textContent = `Marker ${m.id} of ${n}. Enter offers to fly there.`);
+      if (this.els.focus) this.els.focus.textContent = `Marker ${m.id} of ${n}. Enter offers to fly there.`;
+      this.map?.panInside(this.frame.latLng(m.position.x, m.position.y), { padding: [30, 30] });
       this.dirty = true;
     } else if ((ev.key === "Enter" || ev.key === " ") && this.popoverMarker !== null) {
       ev.preventDefault();
@@ -453,13 +754,47 @@ export class MapPanel {
     this.dirty = true;
   }
 
-  /** Canvas CSS-pixel position of marker ``id`` (for tests and the accessibility summary). */
+  /** Container pixel position of marker ``id`` (for tests and the popover). */
   markerPixel(id) {
     const m = (this.world?.markers || []).find((k) => k.id === id);
-    if (!m) return null;
-    const T = this.transform();
-    return { x: T.px(m.position.x), y: T.py(m.position.y) };
+    if (!m || !this.map) return null;
+    const p = this.map.latLngToContainerPoint(this.frame.latLng(m.position.x, m.position.y));
+    return { x: p.x, y: p.y };
   }
+
+  /** Container pixel position of map point (x, y) in metres (tests). */
+  pixelOf(x, y) {
+    const p = this.map.latLngToContainerPoint(this.frame.latLng(x, y));
+    return { x: p.x, y: p.y };
+  }
+}
+
+function icon(className, html, size) {
+  return L.divIcon({ className, html, iconSize: [size, size], iconAnchor: [size / 2, size / 2] });
+}
+
+function overlaps(a, b) {
+  return a.l < b.r && b.l < a.r && a.t < b.b && b.t < a.b;
+}
+
+function escapeHtml(s) {
+  return String(s).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+}
+
+/** A trail as polylines (a null in it breaks the line: a re-localisation, not a flight). */
+function trailLines(trail, frame) {
+  const lines = [];
+  let line = [];
+  for (const pt of trail) {
+    if (pt === null) {
+      if (line.length > 1) lines.push(line);
+      line = [];
+      continue;
+    }
+    line.push(frame.latLng(pt[0], pt[1]));
+  }
+  if (line.length > 1) lines.push(line);
+  return lines;
 }
 
 // A step longer than this between two estimates is a re-localisation, not a flight: break the line.

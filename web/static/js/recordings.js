@@ -1,8 +1,13 @@
 // Flight recordings in the top bar: a "● REC" pill while a flight is being recorded, and a
-// "Recordings" menu listing GET /api/v1/flights with a download link (MCAP) for each.
+// "Recordings" menu listing GET /api/v1/flights with a download link (MCAP) and a Replay
+// button for each: the replay opens in a tab of its own (replay.js), the live console stays.
 //
-// Downloads are plain links carrying the page's token (?token=…, which the REST door accepts
-// like a bearer token), so the browser saves the file under the server's Content-Disposition name.
+// Downloads and replays carry no credential in their addresses: the browser sends the HttpOnly
+// cookie the console's first load set (server/http_guard.py), with the download (streamed to
+// disk, saved under the server's Content-Disposition name) and with the replay's rosbridge
+// socket. A token in a URL would end up in history and logs.
+
+import { replayPageUrl } from "./replay.js";
 
 const POLL_MS = 5000;
 
@@ -24,12 +29,13 @@ export class RecordingsMenu {
   /**
    * @param {import("./api.js").Api} api
    * @param {{pill: HTMLElement, menu: HTMLDetailsElement, list: HTMLElement}} els
-   * @param {string|null} token the page's token, for the download links
+   * @param {(url: string) => void} open opens a replay page (a new tab sharing this tab's
+   *   session storage; its connections carry the console's cookie, no token in any address)
    */
-  constructor(api, els, token) {
+  constructor(api, els, open = (url) => window.open(url, "_blank")) {
     this.api = api;
     this.els = els;
-    this.token = token;
+    this.open = open;
     this.flights = [];
     els.menu.addEventListener("toggle", () => {
       if (els.menu.open) this.poll();
@@ -73,12 +79,21 @@ export class RecordingsMenu {
         li.textContent = `${label} · recording…`;
       } else {
         const a = document.createElement("a");
-        const q = this.token ? `?token=${encodeURIComponent(this.token)}` : "";
-        a.href = `/api/v1/flights/${encodeURIComponent(f.id)}${q}`;
+        a.href = `/api/v1/flights/${encodeURIComponent(f.id)}`;
         a.download = `uav-console-${f.id}.mcap`;
         a.textContent = label;
         a.title = `${f.messages} messages; open in Foxglove or with uav-console replay`;
-        li.append(a);
+        const play = document.createElement("button");
+        play.type = "button";
+        play.className = "btn btn-small recording-replay";
+        play.dataset.replay = f.id;
+        play.textContent = "Replay";
+        play.setAttribute("aria-label", `Replay the flight of ${label}`);
+        play.addEventListener("click", () => {
+          this.els.menu.open = false;
+          this.open(replayPageUrl(f.id));
+        });
+        li.append(a, " ", play);
       }
       list.append(li);
     }

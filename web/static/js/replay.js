@@ -1,11 +1,40 @@
-// Replay timeline: play/pause, seek and speed for `uav-console replay FILE.mcap`.
+// Replay timeline: play/pause, seek and speed of a recorded flight, read-only.
 //
-// Shown only when the server is a replay (its GET /api/v1/drones entries carry `replay: true`;
-// a live console never asks for /replay and the bar stays hidden). The server plays the recording onto its graph, so every panel
-// keeps listening to rosbridge as it does live; this bar only drives the timeline:
-// POST /api/v1/replay {action: play|pause|seek|speed, position_s, speed}.
+// Two ways in: the live console's Recordings menu opens ``/?replay=FLIGHT_ID`` (the running
+// console replays it: every REST call goes to /api/v1/replays/FLIGHT_ID/…, rosbridge to
+// …/rosbridge, a graph of its own where nothing flies: server/recorder/replay_live.py), or
+// ``uav-console replay FILE.mcap`` serves the console on one recording. Either way the bar is
+// shown only when the drones say ``replay: true``; the server plays the recording onto the
+// graph, so every panel listens as it does live; this bar drives the timeline
+// (POST …/replay {action: play|pause|seek|speed, position_s, speed}) and keeps the
+// recording's clock, which the dialog and the alarms use for their times.
 
 const POLL_MS = 500;
+// Flight ids as the recorder makes them (server/recorder/index.py): nothing else is asked for.
+const FLIGHT_ID = /^\d{8}T\d{6}Z(?:-\d+)?$/;
+
+/** The flight this page replays (``?replay=ID``), or null for the live console. */
+export function pageReplay(loc = window.location) {
+  const id = new URLSearchParams(loc.search).get("replay");
+  return id && FLIGHT_ID.test(id) ? id : null;
+}
+
+/** The REST base of a flight's replay in the running console. */
+export function replayApiBase(id) {
+  return `/api/v1/replays/${encodeURIComponent(id)}`;
+}
+
+/** The rosbridge URL of a flight's replay: no token in it, the handshake carries the
+ *  console's HttpOnly cookie (server/recorder/replay_live.py admits it). */
+export function replayRosbridgeUrl(location, id) {
+  const scheme = location.protocol === "https:" ? "wss:" : "ws:";
+  return `${scheme}//${location.host}${replayApiBase(id)}/rosbridge`;
+}
+
+/** The page that replays ``id`` (the token stays in this tab's storage, not in the URL). */
+export function replayPageUrl(id) {
+  return `/?replay=${encodeURIComponent(id)}`;
+}
 
 /** "m:ss" of a number of seconds. */
 export function clock(seconds) {
@@ -24,6 +53,8 @@ export class ReplayBar {
     this.root = root;
     this.onSeek = onSeek;
     this.status = null;
+    this.polledAt = 0; // performance.now() when ``status`` came
+    this.active = false;
     this.dragging = false;
     this.button = root.querySelector("#replay-play");
     this.range = root.querySelector("#replay-seek");
@@ -57,9 +88,22 @@ export class ReplayBar {
       return false;
     }
     this.root.hidden = false;
+    this.active = true;
     document.body.dataset.replay = "1";
     setInterval(() => this.poll(), POLL_MS);
     return true;
+  }
+
+  /**
+   * The recording's clock: Unix seconds of the moment being replayed now (null before the
+   * first answer). Between two polls it runs on at the replay's speed while playing.
+   */
+  now() {
+    const st = this.status;
+    if (!st || !Number.isFinite(st.start_ns)) return null;
+    let pos = Number(st.position_s) || 0;
+    if (st.playing) pos += ((performance.now() - this.polledAt) / 1000) * (Number(st.speed) || 1);
+    return st.start_ns / 1e9 + Math.min(pos, Number(st.duration_s) || pos);
   }
 
   async poll() {
@@ -81,6 +125,7 @@ export class ReplayBar {
   render(st) {
     if (!st) return;
     this.status = st;
+    this.polledAt = performance.now();
     const playing = Boolean(st.playing);
     this.button.textContent = playing ? "Pause" : "Play";
     this.button.setAttribute("aria-pressed", String(playing));

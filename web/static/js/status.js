@@ -3,10 +3,12 @@
 // roads a stop takes (the web server and the drone's safety door). One function names
 // flight states for every panel (status bar, telemetry, map, fleet list), so labels agree.
 //
-// When the connection drops the bar greys out and says since when; after a reconnect the
-// console compares what it knew before with what the server says now and tells the operator
-// what was lost (a task or patrol that no longer runs, a drone that landed or stopped).
+// When the server goes silent the bar greys out and says how old its values are and since
+// when (the page's one rule, freshness.js); after a reconnect the console compares what it knew
+// before with what the server says now and tells the operator what was lost (a task or patrol
+// that no longer runs, a drone that landed or stopped).
 
+import { ageText } from "./freshness.js";
 import { setLevel, setText } from "./util.js";
 
 // DESIGN §5 / Settings defaults (battery_low_pct 25, battery_critical_pct 12).
@@ -131,7 +133,9 @@ export class StatusBar {
 
   setTask(task) {
     this.view.task = task;
-    setText(this.$("sb-task-v"), taskText(task));
+    const text = taskText(task);
+    setText(this.$("sb-task-v"), text);
+    this.$("sb-task").title = `Task: ${text}`;
   }
 
   /** A copy of what the bar shows (to compare across a reconnection). */
@@ -139,22 +143,28 @@ export class StatusBar {
     return JSON.parse(JSON.stringify(this.view));
   }
 
-  /** Connection lost: grey everything and say since when. */
+  /** Connection lost: remember what was shown, to tell what changed once it is back. */
   markStale() {
     if (this.staleSince) return;
     this.staleSince = this.now();
-    const bar = this.$("statusbar");
-    bar.dataset.stale = "true";
-    const el = this.$("sb-stale");
-    const t = this.staleSince.toLocaleTimeString([], { hour12: false });
-    el.textContent = `Connection lost since ${t}: values may be out of date`;
-    el.hidden = false;
   }
 
   markFresh() {
     this.staleSince = null;
-    this.$("statusbar").dataset.stale = "false";
-    this.$("sb-stale").hidden = true;
+  }
+
+  /** The server's silence (freshness.js): the bar greys out (data-stale, set by the rule) and
+   *  says how old its values are and since when; null hides it. */
+  showAge(ageS) {
+    const el = this.$("sb-stale");
+    if (ageS === null) {
+      el.hidden = true;
+      return;
+    }
+    const since = new Date(this.now().getTime() - ageS * 1000);
+    const t = since.toLocaleTimeString([], { hour12: false });
+    setText(el, `${ageText(ageS)} · no word from the server since ${t}`);
+    el.title = el.textContent;
+    el.hidden = false;
   }
 }
-

@@ -32,6 +32,8 @@ export class TelemetryPanel {
     this.onFlight = () => {};
     /** Called with (text, level, lost) on every link render. */
     this.onLink = () => {};
+    /** Called on every navdata message: a word from the vehicle (freshness.js). */
+    this.onNavdataSeen = () => {};
     this.timer = setInterval(() => this.renderLink(), 250);
     this.renderLink();
   }
@@ -41,6 +43,7 @@ export class TelemetryPanel {
     this.navTimes.push(t);
     while (this.navTimes.length && t - this.navTimes[0] > 2) this.navTimes.shift();
     this.lastNav = t;
+    this.onNavdataSeen();
 
     const battery = Number(msg.batteryPercent);
     const meter = this.$("battery-meter");
@@ -99,6 +102,7 @@ export class TelemetryPanel {
     }
     if (msg.detail) text += ` — ${msg.detail}`;
     setText(this.$("task"), text);
+    this.$("task").title = text;
     const failed = /fail|abort|refus/i.test(msg.state || "");
     setLevel(this.$("m-task"), failed ? "warn" : "ok");
   }
@@ -114,8 +118,12 @@ export class TelemetryPanel {
       this.onFlight(this.flight, num(status.battery_pct));
     }
     document.body.dataset.droneEmergency = this.emergency ? "1" : "";
-    // Navdata over rosbridge is the live source; the 1 Hz REST snapshot fills in without it.
-    if (this.lastNav === null || this.now() - this.lastNav > 1.5) this.fromSnapshot(status);
+    // Navdata over rosbridge is the live source; the 1 Hz REST snapshot fills in without it,
+    // but never with a snapshot older than what is shown (a vehicle process gone silent, a lost
+    // link: the server answers with its last word, the panel keeps the newer one, greyed).
+    const silent = this.lastNav === null || this.now() - this.lastNav > 1.5;
+    const fresh = status.link_ok !== false && status.vehicle?.connected !== false;
+    if (silent && fresh) this.fromSnapshot(status);
     const loop = loopHealth(status);
     const el = this.$("loop");
     if (!loop) {
@@ -130,6 +138,7 @@ export class TelemetryPanel {
     if (loop.stalls) bits.push(`${loop.stalls} stalls`);
     if (loop.stalled) bits.push("stalled");
     setText(el, bits.join(" · ") || "running");
+    el.title = el.textContent;
     const level =
       loop.stalled || (loop.p99_ms ?? 0) > LOOP_ALERT_MS
         ? "alert"
