@@ -400,7 +400,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"|   missed: {r['text']!r} ({r['voice']}) heard {r['heard']!r} | | | | |")
     allms = [r["ms"] for k, rows in results.items() if k != "typed" for r in rows if r["ms"]]
     if len(results) > 2 or (len(results) == 2 and "typed" not in results):
-        summary("spoken, all voices", allms, sum(len(v) for k, v in results.items() if k != "typed"))
+        summary(
+            "spoken, all voices", allms, sum(len(v) for k, v in results.items() if k != "typed")
+        )
     if "typed" in results:
         summary("typed (baseline): Enter -> AT*REF", results["typed"], len(results["typed"]))
         if allms and results["typed"]:

@@ -23,9 +23,18 @@ from server.api.deps import RoleDep, RuntimeDep, check_lease
 from server.security import Role, token_from
 from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
-from server.speech.recognizer import Recognition, speech_span
-from server.speech.service import SpeechService
-from server.speech.stream import MODES, Final, Interim, Problem, StreamSession, control_kind
+from server.speech.recognizer import Recognition, frame_speech_prob
+from server.speech.service import SpeechService, decisive
+from server.speech.stream import (
+    MODES,
+    Event,
+    Final,
+    Interim,
+    Problem,
+    Speculation,
+    StreamSession,
+    control_kind,
+)
 from server.ws_guard import lift_frame_cap
 
 log = logging.getLogger("uav_console.speech")
@@ -34,7 +43,7 @@ router = APIRouter(tags=["speech"])
 WAV_TYPES = frozenset({"audio/wav", "audio/x-wav", "audio/wave", "audio/vnd.wave"})
 # 30 s of 48 kHz stereo 16-bit PCM plus headers: anything longer cannot be a valid request.
 MAX_BODY_BYTES = int(MAX_REQUEST_S * 48_000 * 2 * 2) + 64 * 1024
-MAX_FRAME_BYTES = 64 * 1024  # one stream frame: far more than the worklet's 20-100 ms chunks
+MAX_FRAME_BYTES = 64 * 1024  # one stream frame: far more than the worklet's 32 ms chunks
 STREAM_IDLE_S = 10.0  # a push-to-talk stream that sends nothing for this long is closed
 CLOSE_POLICY = 1008  # RFC 6455 §7.4.1
 CLOSE_TRY_AGAIN = 1013  # RFC 6455 §7.4.1 (IANA registry): try again later
@@ -229,15 +238,13 @@ class _Stream:
         self.ws = ws
         self.service = service
         self.mode = mode
-        # Both modes listen for the end of speech, to decode speculatively (server.speech.stream).
-        self.session = StreamSession(mode, detect=self._voiced)
+        # Both modes end-point with the voice detector, to decode speculatively
+        # (server.speech.stream); hands-free also ends utterances with it.
+        self.session = StreamSession(mode, score=frame_speech_prob)
         self._interim: asyncio.Task[None] | None = None
-        self._finals: asyncio.Queue[Samples | None] = asyncio.Queue(maxsize=2)
+        self._speculations: set[asyncio.Task[None]] = set()
+        self._finals: asyncio.Queue[Final | None] = asyncio.Queue(maxsize=2)
         self._vad_lock = asyncio.Lock()
-
-    @staticmethod
-    def _voiced(samples: Samples) -> bool:
-        return speech_span(samples, min_silence_ms=100) is not None
 
     async def run(self) -> None:
         try:
@@ -255,6 +262,8 @@ class _Stream:
                 self._finals.put_nowait(None)
             if self._interim is not None:
                 self._interim.cancel()
+            for task in list(self._speculations):
+                task.cancel()
             with contextlib.suppress(asyncio.TimeoutError, Exception):
                 await asyncio.wait_for(finals, 35.0)
             finals.cancel()
@@ -284,7 +293,8 @@ class _Stream:
             elif text is not None:
                 kind = control_kind(text)
                 if kind == "end":
-                    events = self.session.end()
+                    async with self._vad_lock:
+                        events = self.session.end()
                     if not events:
                         await self._send(
                             {
@@ -296,7 +306,8 @@ class _Stream:
                             }
                         )
                 elif kind == "cancel":
-                    self.session.cancel()
+                    async with self._vad_lock:
+                        self.session.cancel()
                     events = []
                 else:
                     await self._send({"type": "error", "error": "text frames: end or cancel"})
@@ -306,35 +317,59 @@ class _Stream:
             for ev in events:
                 await self._handle(ev)
 
-    async def _handle(self, ev: Interim | Final | Problem) -> None:
+    async def _handle(self, ev: Event) -> None:
         if isinstance(ev, Problem):
             await self._send({"type": "error", "error": ev.message})
+        elif isinstance(ev, Speculation):
+            task = asyncio.create_task(self._speculate(ev))
+            self._speculations.add(task)
+            task.add_done_callback(self._speculations.discard)
         elif isinstance(ev, Interim):
-            if self._interim is None or self._interim.done():
+            # Interim text is a nicety: never while a speculation (the likely final) waits.
+            idle = not self._speculations and (self._interim is None or self._interim.done())
+            if idle:
                 self._interim = asyncio.create_task(self._decode_interim(ev.samples.copy()))
         else:
             if self._interim is not None:
                 self._interim.cancel()
             try:
-                self._finals.put_nowait(ev.samples)
+                self._finals.put_nowait(ev)
             except asyncio.QueueFull:
                 await self._send(
                     {"type": "error", "error": "still decoding the previous utterances: dropped"}
                 )
 
     async def _decode_interim(self, samples: Samples) -> None:
-        """A whole recognition (VAD, decode, snap), not only a transcript: when the utterance
-        ends with the same speech, the final reuses it (server.speech.memo)."""
+        """A whole recognition (VAD, decode, snap), not only a transcript, for interim text."""
         assert self.service.pool is not None and self.service.recognizer is not None
         rec = self.service.recognizer
         out = await self.service.pool.try_run(rec.recognize, samples)
         if out is not None and out.heard:
             await self._send({"type": "interim", "text": out.heard})
 
+    async def _speculate(self, ev: Speculation) -> None:
+        """Decode the speech while the operator may still go on; the session ends the
+        utterance early on a decisive reading. The final of the same speech reuses this
+        decode (server.speech.memo), waiting for it if it is still running."""
+        assert self.service.pool is not None and self.service.recognizer is not None
+        recognizer = self.service.recognizer
+        try:
+            rec = await self.service.pool.run(recognizer.recognize, ev.samples, vad=False)
+        except Busy:
+            return  # the final decodes it in its turn
+        sure = decisive(rec, self.service.nlu, self.service.config.threshold)
+        async with self._vad_lock:
+            events = self.session.decided(ev.serial, sure)
+        if rec.heard and not events:
+            await self._send({"type": "interim", "text": rec.heard})
+        for out in events:
+            await self._handle(out)
+
     async def _decode_finals(self) -> None:
-        while (samples := await self._finals.get()) is not None:
+        while (final := await self._finals.get()) is not None:
+            samples = final.samples
             try:
-                rec: Recognition = await self.service.recognize(samples)
+                rec: Recognition = await self.service.recognize(samples, vad=not final.trimmed)
             except Busy as exc:
                 await self._send({"type": "error", "error": str(exc)})
                 continue
@@ -343,9 +378,9 @@ class _Stream:
                 continue
             msg: dict[str, Any] = {"type": "final", **rec.as_json()}
             log.info(
-                "speech final %r (heard %r, confidence %.2f) from %.1f s of audio",
+                "speech final %r (heard %r, confidence %.2f) from %.1f s of audio%s",
                 msg.get("text"), msg.get("heard"), float(msg.get("confidence") or 0.0),
-                len(samples) / SAMPLE_RATE,
+                len(samples) / SAMPLE_RATE, " (reused)" if rec.reused else "",
             )  # fmt: skip
             await self._send(msg)
 

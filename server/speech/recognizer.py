@@ -120,6 +120,18 @@ def speech_span(samples: Samples, *, min_silence_ms: int = 300) -> tuple[int, in
     return max(0, spans[0]["start"] - pad), min(len(samples), spans[-1]["end"] + pad)
 
 
+def frame_speech_prob(samples: Samples) -> float:
+    """Silero VAD's speech probability of the last 512-sample frame of ``samples`` (one or
+    two whole frames: the first is context), as ``get_speech_timestamps`` scores each frame."""
+    from faster_whisper.vad import get_vad_model
+
+    usable = len(samples) - len(samples) % 512
+    if usable == 0:
+        return 0.0
+    frames = np.ascontiguousarray(samples[len(samples) - usable :], dtype=np.float32)
+    return float(np.ravel(get_vad_model()(frames))[-1])
+
+
 def _suppress_list(tokenizer: Any, vocab: Vocabulary) -> list[int]:
     """The guided ``suppress_tokens`` for a faster-whisper ``Tokenizer``: tokens outside the
     grammar vocabulary (:mod:`server.speech.constraint`) plus the model's non-speech symbols."""
