@@ -59,6 +59,7 @@ import tempfile
 import threading
 import time
 from collections import defaultdict
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -75,7 +76,13 @@ from server.settings import Settings  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
 from server.speech.model import default_workers, load_whisper, resolve  # noqa: E402
 from server.speech.pool import DecoderPool  # noqa: E402
-from server.speech.recognizer import BEAMS, Recognizer, frame_speech_prob, speech_span  # noqa: E402
+from server.speech.recognizer import (  # noqa: E402
+    BEAMS,
+    Recognition,
+    Recognizer,
+    frame_speech_prob,
+    speech_span,
+)
 from server.speech.service import decisive  # noqa: E402
 from server.speech.stream import Final, Speculation, StreamSession  # noqa: E402
 from server.speech.window import MIN_S  # noqa: E402
@@ -243,6 +250,29 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     return summary
 
 
+def stream_finals(recognizer: Recognizer, samples: Any) -> list[Any]:
+    """The recognitions the page's hands-free stream gets for one clip (and 1 s of silence
+    after it): fed in 32 ms frames through the server's end-pointer, each speculation decoded
+    at once and told back (a decode of no time: the earliest end, the likeliest cut)."""
+    session = StreamSession("handsfree", score=frame_speech_prob)
+    audio = np.concatenate([samples, np.zeros(SAMPLE_RATE, np.float32)])
+    pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2").tobytes()
+    done: dict[int, Any] = {}
+    out: list[Any] = []
+    pending = [e for i in range(0, len(pcm), 1024) for e in session.feed(pcm[i : i + 1024])]
+    pending += session.end()
+    while pending:
+        ev = pending.pop(0)
+        if isinstance(ev, Speculation):
+            r = recognizer.recognize(ev.samples, vad=False)
+            done[id(ev.samples)] = r
+            pending[:0] = session.decided(ev.serial, decisive(r, recognizer.nlu, THRESHOLD))
+        elif isinstance(ev, Final):
+            known = done.get(id(ev.samples))
+            out.append(known or recognizer.recognize(ev.samples, vad=not ev.trimmed))
+    return out
+
+
 def bench_accuracy(
     recognizer: Recognizer,
     quick: bool,
@@ -250,6 +280,7 @@ def bench_accuracy(
     rows: str = "all",
     seed: int = 15,
     progress: Path | None = None,
+    via: str = "whole",
 ) -> dict[str, Any]:
     utterances = pick_utterances(12 if quick else 36, seed)
     voices = TTS_VOICES[tts]
@@ -292,20 +323,34 @@ def bench_accuracy(
         dur = len(samples) / SAMPLE_RATE
         for name, rec_by, guided in runs:
             t = time.perf_counter()
-            rec = rec_by.recognize(samples, guided=guided)
+            if via == "stream" and name == "guided":
+                recs = stream_finals(rec_by, samples) or [Recognition("", 0.0)]
+            else:
+                recs = [rec_by.recognize(samples, guided=guided)]
             ms = (time.perf_counter() - t) * 1000
-            executed = rec.commands if rec.confidence >= THRESHOLD else []
-            # In flight, an emergency under its bar hovers and asks (server.dialog.confirm).
-            hover_ask = any(c["action"] == "emergency" for c in executed) and (
-                rec.confidence < max(THRESHOLD, EMERGENCY_CONFIDENCE)
-            )
-            if hover_ask:
-                executed = []
+            executed, read_back, hover_ask = [], [], False
+            for rec in recs:  # a stream may cut one clip into several utterances
+                now = rec.commands if rec.confidence >= THRESHOLD else []
+                # In flight, an emergency under its bar hovers and asks (server.dialog.confirm).
+                if any(c["action"] == "emergency" for c in now) and (
+                    rec.confidence < max(THRESHOLD, EMERGENCY_CONFIDENCE)
+                ):
+                    hover_ask, now = True, []
+                executed += now
+                # What the dialog reads back ("Did you say …?", server/dialog/confirm.py):
+                # speech between the floor and the threshold the grammars understand whole.
+                offered = to_read_back(
+                    rec_by.nlu, rec.text, rec.confidence, THRESHOLD, CONFIRM_FLOOR
+                )
+                read_back += offered.commands if offered is not None else []
+            if len(recs) > 1:
+                rec = replace(
+                    recs[0],
+                    heard=" | ".join(r.heard for r in recs),
+                    confidence=min(r.confidence for r in recs),
+                    doubt="cut",
+                )
             want = canon(row["commands"])
-            # What the dialog reads back ("Did you say …?", server/dialog/confirm.py): speech
-            # between the floor and the threshold that the grammars understand whole.
-            offered = to_read_back(rec_by.nlu, rec.text, rec.confidence, THRESHOLD, CONFIRM_FLOOR)
-            read_back = offered.commands if offered is not None else []
             results[name].append(
                 {
                     "text": row["text"],
@@ -614,6 +659,13 @@ def main(argv: list[str] | None = None) -> int:
         "--rows", choices=["all", "guided"], default="all", help="section 1's recognisers"
     )
     ap.add_argument("--seed", type=int, default=15, help="which utterances (15: the tuning set)")
+    ap.add_argument(
+        "--via",
+        choices=["whole", "stream"],
+        default="whole",
+        help="section 1's guided row: each clip whole, or through the hands-free stream's "
+        "end-pointer as the page sends it (stream_finals)",
+    )
     ap.add_argument("--progress", type=Path, help="section 1's per-clip results (JSONL)")
     ap.add_argument(
         "--report", type=Path, help="only print the tables of a (partial) progress file"
@@ -647,7 +699,7 @@ def main(argv: list[str] | None = None) -> int:
     out: dict[str, Any] = {}
     if not args.skip_accuracy:
         out["accuracy"] = bench_accuracy(
-            rec, args.quick, args.tts, args.rows, args.seed, args.progress
+            rec, args.quick, args.tts, args.rows, args.seed, args.progress, args.via
         )
     if not args.skip_stream:
         out["stream"] = bench_stream(rec, args.quick)

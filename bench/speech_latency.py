@@ -217,6 +217,8 @@ def serve(tmp: Path) -> Iterator[tuple[int, httpx.Client]]:
             proc.kill()
         http.close()
         log.close()
+        kept = Path(tempfile.gettempdir()) / "uavc-speech-latency-serve.log"
+        kept.write_bytes((tmp / "serve.log").read_bytes())
 
 
 def clock_offset(page: Any) -> float:
@@ -232,15 +234,24 @@ def clock_offset(page: Any) -> float:
     return best[1]
 
 
-def stream_of(page: Any, offset: float) -> tuple[np.ndarray, float]:
-    """The PCM the page sent and the monotonic time of its sample 0 (the capture clock)."""
+def stream_of(page: Any, offset: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The PCM the page sent, and each send's monotonic time and samples sent up to it."""
     log = page.evaluate("window.__pcm")
     chunks = [np.frombuffer(base64.b64decode(b64), "<i2") for _t, b64 in log]
     ends = np.cumsum([len(c) for c in chunks])
     sent = np.array([t / 1000 - offset for t, _b64 in log])
-    origin = float(np.min(sent - ends / SAMPLE_RATE))
     pcm = np.concatenate(chunks).astype(np.float32) / 32768.0
-    return pcm, origin
+    return pcm, sent, ends
+
+
+def captured_at(n: int, sent: np.ndarray, ends: np.ndarray) -> float:
+    """When sample ``n`` of the stream was captured: the lower envelope of ``send time -
+    (samples sent - n) / 16 kHz`` over the sends of the 2 s around it (a sample is never sent
+    before it is captured; a loaded machine's fake microphone may fall behind real time, so
+    the envelope is local)."""
+    near = np.abs(ends - n) <= 2 * SAMPLE_RATE
+    after = near & (ends >= n)
+    return float(np.min(sent[after] - (ends[after] - n) / SAMPLE_RATE))
 
 
 def onsets(pcm: np.ndarray, n: int) -> list[int]:
@@ -282,6 +293,9 @@ def spoken_run(
     try:
         page = browser.new_context(viewport={"width": 1280, "height": 800}).new_page()
         page.add_init_script(SEND_LOG)
+        # Replies shown, not spoken: hands-free does not listen while the console speaks, and
+        # on a busy machine a late reply would silence the next command of this fixed script.
+        page.add_init_script("localStorage.setItem('uavc.muted', '1')")
         page.goto(f"http://{HOST}:{port}/?token={TOKEN}")
         wait_for(lambda: page.evaluate("uavConsole.haveLease === true"), "the lease", 30)
         wait_for(
@@ -297,14 +311,14 @@ def spoken_run(
             time.sleep(0.5)
         page.uncheck("#handsfree")
         offset = clock_offset(page)
-        pcm, origin = stream_of(page, offset)
+        pcm, sent, ends = stream_of(page, offset)
         finals = [(t / 1000 - offset, m) for t, m in page.evaluate("window.__finals")]
     finally:
         browser.close()
     starts = onsets(pcm, len(utts))
     rows: list[dict[str, Any]] = []
     for u, s in zip(utts, starts, strict=False):
-        end_t = origin + (s + (u.end - u.onset)) / SAMPLE_RATE  # aligned by its onset
+        end_t = captured_at(s + (u.end - u.onset), sent, ends)  # aligned by its onset
         nxt = next((v for v in utts if v.start > u.start), None)
         limit = end_t + GAP_S if nxt else end_t + GAP_S + 2
         at = sim.first_after(u.action, end_t - 1.0)
@@ -317,8 +331,10 @@ def spoken_run(
                 "action": u.action,
                 "executed": ok,
                 "ms": (at - end_t) * 1000 if ok and at is not None else None,
+                "lag_s": float(end_t - sent[0] - (s + u.end - u.onset) / SAMPLE_RATE),
                 "final_ms": (final[0] - end_t) * 1000 if final else None,
                 "heard": final[1].get("text") if final else None,
+                "decode_ms": final[1].get("decode_ms") if final else None,
                 "confidence": final[1].get("confidence") if final else None,
             }
         )

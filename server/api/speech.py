@@ -11,6 +11,7 @@ not hold the lease while another does (close code 1008 with the reason).
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import json
 import logging
@@ -44,6 +45,13 @@ WAV_TYPES = frozenset({"audio/wav", "audio/x-wav", "audio/wave", "audio/vnd.wave
 # 30 s of 48 kHz stereo 16-bit PCM plus headers: anything longer cannot be a valid request.
 MAX_BODY_BYTES = int(MAX_REQUEST_S * 48_000 * 2 * 2) + 64 * 1024
 MAX_FRAME_BYTES = 64 * 1024  # one stream frame: far more than the worklet's 32 ms chunks
+# Interim text every this many seconds of speech. The one decoder of a 2-core machine is busy
+# for a whole decode once one starts (a decode cannot be stopped): hands-free, a decode for
+# interim text still running when the speech ends holds back the decode that ends the
+# utterance, so only speech longer than most commands gets interim text.
+PTT_INTERIM_S = 0.8
+HANDSFREE_INTERIM_S = 1.6
+INBOX_FRAMES = 256  # frames read ahead of the session (8 s of the worklet's 32 ms frames)
 STREAM_IDLE_S = 10.0  # a push-to-talk stream that sends nothing for this long is closed
 CLOSE_POLICY = 1008  # RFC 6455 §7.4.1
 CLOSE_TRY_AGAIN = 1013  # RFC 6455 §7.4.1 (IANA registry): try again later
@@ -240,7 +248,8 @@ class _Stream:
         self.mode = mode
         # Both modes end-point with the voice detector, to decode speculatively
         # (server.speech.stream); hands-free also ends utterances with it.
-        self.session = StreamSession(mode, score=frame_speech_prob)
+        step = PTT_INTERIM_S if mode == "ptt" else HANDSFREE_INTERIM_S
+        self.session = StreamSession(mode, score=frame_speech_prob, interim_step_s=step)
         self._interim: asyncio.Task[None] | None = None
         self._speculations: set[asyncio.Task[None]] = set()
         self._finals: asyncio.Queue[Final | None] = asyncio.Queue(maxsize=2)
@@ -268,13 +277,39 @@ class _Stream:
                 await asyncio.wait_for(finals, 35.0)
             finals.cancel()
 
-    async def _read(self) -> None:
+    async def _receive(self, inbox: asyncio.Queue[dict[str, Any]]) -> None:
+        """Frames off the socket into ``inbox`` (bounded: a full inbox holds the socket back)."""
         while True:
-            try:
-                msg = await asyncio.wait_for(self.ws.receive(), STREAM_IDLE_S)
-            except TimeoutError:
+            msg = await self.ws.receive()
+            await inbox.put(dict(msg))
+            if msg["type"] == "websocket.disconnect":
+                return
+
+    async def _read(self) -> None:
+        """Handle frames in order; audio frames that queued up while the previous ones were
+        handled (a busy machine) go to the session in one batch, one voice-detector call."""
+        inbox: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=INBOX_FRAMES)
+        receiver = asyncio.create_task(self._receive(inbox))
+        try:
+            await self._handle_frames(inbox)
+        finally:
+            receiver.cancel()
+
+    async def _handle_frames(self, inbox: asyncio.Queue[dict[str, Any]]) -> None:
+        pending: collections.deque[dict[str, Any]] = collections.deque()
+        while True:
+            if not pending:
+                try:
+                    pending.append(await asyncio.wait_for(inbox.get(), STREAM_IDLE_S))
+                except TimeoutError:
+                    pending.append({"type": "idle"})
+            while not inbox.empty():
+                pending.append(inbox.get_nowait())
+            msg = pending.popleft()
+            if msg["type"] == "idle":
                 if self.session.buffered_s > 0 and self.mode == "ptt":
-                    self.session.cancel()
+                    async with self._vad_lock:
+                        self.session.cancel()
                     await self._send(
                         {"type": "error", "error": "no audio for 10 s: utterance discarded"}
                     )
@@ -284,12 +319,17 @@ class _Stream:
             data: bytes | None = msg.get("bytes")
             text: str | None = msg.get("text")
             if data is not None:
-                if len(data) > MAX_FRAME_BYTES:
+                audio = [data]
+                while pending and pending[0].get("bytes") is not None:
+                    audio.append(pending.popleft()["bytes"])
+                if any(len(d) > MAX_FRAME_BYTES for d in audio):
                     await self._send({"type": "error", "error": "audio frame over 64 KiB"})
                     await self.ws.close(CLOSE_POLICY, "audio frame too large")
                     return
+                # Whole samples per frame: a frame of odd length loses its last byte, as alone.
+                pcm = b"".join(d[: len(d) - len(d) % 2] for d in audio)
                 async with self._vad_lock:  # the session runs the VAD: off the event loop
-                    events = await asyncio.to_thread(self.session.feed, data)
+                    events = await asyncio.to_thread(self.session.feed, pcm)
             elif text is not None:
                 kind = control_kind(text)
                 if kind == "end":

@@ -120,16 +120,17 @@ def speech_span(samples: Samples, *, min_silence_ms: int = 300) -> tuple[int, in
     return max(0, spans[0]["start"] - pad), min(len(samples), spans[-1]["end"] + pad)
 
 
-def frame_speech_prob(samples: Samples) -> float:
-    """Silero VAD's speech probability of the last 512-sample frame of ``samples`` (one or
-    two whole frames: the first is context), as ``get_speech_timestamps`` scores each frame."""
+def frame_speech_prob(samples: Samples) -> np.ndarray:
+    """Silero VAD's speech probability of each 512-sample frame of ``samples`` (a whole number
+    of frames), as ``get_speech_timestamps`` scores them (each frame with the last 64 samples of
+    the one before as context)."""
     from faster_whisper.vad import get_vad_model
 
     usable = len(samples) - len(samples) % 512
     if usable == 0:
-        return 0.0
-    frames = np.ascontiguousarray(samples[len(samples) - usable :], dtype=np.float32)
-    return float(np.ravel(get_vad_model()(frames))[-1])
+        return np.zeros(0, np.float32)
+    frames = np.ascontiguousarray(samples[:usable], dtype=np.float32)
+    return np.ravel(get_vad_model()(frames))
 
 
 def _suppress_list(tokenizer: Any, vocab: Vocabulary) -> list[int]:

@@ -11,7 +11,8 @@ microphone; 32 ms frames, one voice-detector frame each). Two modes:
   is dropped (an open microphone in a quiet room holds at most ``keep_s`` of samples).
 
 **End-pointing.** Each 512-sample frame is scored once by ``score`` (Silero VAD's speech
-probability, injected), with Silero's own hysteresis (speech from ``threshold``, silence under
+probability, injected; the frames that arrived since the last call in one batch, so a server
+that fell behind catches up), with Silero's own hysteresis (speech from ``threshold``, silence under
 ``neg_threshold``: faster-whisper ``get_speech_timestamps``). When ``settle_s`` of silence
 follows speech, the session asks for a :class:`Speculation`: the speech only (``pre_s``
 before its first voiced frame, ``settle_s`` after its last), decoded while the operator may
@@ -42,9 +43,8 @@ import numpy as np
 
 from server.speech.audio import SAMPLE_RATE, Samples, pcm16_to_float
 
-# Speech probability of the last 512-sample frame of the samples given (the frame before it,
-# when present, is the scorer's context).
-Score = Callable[[Samples], float]
+# Speech probability of each 512-sample frame of the samples given (a whole number of frames).
+Score = Callable[[Samples], np.ndarray]
 MODES = ("ptt", "handsfree")
 FRAME = 512  # Silero VAD's window at 16 kHz (faster_whisper.vad: window_size_samples)
 THRESHOLD = 0.5  # Silero's speech threshold (faster_whisper.vad.VadOptions.threshold)
@@ -160,9 +160,12 @@ class StreamSession:
             return [Problem(f"longer than {seconds:.0f} s: this utterance is discarded")]
         self._buf = np.concatenate([self._buf, chunk])
         events: list[Event] = []
-        if self.score is not None:
-            while self._scored + FRAME <= len(self._buf):
-                events += self._frame()
+        if self.score is not None and self._scored + FRAME <= len(self._buf):
+            lo = max(0, self._scored - FRAME)  # the frame before: the scorer's context
+            n = (len(self._buf) - self._scored) // FRAME
+            probs = np.ravel(self.score(self._buf[lo : self._scored + n * FRAME]))
+            for prob in probs[len(probs) - n :]:
+                events += self._frame(float(prob))
         if self.mode == "ptt":
             self._since_interim += len(chunk)
             if self._since_interim >= self.interim_step and not events:
@@ -173,12 +176,10 @@ class StreamSession:
             self._buf, self._scored = self._buf[drop:], self._scored - drop
         return events
 
-    def _frame(self) -> list[Event]:
-        """Score the next frame and move the end-pointer (Silero's hysteresis)."""
-        assert self.score is not None
-        lo, hi = max(0, self._scored - FRAME), self._scored + FRAME
-        prob = self.score(self._buf[lo:hi])
-        at, self._scored = self._scored, hi
+    def _frame(self, prob: float) -> list[Event]:
+        """The next frame's speech probability moves the end-pointer (Silero's hysteresis)."""
+        at = self._scored
+        self._scored += FRAME
         if self._start is None:
             if prob < THRESHOLD:
                 return []

@@ -23,10 +23,11 @@ def pcm(seconds: float, loud: bool) -> bytes:
     return x.astype("<i2").tobytes()
 
 
-def energy(samples: np.ndarray) -> float:
-    """A stand-in scorer for unit tests: the last frame is speech when loud (the server uses
-    Silero VAD's probability)."""
-    return 1.0 if float(np.sqrt(np.mean(samples[-FRAME:] ** 2))) > 0.05 else 0.0
+def energy(samples: np.ndarray) -> np.ndarray:
+    """A stand-in scorer for unit tests: a frame is speech when loud (the server uses Silero
+    VAD's probability)."""
+    frames = samples[: len(samples) - len(samples) % FRAME].reshape(-1, FRAME)
+    return (np.sqrt(np.mean(frames**2, axis=1)) > 0.05).astype(np.float32)
 
 
 def feed(session: StreamSession, data: bytes, chunk_s: float = FRAME / SAMPLE_RATE) -> list[object]:
@@ -219,3 +220,13 @@ def test_handsfree_next_utterance_starts_clean_after_an_early_end() -> None:
 def test_bad_end_pointing_options() -> None:
     with pytest.raises(ValueError, match="settle_s"):
         StreamSession("ptt", settle_s=0.5, commit_s=0.3)
+
+
+def test_frames_that_queued_up_end_point_as_if_fed_one_by_one() -> None:
+    """A server that fell behind feeds what queued up in one batch: the same utterances."""
+    audio = pcm(0.4, False) + pcm(0.9, True) + pcm(0.9, False) + pcm(0.5, True) + pcm(1.0, False)
+    one, batched = handsfree(), handsfree()
+    a = [e for e in feed(one, audio) if isinstance(e, Final | Speculation)]
+    b = [e for e in feed(batched, audio, chunk_s=0.7) if isinstance(e, Final | Speculation)]
+    assert [type(e) for e in a] == [type(e) for e in b] == [Speculation, Final] * 2
+    assert all(np.array_equal(x.samples, y.samples) for x, y in zip(a, b, strict=True))
