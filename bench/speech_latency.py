@@ -188,14 +188,14 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def serve(tmp: Path) -> Iterator[tuple[int, httpx.Client]]:
-    """``serve`` on the probe simulator, speech model loaded, the drone landed and linked."""
+def serve(tmp: Path, root: Path = ROOT) -> Iterator[tuple[int, httpx.Client]]:
+    """``serve`` (of the checkout at ``root``) on the probe simulator, the drone linked."""
     port = free_port()
-    env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "PYTHONPATH": str(root)}
     argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
     argv += ["--drone", SIM_ADDR, "--token", TOKEN, "--vehicles", "process"]
     log = open(tmp / "serve.log", "wb")  # noqa: SIM115
-    proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
+    proc = subprocess.Popen(argv, cwd=root, env=env, stdout=log, stderr=log)
     http = httpx.Client(
         base_url=f"http://{HOST}:{port}", headers={"Authorization": f"Bearer {TOKEN}"}, timeout=60
     )
@@ -316,14 +316,16 @@ def spoken_run(
     finally:
         browser.close()
     starts = onsets(pcm, len(utts))
+    end_times = [
+        captured_at(s + (u.end - u.onset), sent, ends) for u, s in zip(utts, starts, strict=False)
+    ]
     rows: list[dict[str, Any]] = []
-    for u, s in zip(utts, starts, strict=False):
-        end_t = captured_at(s + (u.end - u.onset), sent, ends)  # aligned by its onset
-        nxt = next((v for v in utts if v.start > u.start), None)
-        limit = end_t + GAP_S if nxt else end_t + GAP_S + 2
+    for k, (u, end_t) in enumerate(zip(utts, end_times, strict=False)):
+        # What follows this utterance, up to the end of the next one, is its answer.
+        limit = end_times[k + 1] if k + 1 < len(end_times) else end_t + GAP_S + 2
         at = sim.first_after(u.action, end_t - 1.0)
-        final = next(((t, m) for t, m in finals if end_t - 0.5 <= t <= limit), None)
-        ok = at is not None and at <= limit
+        final = next(((t, m) for t, m in finals if end_t - 0.5 <= t < limit), None)
+        ok = at is not None and at < limit
         rows.append(
             {
                 "text": u.text,
@@ -331,7 +333,6 @@ def spoken_run(
                 "action": u.action,
                 "executed": ok,
                 "ms": (at - end_t) * 1000 if ok and at is not None else None,
-                "lag_s": float(end_t - sent[0] - (s + u.end - u.onset) / SAMPLE_RATE),
                 "final_ms": (final[0] - end_t) * 1000 if final else None,
                 "heard": final[1].get("text") if final else None,
                 "decode_ms": final[1].get("decode_ms") if final else None,
@@ -376,30 +377,36 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=2, help="each wording this many times")
     ap.add_argument("--typed", type=int, default=1, help="typed baseline repeats (0: none)")
     ap.add_argument("--json", type=Path)
+    ap.add_argument(
+        "--before",
+        type=Path,
+        help="also serve this checkout (e.g. `git worktree add /tmp/main main`) in the same run",
+    )
     args = ap.parse_args(argv)
     print(f"load before: {os.getloadavg()} on {os.cpu_count()} cores (shared machine)")
     results: dict[str, Any] = {}
-    with (
-        tempfile.TemporaryDirectory() as td,
-        EdgeSim(SIM_ADDR) as sim,
-        serve(Path(td)) as (port, http),
-        sync_playwright() as pw,
-    ):
-        # Load the model (the page's first stream would) before anything is timed.
-        http.post(
-            "/api/v1/speech?execute=false",
-            content=to_wav(np.zeros(SAMPLE_RATE, np.float32)),
-            headers={"Content-Type": "audio/wav"},
-        )
-        for tts in args.tts.split(","):
-            wav = Path(td) / f"{tts}.wav"
-            utts = build_wav(wav, tts, args.repeats, Path(td))
-            reset_landed(sim, http)
-            results[tts] = spoken_run(pw, port, sim, http, wav, utts)
-            print(f"load after {tts}: {os.getloadavg()}", flush=True)
-        if args.typed:
-            reset_landed(sim, http)
-            results["typed"] = [x * 1000 for x in typed_run(pw, port, sim, args.typed)]
+    servers = [("", ROOT)] + ([(" (before)", args.before)] if args.before else [])
+    with tempfile.TemporaryDirectory() as td, EdgeSim(SIM_ADDR) as sim, sync_playwright() as pw:
+        wavs = {tts: build_wav(Path(td) / f"{tts}.wav", tts, args.repeats, Path(td))
+                for tts in args.tts.split(",")}  # fmt: skip
+        for suffix, root in servers:
+            data = Path(td) / f"serve{len(results)}"
+            data.mkdir()
+            with serve(data, root) as (port, http):
+                # Load the model (the page's first stream would) before anything is timed.
+                http.post(
+                    "/api/v1/speech?execute=false",
+                    content=to_wav(np.zeros(SAMPLE_RATE, np.float32)),
+                    headers={"Content-Type": "audio/wav"},
+                )
+                for tts, utts in wavs.items():
+                    reset_landed(sim, http)
+                    wav = Path(td) / f"{tts}.wav"
+                    results[tts + suffix] = spoken_run(pw, port, sim, http, wav, utts)
+                    print(f"load after {tts}{suffix}: {os.getloadavg()}", flush=True)
+                if args.typed and not suffix:
+                    reset_landed(sim, http)
+                    results["typed"] = [x * 1000 for x in typed_run(pw, port, sim, args.typed)]
     print(f"load after: {os.getloadavg()}")
     print("\n| end of speech -> AT*REF on the drone | executed | p50 ms | p90 ms | "
           "end of speech -> final text in the page p50 / p90 ms |")  # fmt: skip
@@ -414,16 +421,22 @@ def main(argv: list[str] | None = None) -> int:
         for r in rows:
             if not r["executed"]:
                 print(f"|   missed: {r['text']!r} ({r['voice']}) heard {r['heard']!r} | | | | |")
-    allms = [r["ms"] for k, rows in results.items() if k != "typed" for r in rows if r["ms"]]
-    if len(results) > 2 or (len(results) == 2 and "typed" not in results):
-        summary(
-            "spoken, all voices", allms, sum(len(v) for k, v in results.items() if k != "typed")
-        )
+    spoken = {k: v for k, v in results.items() if k != "typed" and "(before)" not in k}
+    allms = [r["ms"] for rows in spoken.values() for r in rows if r["ms"] is not None]
+    if len(spoken) > 1:
+        summary("spoken, all voices", allms, sum(len(v) for v in spoken.values()))
+    before = {k: v for k, v in results.items() if "(before)" in k}
+    old = [r["ms"] for rows in before.values() for r in rows if r["ms"] is not None]
+    if len(before) > 1:
+        summary("spoken, all voices (before)", old, sum(len(v) for v in before.values()))
     if "typed" in results:
         summary("typed (baseline): Enter -> AT*REF", results["typed"], len(results["typed"]))
         if allms and results["typed"]:
             ratio = statistics.median(allms) / statistics.median(results["typed"])
             print(f"\nspoken p50 / typed p50: {ratio:.1f}x")
+    if allms and old:
+        ratio = statistics.median(old) / statistics.median(allms)
+        print(f"spoken p50, before / now: {ratio:.1f}x")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0
