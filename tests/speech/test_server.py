@@ -372,10 +372,10 @@ async def _until(ws: Any, kinds: tuple[str, ...], text: str = "") -> dict[str, A
 
 
 def test_handsfree_ends_a_decisive_command_after_a_short_silence(served: Served) -> None:
-    """0.45 s of silence after "take off" is all the server gets: a decisive reading ends the
+    """0.35 s of silence after "take off" is all the server gets: a decisive reading ends the
     utterance there (the full end of an utterance needs 0.7 s)."""
     speech = read_wav(served.clip("take off", voice="en-us", speed=150, pad_s=0.0))
-    quiet = np.zeros(int(0.45 * 16000), np.float32)
+    quiet = np.zeros(int(0.35 * 16000), np.float32)
 
     async def talk() -> dict[str, Any]:
         async with connect(_stream_url(served, "handsfree"), ssl=_ws_ssl(served)) as ws:
