@@ -111,7 +111,7 @@ class StreamSession:
         keep_s: float = 1.0,
         pre_s: float = 0.3,
         settle_s: float = 0.2,
-        commit_s: float = 0.3,
+        commit_s: float = 0.35,
     ) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
@@ -171,8 +171,10 @@ class StreamSession:
             if self._since_interim >= self.interim_step and not events:
                 self._since_interim = 0
                 events.append(Interim(self._buf))
-        elif self._start is None and self._scored > self.keep:
-            drop = self._scored - self.keep  # pre-roll only: the start of the first word
+        elif self._start is None and self._scored >= self.keep + FRAME:
+            # Pre-roll only (the start of the first word); whole frames, so that frames stay
+            # where they were in the stream, whatever was dropped.
+            drop = (self._scored - self.keep) // FRAME * FRAME
             self._buf, self._scored = self._buf[drop:], self._scored - drop
         return events
 
