@@ -22,7 +22,7 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
 2. The microphone stream, end of speech -> command: clips fed in real time (20 ms chunks)
    through the stream session and a one-decoder pool as the server's stream route does;
    push-to-talk released 0.5 s after the speech ends, and hands-free; with the end-pointer's
-   speculative decode at 0.2 s of silence, the early end on a decisive reading and the reuse
+   speculative decode at 0.3 s of silence, the early end on a decisive reading and the reuse
    of its result (the product) vs a decode only at the end (hands-free's 0.7 s of silence, the
    release), same clips, same run. ``bench/speech_latency.py`` measures the same in the page,
    end of speech to the command on the drone's wire.

@@ -110,7 +110,7 @@ class StreamSession:
         end_silence_s: float = 0.7,
         keep_s: float = 1.0,
         pre_s: float = 0.3,
-        settle_s: float = 0.2,
+        settle_s: float = 0.3,
         commit_s: float = 0.35,
     ) -> None:
         if mode not in MODES:
@@ -127,7 +127,10 @@ class StreamSession:
         self.keep = max(int(keep_s * SAMPLE_RATE), int(pre_s * SAMPLE_RATE) + FRAME)
         self.pre = int(pre_s * SAMPLE_RATE)
         # The speculation keeps settle_s of silence after the speech: Silero ends speech at the
-        # first quiet frame, and a soft last consonant may lie after it.
+        # first quiet frame, and a soft last consonant may lie after it. 0.3 s is the pad the
+        # recogniser's own trim gives a whole clip (recognizer.VAD_PAD_S), the speech the
+        # doubt rules were chosen on: with 0.2 s, 3 of bench/speech.py's 324 espeak-ng clips
+        # were flown wrong (a beam's doubt no longer showed).
         self.settle = int(settle_s * SAMPLE_RATE)
         self.commit = int(commit_s * SAMPLE_RATE)
         self.speculated = 0  # speculative decodes asked for (tests, logs)

@@ -56,7 +56,7 @@ def test_a_command_ends_at_its_short_pause_and_keeps_its_last_sound(tmp_path: Pa
     # pre-roll and settle_s of silence besides.
     heard = np.flatnonzero(np.abs(final.samples) >= 2**-10)  # 16-bit PCM: a sample's jitter
     assert heard[-1] - heard[0] + 1 >= len(speech) - 0.005 * SAMPLE_RATE
-    assert len(final.samples) <= len(speech) + 0.6 * SAMPLE_RATE
+    assert len(final.samples) <= len(speech) + 0.7 * SAMPLE_RATE
 
 
 @pytest.mark.parametrize("pause_s", [0.1, 0.2])
@@ -76,4 +76,4 @@ def test_a_long_pause_makes_two_utterances(tmp_path: Path) -> None:
     audio = np.concatenate([quiet(0.5), first, quiet(1.0), second, quiet(1.0)])
     finals, s = finals_of(audio)
     assert len(finals) == 2 and s.utterances == 2
-    assert len(finals[0].samples) < len(first) + 0.6 * SAMPLE_RATE
+    assert len(finals[0].samples) < len(first) + 0.7 * SAMPLE_RATE
