@@ -278,12 +278,14 @@ class _Stream:
             finals.cancel()
 
     async def _receive(self, inbox: asyncio.Queue[dict[str, Any]]) -> None:
-        """Frames off the socket into ``inbox`` (bounded: a full inbox holds the socket back)."""
-        while True:
-            msg = await self.ws.receive()
-            await inbox.put(dict(msg))
-            if msg["type"] == "websocket.disconnect":
-                return
+        """Frames off the socket into ``inbox`` (bounded: a full inbox holds the socket back),
+        ending with a disconnect, however the socket ended."""
+        try:
+            while (msg := await self.ws.receive())["type"] != "websocket.disconnect":
+                await inbox.put(dict(msg))
+        finally:
+            with contextlib.suppress(asyncio.QueueFull):
+                inbox.put_nowait({"type": "websocket.disconnect"})
 
     async def _read(self) -> None:
         """Handle frames in order; audio frames that queued up while the previous ones were
@@ -291,11 +293,13 @@ class _Stream:
         inbox: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=INBOX_FRAMES)
         receiver = asyncio.create_task(self._receive(inbox))
         try:
-            await self._handle_frames(inbox)
+            await self._handle_frames(inbox, receiver)
         finally:
             receiver.cancel()
 
-    async def _handle_frames(self, inbox: asyncio.Queue[dict[str, Any]]) -> None:
+    async def _handle_frames(
+        self, inbox: asyncio.Queue[dict[str, Any]], receiver: asyncio.Task[None]
+    ) -> None:
         pending: collections.deque[dict[str, Any]] = collections.deque()
         while True:
             if not pending:
@@ -306,6 +310,8 @@ class _Stream:
             while not inbox.empty():
                 pending.append(inbox.get_nowait())
             msg = pending.popleft()
+            if msg["type"] == "idle" and receiver.done() and inbox.empty():
+                return  # the socket is gone (its disconnect did not fit in a full inbox)
             if msg["type"] == "idle":
                 if self.session.buffered_s > 0 and self.mode == "ptt":
                     async with self._vad_lock:
