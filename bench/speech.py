@@ -80,7 +80,7 @@ from server.speech.recognizer import (  # noqa: E402
     BEAMS,
     Recognition,
     Recognizer,
-    frame_speech_prob,
+    SileroStream,
     speech_span,
 )
 from server.speech.service import decisive  # noqa: E402
@@ -254,7 +254,7 @@ def stream_finals(recognizer: Recognizer, samples: Any) -> list[Any]:
     """The recognitions the page's hands-free stream gets for one clip (and 1 s of silence
     after it): fed in 32 ms frames through the server's end-pointer, each speculation decoded
     at once and told back (a decode of no time: the earliest end, the likeliest cut)."""
-    session = StreamSession("handsfree", score=frame_speech_prob)
+    session = StreamSession("handsfree", score=SileroStream())
     audio = np.concatenate([samples, np.zeros(SAMPLE_RATE, np.float32)])
     pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2").tobytes()
     done: dict[int, Any] = {}
@@ -390,7 +390,7 @@ async def _stream_once(
     quiet = {} if speculate else {"settle_s": 10.0, "commit_s": 10.0, "end_silence_s": 10.0}
     if not speculate and mode == "handsfree":
         quiet = {"settle_s": 0.7, "commit_s": 0.7, "end_silence_s": 0.7}
-    session = StreamSession(mode, score=frame_speech_prob, **quiet)
+    session = StreamSession(mode, score=SileroStream(), **quiet)
     hold = int(0.5 * SAMPLE_RATE)
     tail = hold if mode == "ptt" else int(1.5 * SAMPLE_RATE)
     audio = np.concatenate([clip[:speech_end], np.zeros(tail, np.float32)])

@@ -24,7 +24,7 @@ from server.api.deps import RoleDep, RuntimeDep, check_lease
 from server.security import Role, token_from
 from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
-from server.speech.recognizer import Recognition, frame_speech_prob
+from server.speech.recognizer import Recognition, SileroStream
 from server.speech.service import SpeechService, decisive
 from server.speech.stream import (
     MODES,
@@ -249,7 +249,7 @@ class _Stream:
         # Both modes end-point with the voice detector, to decode speculatively
         # (server.speech.stream); hands-free also ends utterances with it.
         step = PTT_INTERIM_S if mode == "ptt" else HANDSFREE_INTERIM_S
-        self.session = StreamSession(mode, score=frame_speech_prob, interim_step_s=step)
+        self.session = StreamSession(mode, score=SileroStream(), interim_step_s=step)
         self._interim: asyncio.Task[None] | None = None
         self._speculations: set[asyncio.Task[None]] = set()
         self._finals: asyncio.Queue[Final | None] = asyncio.Queue(maxsize=2)

@@ -43,7 +43,8 @@ import numpy as np
 
 from server.speech.audio import SAMPLE_RATE, Samples, pcm16_to_float
 
-# Speech probability of each 512-sample frame of the samples given (a whole number of frames).
+# Speech probability of each 512-sample frame of the samples given: the stream's next frames,
+# in order (a recurrent scorer keeps its state between calls: recognizer.SileroStream).
 Score = Callable[[Samples], np.ndarray]
 MODES = ("ptt", "handsfree")
 FRAME = 512  # Silero VAD's window at 16 kHz (faster_whisper.vad: window_size_samples)
@@ -164,10 +165,9 @@ class StreamSession:
         self._buf = np.concatenate([self._buf, chunk])
         events: list[Event] = []
         if self.score is not None and self._scored + FRAME <= len(self._buf):
-            lo = max(0, self._scored - FRAME)  # the frame before: the scorer's context
             n = (len(self._buf) - self._scored) // FRAME
-            probs = np.ravel(self.score(self._buf[lo : self._scored + n * FRAME]))
-            for prob in probs[len(probs) - n :]:
+            probs = np.ravel(self.score(self._buf[self._scored : self._scored + n * FRAME]))
+            for prob in probs[:n]:
                 events += self._frame(float(prob))
         if self.mode == "ptt":
             self._since_interim += len(chunk)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from server.speech.audio import SAMPLE_RATE, read_wav
-from server.speech.recognizer import frame_speech_prob
+from server.speech.recognizer import SileroStream
 from server.speech.stream import Final, Speculation, StreamSession
 from tests.speech.conftest import needs_tts, synthesise
 
@@ -33,7 +33,7 @@ def quiet(seconds: float) -> np.ndarray:
 
 def finals_of(audio: np.ndarray) -> tuple[list[Final], StreamSession]:
     """Hands-free, in the page's 32 ms frames; every speculation is decisive at once."""
-    s = StreamSession("handsfree", score=frame_speech_prob)
+    s = StreamSession("handsfree", score=SileroStream())
     pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2").tobytes()
     out: list[Final] = []
     for i in range(0, len(pcm), 1024):
