@@ -21,9 +21,11 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
    Targets (issue 15): >= 90 % exact clean, >= 80 % at 10 dB, p50 <= 400 ms.
 2. The microphone stream, end of speech -> command: clips fed in real time (20 ms chunks)
    through the stream session and a one-decoder pool as the server's stream route does;
-   push-to-talk released 0.5 s after the speech ends, and hands-free (0.7 s of silence ends the
-   utterance); with the speculative decode at the first 0.4 s of silence and the reuse of its
-   result (the product) vs without either (the baseline), same clips, same run.
+   push-to-talk released 0.5 s after the speech ends, and hands-free; with the end-pointer's
+   speculative decode at 0.3 s of silence, the early end on a decisive reading and the reuse
+   of its result (the product) vs a decode only at the end (hands-free's 0.7 s of silence, the
+   release), same clips, same run. ``bench/speech_latency.py`` measures the same in the page,
+   end of speech to the command on the drone's wire.
 4. Spoken replies: synthesis time of typical replies with hibari-tts's neural voice (the
    server's first choice, server/speech/synth.py) and with espeak-ng, one after another.
 3. The 100 Hz control loop (drone/control/loop.py, sleep+spin as flown) alone, then while 3
@@ -57,6 +59,7 @@ import tempfile
 import threading
 import time
 from collections import defaultdict
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -73,8 +76,15 @@ from server.settings import Settings  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav  # noqa: E402
 from server.speech.model import default_workers, load_whisper, resolve  # noqa: E402
 from server.speech.pool import DecoderPool  # noqa: E402
-from server.speech.recognizer import BEAMS, Recognizer, speech_span  # noqa: E402
-from server.speech.stream import Final, Interim, StreamSession  # noqa: E402
+from server.speech.recognizer import (  # noqa: E402
+    BEAMS,
+    Recognition,
+    Recognizer,
+    SileroStream,
+    speech_span,
+)
+from server.speech.service import decisive  # noqa: E402
+from server.speech.stream import Final, Speculation, StreamSession  # noqa: E402
 from server.speech.window import MIN_S  # noqa: E402
 from server.vehicles.host import VEHICLE_SWITCH_INTERVAL_S, raise_priority  # noqa: E402
 from tests.speech.conftest import HIBARI_VOICES, synthesise  # noqa: E402
@@ -240,6 +250,29 @@ def report(results: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
     return summary
 
 
+def stream_finals(recognizer: Recognizer, samples: Any) -> list[Any]:
+    """The recognitions the page's hands-free stream gets for one clip (and 1 s of silence
+    after it): fed in 32 ms frames through the server's end-pointer, each speculation decoded
+    at once and told back (a decode of no time: the earliest end, the likeliest cut)."""
+    session = StreamSession("handsfree", score=SileroStream())
+    audio = np.concatenate([samples, np.zeros(SAMPLE_RATE, np.float32)])
+    pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2").tobytes()
+    done: dict[int, Any] = {}
+    out: list[Any] = []
+    pending = [e for i in range(0, len(pcm), 1024) for e in session.feed(pcm[i : i + 1024])]
+    pending += session.end()
+    while pending:
+        ev = pending.pop(0)
+        if isinstance(ev, Speculation):
+            r = recognizer.recognize(ev.samples, vad=False)
+            done[id(ev.samples)] = r
+            pending[:0] = session.decided(ev.serial, decisive(r, recognizer.nlu, THRESHOLD))
+        elif isinstance(ev, Final):
+            known = done.get(id(ev.samples))
+            out.append(known or recognizer.recognize(ev.samples, vad=not ev.trimmed))
+    return out
+
+
 def bench_accuracy(
     recognizer: Recognizer,
     quick: bool,
@@ -247,6 +280,7 @@ def bench_accuracy(
     rows: str = "all",
     seed: int = 15,
     progress: Path | None = None,
+    via: str = "whole",
 ) -> dict[str, Any]:
     utterances = pick_utterances(12 if quick else 36, seed)
     voices = TTS_VOICES[tts]
@@ -289,20 +323,34 @@ def bench_accuracy(
         dur = len(samples) / SAMPLE_RATE
         for name, rec_by, guided in runs:
             t = time.perf_counter()
-            rec = rec_by.recognize(samples, guided=guided)
+            if via == "stream" and name == "guided":
+                recs = stream_finals(rec_by, samples) or [Recognition("", 0.0)]
+            else:
+                recs = [rec_by.recognize(samples, guided=guided)]
             ms = (time.perf_counter() - t) * 1000
-            executed = rec.commands if rec.confidence >= THRESHOLD else []
-            # In flight, an emergency under its bar hovers and asks (server.dialog.confirm).
-            hover_ask = any(c["action"] == "emergency" for c in executed) and (
-                rec.confidence < max(THRESHOLD, EMERGENCY_CONFIDENCE)
-            )
-            if hover_ask:
-                executed = []
+            executed, read_back, hover_ask = [], [], False
+            for rec in recs:  # a stream may cut one clip into several utterances
+                now = rec.commands if rec.confidence >= THRESHOLD else []
+                # In flight, an emergency under its bar hovers and asks (server.dialog.confirm).
+                if any(c["action"] == "emergency" for c in now) and (
+                    rec.confidence < max(THRESHOLD, EMERGENCY_CONFIDENCE)
+                ):
+                    hover_ask, now = True, []
+                executed += now
+                # What the dialog reads back ("Did you say …?", server/dialog/confirm.py):
+                # speech between the floor and the threshold the grammars understand whole.
+                offered = to_read_back(
+                    rec_by.nlu, rec.text, rec.confidence, THRESHOLD, CONFIRM_FLOOR
+                )
+                read_back += offered.commands if offered is not None else []
+            if len(recs) > 1:
+                rec = replace(
+                    recs[0],
+                    heard=" | ".join(r.heard for r in recs),
+                    confidence=min(r.confidence for r in recs),
+                    doubt="cut",
+                )
             want = canon(row["commands"])
-            # What the dialog reads back ("Did you say …?", server/dialog/confirm.py): speech
-            # between the floor and the threshold that the grammars understand whole.
-            offered = to_read_back(rec_by.nlu, rec.text, rec.confidence, THRESHOLD, CONFIRM_FLOOR)
-            read_back = offered.commands if offered is not None else []
             results[name].append(
                 {
                     "text": row["text"],
@@ -334,36 +382,55 @@ def bench_accuracy(
 async def _stream_once(
     rec: Recognizer, clip: Any, speech_end: int, mode: str, speculate: bool
 ) -> float:
-    """Seconds from the end of speech to the final recognition, fed in real time."""
+    """Seconds from the end of speech to the final recognition, fed in real time (32 ms
+    frames, as the page's worklet sends them), handled as the server's stream route does."""
     pool = DecoderPool(1, queue=4)
-    session = StreamSession(
-        mode, detect=lambda x: speech_span(x, min_silence_ms=100) is not None,
-        settle_s=0.4 if speculate else 1e6,  # 1e6 s: the tail is never all silence
-    )  # fmt: skip
+    # Without speculation (the baseline) the end-pointer decodes only at the end of the
+    # utterance: hands-free's full 0.7 s of silence, push-to-talk's release.
+    quiet = {} if speculate else {"settle_s": 10.0, "commit_s": 10.0, "end_silence_s": 10.0}
+    if not speculate and mode == "handsfree":
+        quiet = {"settle_s": 0.7, "commit_s": 0.7, "end_silence_s": 0.7}
+    session = StreamSession(mode, score=SileroStream(), **quiet)
     hold = int(0.5 * SAMPLE_RATE)
     tail = hold if mode == "ptt" else int(1.5 * SAMPLE_RATE)
     audio = np.concatenate([clip[:speech_end], np.zeros(tail, np.float32)])
     pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2").tobytes()
-    chunk = int(0.02 * SAMPLE_RATE)
-    interim: asyncio.Task[Any] | None = None
+    chunk = 512
+    lock = asyncio.Lock()
+    finals: asyncio.Queue[Final] = asyncio.Queue()
+    tasks: list[asyncio.Task[Any]] = []
+
+    async def handle(events: list[Any]) -> None:
+        for ev in events:
+            if isinstance(ev, Speculation):
+                tasks.append(asyncio.create_task(speculate_on(ev)))
+            elif isinstance(ev, Final):
+                finals.put_nowait(ev)
+
+    async def speculate_on(ev: Speculation) -> None:
+        r = await pool.run(rec.recognize, ev.samples, vad=False)
+        async with lock:
+            out = session.decided(ev.serial, decisive(r, rec.nlu, THRESHOLD))
+        await handle(out)
+
     start = time.perf_counter()
     end_of_speech = start + speech_end / SAMPLE_RATE
     try:
         for i in range(0, len(audio), chunk):
             await asyncio.sleep(max(0.0, start + i / SAMPLE_RATE - time.perf_counter()))
-            events = await asyncio.to_thread(session.feed, pcm[2 * i : 2 * (i + chunk)])
-            if mode == "ptt" and i + chunk >= len(audio):
-                events += session.end()
-            for ev in events:
-                if isinstance(ev, Interim) and (interim is None or interim.done()):
-                    interim = asyncio.create_task(pool.try_run(rec.recognize, ev.samples))
-                elif isinstance(ev, Final):
-                    if interim is not None:
-                        interim.cancel()
-                    await pool.run(rec.recognize, ev.samples)
-                    return time.perf_counter() - end_of_speech
-        return float("nan")
+            async with lock:
+                events = await asyncio.to_thread(session.feed, pcm[2 * i : 2 * (i + chunk)])
+                if mode == "ptt" and i + chunk >= len(audio):
+                    events += session.end()
+            await handle(events)
+            if not finals.empty():
+                break
+        final = await asyncio.wait_for(finals.get(), 30)
+        await pool.run(rec.recognize, final.samples, vad=not final.trimmed)
+        return time.perf_counter() - end_of_speech
     finally:
+        for t in tasks:
+            t.cancel()
         pool.close()
 
 
@@ -592,6 +659,13 @@ def main(argv: list[str] | None = None) -> int:
         "--rows", choices=["all", "guided"], default="all", help="section 1's recognisers"
     )
     ap.add_argument("--seed", type=int, default=15, help="which utterances (15: the tuning set)")
+    ap.add_argument(
+        "--via",
+        choices=["whole", "stream"],
+        default="whole",
+        help="section 1's guided row: each clip whole, or through the hands-free stream's "
+        "end-pointer as the page sends it (stream_finals)",
+    )
     ap.add_argument("--progress", type=Path, help="section 1's per-clip results (JSONL)")
     ap.add_argument(
         "--report", type=Path, help="only print the tables of a (partial) progress file"
@@ -625,7 +699,7 @@ def main(argv: list[str] | None = None) -> int:
     out: dict[str, Any] = {}
     if not args.skip_accuracy:
         out["accuracy"] = bench_accuracy(
-            rec, args.quick, args.tts, args.rows, args.seed, args.progress
+            rec, args.quick, args.tts, args.rows, args.seed, args.progress, args.via
         )
     if not args.skip_stream:
         out["stream"] = bench_stream(rec, args.quick)

@@ -11,6 +11,7 @@ not hold the lease while another does (close code 1008 with the reason).
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import json
 import logging
@@ -24,9 +25,18 @@ from server.api.models import CommandList, SpeechStatus
 from server.security import Role, token_from
 from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
-from server.speech.recognizer import Recognition, speech_span
-from server.speech.service import SpeechService
-from server.speech.stream import MODES, Final, Interim, Problem, StreamSession, control_kind
+from server.speech.recognizer import Recognition, SileroStream
+from server.speech.service import SpeechService, decisive
+from server.speech.stream import (
+    MODES,
+    Event,
+    Final,
+    Interim,
+    Problem,
+    Speculation,
+    StreamSession,
+    control_kind,
+)
 from server.ws_guard import lift_frame_cap
 
 log = logging.getLogger("uav_console.speech")
@@ -35,7 +45,14 @@ router = APIRouter(tags=["speech"])
 WAV_TYPES = frozenset({"audio/wav", "audio/x-wav", "audio/wave", "audio/vnd.wave"})
 # 30 s of 48 kHz stereo 16-bit PCM plus headers: anything longer cannot be a valid request.
 MAX_BODY_BYTES = int(MAX_REQUEST_S * 48_000 * 2 * 2) + 64 * 1024
-MAX_FRAME_BYTES = 64 * 1024  # one stream frame: far more than the worklet's 20-100 ms chunks
+MAX_FRAME_BYTES = 64 * 1024  # one stream frame: far more than the worklet's 32 ms chunks
+# Interim text every this many seconds of speech. The one decoder of a 2-core machine is busy
+# for a whole decode once one starts (a decode cannot be stopped): hands-free, a decode for
+# interim text still running when the speech ends holds back the decode that ends the
+# utterance, so only speech longer than most commands gets interim text.
+PTT_INTERIM_S = 0.8
+HANDSFREE_INTERIM_S = 1.6
+INBOX_FRAMES = 256  # frames read ahead of the session (8 s of the worklet's 32 ms frames)
 STREAM_IDLE_S = 10.0  # a push-to-talk stream that sends nothing for this long is closed
 CLOSE_POLICY = 1008  # RFC 6455 §7.4.1
 CLOSE_TRY_AGAIN = 1013  # RFC 6455 §7.4.1 (IANA registry): try again later
@@ -230,15 +247,14 @@ class _Stream:
         self.ws = ws
         self.service = service
         self.mode = mode
-        # Both modes listen for the end of speech, to decode speculatively (server.speech.stream).
-        self.session = StreamSession(mode, detect=self._voiced)
+        # Both modes end-point with the voice detector, to decode speculatively
+        # (server.speech.stream); hands-free also ends utterances with it.
+        step = PTT_INTERIM_S if mode == "ptt" else HANDSFREE_INTERIM_S
+        self.session = StreamSession(mode, score=SileroStream(), interim_step_s=step)
         self._interim: asyncio.Task[None] | None = None
-        self._finals: asyncio.Queue[Samples | None] = asyncio.Queue(maxsize=2)
+        self._speculations: set[asyncio.Task[None]] = set()
+        self._finals: asyncio.Queue[Final | None] = asyncio.Queue(maxsize=2)
         self._vad_lock = asyncio.Lock()
-
-    @staticmethod
-    def _voiced(samples: Samples) -> bool:
-        return speech_span(samples, min_silence_ms=100) is not None
 
     async def run(self) -> None:
         try:
@@ -256,17 +272,51 @@ class _Stream:
                 self._finals.put_nowait(None)
             if self._interim is not None:
                 self._interim.cancel()
+            for task in list(self._speculations):
+                task.cancel()
             with contextlib.suppress(asyncio.TimeoutError, Exception):
                 await asyncio.wait_for(finals, 35.0)
             finals.cancel()
 
+    async def _receive(self, inbox: asyncio.Queue[dict[str, Any]]) -> None:
+        """Frames off the socket into ``inbox`` (bounded: a full inbox holds the socket back),
+        ending with a disconnect, however the socket ended."""
+        try:
+            while (msg := await self.ws.receive())["type"] != "websocket.disconnect":
+                await inbox.put(dict(msg))
+        finally:
+            with contextlib.suppress(asyncio.QueueFull):
+                inbox.put_nowait({"type": "websocket.disconnect"})
+
     async def _read(self) -> None:
+        """Handle frames in order; audio frames that queued up while the previous ones were
+        handled (a busy machine) go to the session in one batch, one voice-detector call."""
+        inbox: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=INBOX_FRAMES)
+        receiver = asyncio.create_task(self._receive(inbox))
+        try:
+            await self._handle_frames(inbox, receiver)
+        finally:
+            receiver.cancel()
+
+    async def _handle_frames(
+        self, inbox: asyncio.Queue[dict[str, Any]], receiver: asyncio.Task[None]
+    ) -> None:
+        pending: collections.deque[dict[str, Any]] = collections.deque()
         while True:
-            try:
-                msg = await asyncio.wait_for(self.ws.receive(), STREAM_IDLE_S)
-            except TimeoutError:
+            if not pending:
+                try:
+                    pending.append(await asyncio.wait_for(inbox.get(), STREAM_IDLE_S))
+                except TimeoutError:
+                    pending.append({"type": "idle"})
+            while not inbox.empty():
+                pending.append(inbox.get_nowait())
+            msg = pending.popleft()
+            if msg["type"] == "idle" and receiver.done() and inbox.empty():
+                return  # the socket is gone (its disconnect did not fit in a full inbox)
+            if msg["type"] == "idle":
                 if self.session.buffered_s > 0 and self.mode == "ptt":
-                    self.session.cancel()
+                    async with self._vad_lock:
+                        self.session.cancel()
                     await self._send(
                         {"type": "error", "error": "no audio for 10 s: utterance discarded"}
                     )
@@ -276,16 +326,22 @@ class _Stream:
             data: bytes | None = msg.get("bytes")
             text: str | None = msg.get("text")
             if data is not None:
-                if len(data) > MAX_FRAME_BYTES:
+                audio = [data]
+                while pending and pending[0].get("bytes") is not None:
+                    audio.append(pending.popleft()["bytes"])
+                if any(len(d) > MAX_FRAME_BYTES for d in audio):
                     await self._send({"type": "error", "error": "audio frame over 64 KiB"})
                     await self.ws.close(CLOSE_POLICY, "audio frame too large")
                     return
+                # Whole samples per frame: a frame of odd length loses its last byte, as alone.
+                pcm = b"".join(d[: len(d) - len(d) % 2] for d in audio)
                 async with self._vad_lock:  # the session runs the VAD: off the event loop
-                    events = await asyncio.to_thread(self.session.feed, data)
+                    events = await asyncio.to_thread(self.session.feed, pcm)
             elif text is not None:
                 kind = control_kind(text)
                 if kind == "end":
-                    events = self.session.end()
+                    async with self._vad_lock:
+                        events = self.session.end()
                     if not events:
                         await self._send(
                             {
@@ -297,7 +353,8 @@ class _Stream:
                             }
                         )
                 elif kind == "cancel":
-                    self.session.cancel()
+                    async with self._vad_lock:
+                        self.session.cancel()
                     events = []
                 else:
                     await self._send({"type": "error", "error": "text frames: end or cancel"})
@@ -307,35 +364,59 @@ class _Stream:
             for ev in events:
                 await self._handle(ev)
 
-    async def _handle(self, ev: Interim | Final | Problem) -> None:
+    async def _handle(self, ev: Event) -> None:
         if isinstance(ev, Problem):
             await self._send({"type": "error", "error": ev.message})
+        elif isinstance(ev, Speculation):
+            task = asyncio.create_task(self._speculate(ev))
+            self._speculations.add(task)
+            task.add_done_callback(self._speculations.discard)
         elif isinstance(ev, Interim):
-            if self._interim is None or self._interim.done():
+            # Interim text is a nicety: never while a speculation (the likely final) waits.
+            idle = not self._speculations and (self._interim is None or self._interim.done())
+            if idle:
                 self._interim = asyncio.create_task(self._decode_interim(ev.samples.copy()))
         else:
             if self._interim is not None:
                 self._interim.cancel()
             try:
-                self._finals.put_nowait(ev.samples)
+                self._finals.put_nowait(ev)
             except asyncio.QueueFull:
                 await self._send(
                     {"type": "error", "error": "still decoding the previous utterances: dropped"}
                 )
 
     async def _decode_interim(self, samples: Samples) -> None:
-        """A whole recognition (VAD, decode, snap), not only a transcript: when the utterance
-        ends with the same speech, the final reuses it (server.speech.memo)."""
+        """A whole recognition (VAD, decode, snap), not only a transcript, for interim text."""
         assert self.service.pool is not None and self.service.recognizer is not None
         rec = self.service.recognizer
         out = await self.service.pool.try_run(rec.recognize, samples)
         if out is not None and out.heard:
             await self._send({"type": "interim", "text": out.heard})
 
+    async def _speculate(self, ev: Speculation) -> None:
+        """Decode the speech while the operator may still go on; the session ends the
+        utterance early on a decisive reading. The final of the same speech reuses this
+        decode (server.speech.memo), waiting for it if it is still running."""
+        assert self.service.pool is not None and self.service.recognizer is not None
+        recognizer = self.service.recognizer
+        try:
+            rec = await self.service.pool.run(recognizer.recognize, ev.samples, vad=False)
+        except Busy:
+            return  # the final decodes it in its turn
+        sure = decisive(rec, self.service.nlu, self.service.config.threshold)
+        async with self._vad_lock:
+            events = self.session.decided(ev.serial, sure)
+        if rec.heard and not events:
+            await self._send({"type": "interim", "text": rec.heard})
+        for out in events:
+            await self._handle(out)
+
     async def _decode_finals(self) -> None:
-        while (samples := await self._finals.get()) is not None:
+        while (final := await self._finals.get()) is not None:
+            samples = final.samples
             try:
-                rec: Recognition = await self.service.recognize(samples)
+                rec: Recognition = await self.service.recognize(samples, vad=not final.trimmed)
             except Busy as exc:
                 await self._send({"type": "error", "error": str(exc)})
                 continue
@@ -344,9 +425,9 @@ class _Stream:
                 continue
             msg: dict[str, Any] = {"type": "final", **rec.as_json()}
             log.info(
-                "speech final %r (heard %r, confidence %.2f) from %.1f s of audio",
+                "speech final %r (heard %r, confidence %.2f) from %.1f s of audio%s",
                 msg.get("text"), msg.get("heard"), float(msg.get("confidence") or 0.0),
-                len(samples) / SAMPLE_RATE,
+                len(samples) / SAMPLE_RATE, " (reused)" if rec.reused else "",
             )  # fmt: skip
             await self._send(msg)
 

@@ -120,6 +120,37 @@ def speech_span(samples: Samples, *, min_silence_ms: int = 300) -> tuple[int, in
     return max(0, spans[0]["start"] - pad), min(len(samples), spans[-1]["end"] + pad)
 
 
+class SileroStream:
+    """Silero VAD's speech probability of each 512-sample frame of one stream, fed in order.
+
+    Silero is recurrent: ``get_speech_timestamps`` runs a whole clip in one batch and carries
+    the LSTM state from frame to frame. Scoring each new frame from a fresh state gives other
+    probabilities (the end of "take off" three frames early), so the stream's speech would not
+    be the speech a whole clip is trimmed to; this carries the state and the 64-sample context
+    across calls, giving the whole clip's probabilities (faster_whisper.vad.SileroVADModel)."""
+
+    def __init__(self) -> None:
+        from faster_whisper.vad import get_vad_model
+
+        self._session = get_vad_model().session
+        self._h = np.zeros((1, 1, 128), np.float32)
+        self._c = np.zeros((1, 1, 128), np.float32)
+        self._context = np.zeros(64, np.float32)
+
+    def __call__(self, samples: Samples) -> np.ndarray:
+        n = len(samples) // 512
+        if n == 0:
+            return np.zeros(0, np.float32)
+        frames = np.ascontiguousarray(samples[: n * 512], dtype=np.float32).reshape(n, 512)
+        context = np.concatenate([self._context[None, :], frames[:-1, -64:]])
+        batch = np.concatenate([context, frames], axis=1)
+        out, self._h, self._c = self._session.run(
+            None, {"input": batch, "h": self._h, "c": self._c}
+        )
+        self._context = frames[-1, -64:].copy()
+        return np.ravel(out)
+
+
 def _suppress_list(tokenizer: Any, vocab: Vocabulary) -> list[int]:
     """The guided ``suppress_tokens`` for a faster-whisper ``Tokenizer``: tokens outside the
     grammar vocabulary (:mod:`server.speech.constraint`) plus the model's non-speech symbols."""

@@ -20,6 +20,11 @@ from server.speech.pool import DecoderPool
 from server.speech.recognizer import BEAMS, THRESHOLD, Recognition, Recognizer
 
 log = logging.getLogger("uav_console.speech")
+# Words after which a sentence goes on: a reading ending on one is not decisive (decisive).
+CONTINUING = frozenset(
+    {"and", "then", "to", "by", "at", "of", "the", "a", "an", "for", "from", "with", "or"}
+    | {"but", "marker", "waypoint", "point"}
+)
 
 
 @dataclass(frozen=True)
@@ -36,6 +41,26 @@ class SpeechConfig:
     beams: int = 0  # 0: the recogniser's (server.speech.recognizer.BEAMS)
     threshold: float = THRESHOLD  # the dialog's confidence threshold: doubtful readings under it
     gap_log: Path | None = None  # grammar gaps (server.speech.gaps); None: not logged
+
+
+def decisive(rec: Recognition, nlu: NLU, threshold: float) -> bool:
+    """Whether the dialog takes ``rec`` as heard, at once: commands (or a yes/no answer) at the
+    threshold or above, nothing doubting them, and nothing left open: a transcript ending on a
+    word that continues a sentence ("Take off and"), or a move or turn whose distance or angle
+    is unsaid ("Turn left" may be followed by "ninety degrees"). The stream ends an utterance
+    early on a decisive reading (:mod:`server.speech.stream`), else after its full silence."""
+    if rec.confidence < threshold or rec.doubt:
+        return False
+    words = rec.heard.lower().replace(",", " ").replace(".", " ").split()
+    if not words or words[-1] in CONTINUING:
+        return False
+    if not rec.commands:
+        return nlu.answer(rec.text) is not None
+    last = rec.commands[-1]
+    return not (
+        (last.get("action") == "move" and "distance" not in last)
+        or (last.get("action") == "turn" and "angle" not in last)
+    )
 
 
 class SpeechService:
@@ -121,17 +146,25 @@ class SpeechService:
         return "ready"
 
     async def recognize(
-        self, samples: Samples, *, guided: bool = True, state: str | None = None
+        self,
+        samples: Samples,
+        *,
+        guided: bool = True,
+        state: str | None = None,
+        vad: bool = True,
     ) -> Recognition:
         """Recognise 16 kHz samples on the pool (a whole utterance: its grammar gap, if any, is
-        logged; the stream's speculative decodes are not).
+        logged; the stream's speculative decodes are not). ``vad=False``: the samples are the
+        speech already (the stream's end-pointer trimmed them).
 
         Raises:
             ModelError: no model; Busy: the pool is full.
         """
         recognizer = await self.ready()
         assert self.pool is not None
-        rec = await self.pool.run(recognizer.recognize, samples, guided=guided, state=state)
+        rec = await self.pool.run(
+            recognizer.recognize, samples, guided=guided, state=state, vad=vad
+        )
         if rec.gap and self.gaps is not None:
             await asyncio.to_thread(self.gaps.record, rec, self.clock())
         return rec

@@ -1,22 +1,30 @@
 """One browser microphone stream, sans-I/O: PCM bytes in, decode requests out.
 
 The browser sends 16 kHz mono 16-bit PCM in binary frames (an AudioWorklet resamples the
-microphone). Two modes:
+microphone; 32 ms frames, one voice-detector frame each). Two modes:
 
 * ``ptt`` (push-to-talk): audio accumulates while the button or key is held; ``end()`` on
   release gives the :class:`Final` utterance. While it grows, an :class:`Interim` request is
   emitted every ``interim_step_s`` of new audio (the wrapper decodes it only when a decoder is
   idle, so interim text never delays a final one).
-* ``handsfree``: voice activity detection (Silero VAD, shipped with faster-whisper, injected as
-  ``detect``) on the recent audio finds where speech starts; ``end_silence_s`` of silence after
-  it ends the utterance. Audio before any speech is dropped, so an open microphone in a quiet
-  room holds at most ``keep_s`` of samples.
+* ``handsfree``: the voice detector finds where speech starts and ends; audio before any speech
+  is dropped (an open microphone in a quiet room holds at most ``keep_s`` of samples).
 
-Both modes also decode speculatively: when ``detect`` (if given) hears the last
-``settle_s`` of audio fall silent after speech, an :class:`Interim` is emitted at once. The
-speech it carries is, most often, exactly the speech of the :class:`Final` that follows (the
-release a moment later, or hands-free's ``end_silence_s``), and the recogniser then reuses that
-decode instead of starting over (:mod:`server.speech.memo`).
+**End-pointing.** Each 512-sample frame is scored once by ``score`` (Silero VAD's speech
+probability, injected; the frames that arrived since the last call in one batch, so a server
+that fell behind catches up), with Silero's own hysteresis (speech from ``threshold``, silence under
+``neg_threshold``: faster-whisper ``get_speech_timestamps``). When ``settle_s`` of silence
+follows speech, the session asks for a :class:`Speculation`: the speech only (``pre_s``
+before its first voiced frame, ``settle_s`` after its last), decoded while the operator may
+still go on. The wrapper tells the result (:meth:`StreamSession.decided`):
+
+* hands-free, a **decisive** reading (one the dialog flies as heard) ends the utterance as soon
+  as ``commit_s`` of silence has passed and the silence lasted through the decode: the
+  :class:`Final` carries the speculation's samples, so the recogniser reuses its result
+  (:mod:`server.speech.memo`). Otherwise the utterance ends after ``end_silence_s`` of silence,
+  with the same samples (and the same reuse);
+* speech that resumes voids the speculation (the operator paused mid-sentence);
+* push-to-talk ends on release only; the final reuses the speculation when no speech followed.
 
 Memory is bounded in both modes: an utterance longer than ``max_utterance_s`` is refused
 (push-to-talk) or cut there (hands-free), never buffered further.
@@ -35,18 +43,38 @@ import numpy as np
 
 from server.speech.audio import SAMPLE_RATE, Samples, pcm16_to_float
 
-Detect = Callable[[Samples], bool]  # does this stretch of audio hold speech?
+# Speech probability of each 512-sample frame of the samples given: the stream's next frames,
+# in order (a recurrent scorer keeps its state between calls: recognizer.SileroStream).
+Score = Callable[[Samples], np.ndarray]
 MODES = ("ptt", "handsfree")
+FRAME = 512  # Silero VAD's window at 16 kHz (faster_whisper.vad: window_size_samples)
+THRESHOLD = 0.5  # Silero's speech threshold (faster_whisper.vad.VadOptions.threshold)
+NEG_THRESHOLD = THRESHOLD - 0.15  # its silence threshold (get_speech_timestamps' default)
 
 
 @dataclass(frozen=True)
 class Interim:
+    """Audio to decode for interim text only, while the operator speaks."""
+
     samples: Samples
 
 
 @dataclass(frozen=True)
-class Final:
+class Speculation:
+    """The speech of the utterance so far, which may be all of it: decode it now, and tell
+    the session whether the reading is decisive (:meth:`StreamSession.decided`)."""
+
     samples: Samples
+    serial: int
+
+
+@dataclass(frozen=True)
+class Final:
+    """The utterance. ``trimmed``: the samples are the speech already (the recogniser skips its
+    own voice detection, and a speculation of the same samples is reused)."""
+
+    samples: Samples
+    trimmed: bool = False
 
 
 @dataclass(frozen=True)
@@ -54,7 +82,7 @@ class Problem:
     message: str
 
 
-Event = Interim | Final | Problem
+Event = Interim | Speculation | Final | Problem
 
 
 def control_kind(text: str) -> str | None:
@@ -70,45 +98,55 @@ def control_kind(text: str) -> str | None:
 
 
 class StreamSession:
-    """Feed PCM with :meth:`feed`; release with :meth:`end`; both return events in order."""
+    """Feed PCM with :meth:`feed`; release with :meth:`end`; tell speculative readings with
+    :meth:`decided`; each returns events in order."""
 
     def __init__(
         self,
         mode: str,
         *,
-        detect: Detect | None = None,
+        score: Score | None = None,
         max_utterance_s: float = 30.0,
         interim_step_s: float = 0.8,
         end_silence_s: float = 0.7,
-        vad_window_s: float = 0.5,
         keep_s: float = 1.0,
-        settle_s: float = 0.35,
-        settle_step_s: float = 0.1,
+        pre_s: float = 0.3,
+        settle_s: float = 0.3,
+        commit_s: float = 0.35,
     ) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
-        if mode == "handsfree" and detect is None:
+        if mode == "handsfree" and score is None:
             raise ValueError("hands-free mode needs a voice activity detector")
+        if not 0 < settle_s <= commit_s <= end_silence_s:
+            raise ValueError("need 0 < settle_s <= commit_s <= end_silence_s")
         self.mode = mode
-        self.detect = detect
+        self.score = score
         self.max_samples = int(max_utterance_s * SAMPLE_RATE)
         self.interim_step = int(interim_step_s * SAMPLE_RATE)
         self.end_silence = int(end_silence_s * SAMPLE_RATE)
-        self.vad_window = int(vad_window_s * SAMPLE_RATE)
-        self.keep = int(keep_s * SAMPLE_RATE)
-        # > the recogniser's VAD pad (0.3 s), so the speculative decode trims to the same speech
+        self.keep = max(int(keep_s * SAMPLE_RATE), int(pre_s * SAMPLE_RATE) + FRAME)
+        self.pre = int(pre_s * SAMPLE_RATE)
+        # The speculation keeps settle_s of silence after the speech: Silero ends speech at the
+        # first quiet frame, and a soft last consonant may lie after it. 0.3 s is the pad the
+        # recogniser's own trim gives a whole clip (recognizer.VAD_PAD_S), the speech the
+        # doubt rules were chosen on: with 0.2 s, 3 of bench/speech.py's 324 espeak-ng clips
+        # were flown wrong (a beam's doubt no longer showed).
         self.settle = int(settle_s * SAMPLE_RATE)
-        self.settle_step = int(settle_step_s * SAMPLE_RATE)  # how often the tail is checked
-        self._since_settle = 0
-        self._buf = np.zeros(0, np.float32)
-        self._since_interim = 0
-        self._since_vad = 0
-        self._overflow = False
-        self._speaking = False
-        self._silent = 0  # samples of silence since the last speech (hands-free)
-        self._heard = False  # speech heard since the last speculative decode
+        self.commit = int(commit_s * SAMPLE_RATE)
         self.speculated = 0  # speculative decodes asked for (tests, logs)
+        self.committed = 0  # utterances ended early on a decisive reading (tests, logs)
         self.utterances = 0
+        self._serial = 0
+        self._buf: Samples = np.zeros(0, np.float32)
+        self._scored = 0  # samples of _buf the detector has scored
+        self._start: int | None = None  # where the utterance's audio starts (pre-roll in)
+        self._quiet_from: int | None = None  # where the silence after the speech began
+        self._spec: Samples | None = None  # the current speculation's samples
+        self._spec_serial = 0
+        self._decisive = False
+        self._since_interim = 0
+        self._overflow = False
 
     @property
     def buffered_s(self) -> float:
@@ -117,92 +155,130 @@ class StreamSession:
     def feed(self, pcm: bytes) -> list[Event]:
         """Add little-endian 16-bit mono PCM at 16 kHz."""
         chunk = pcm16_to_float(pcm)
-        if chunk.size == 0:
+        if chunk.size == 0 or self._overflow:
             return []
-        if self.mode == "ptt":
-            return self._feed_ptt(chunk)
-        return self._feed_handsfree(chunk)
-
-    def _feed_ptt(self, chunk: Samples) -> list[Event]:
-        if self._overflow:
-            return []
-        if len(self._buf) + len(chunk) > self.max_samples:
+        if self.mode == "ptt" and len(self._buf) + len(chunk) > self.max_samples:
             self._overflow = True
             self._buf = np.zeros(0, np.float32)
             seconds = self.max_samples / SAMPLE_RATE
             return [Problem(f"longer than {seconds:.0f} s: this utterance is discarded")]
         self._buf = np.concatenate([self._buf, chunk])
-        self._since_interim += len(chunk)
-        if (speculation := self._settled(len(chunk))) is not None:
-            return [speculation]
-        if self._since_interim >= self.interim_step:
-            self._since_interim = 0
-            return [Interim(self._buf)]
-        return []
-
-    def _settled(self, added: int) -> Interim | None:
-        """Every ``settle_step`` of audio: the speculative :class:`Interim` if the last
-        ``settle`` of audio is silent after speech was heard, else None."""
-        self._since_settle += added
-        if self.detect is None or self._since_settle < self.settle_step:
-            return None
-        self._since_settle = 0
-        if self.detect(self._buf[-self.settle :]):
-            self._heard = True
-            return None
-        if not self._heard:
-            return None
-        self._heard = False  # speech, then silence: the utterance is likely complete
-        self._since_interim = 0
-        self.speculated += 1
-        return Interim(self._buf)
-
-    def _feed_handsfree(self, chunk: Samples) -> list[Event]:
-        assert self.detect is not None
-        self._buf = np.concatenate([self._buf, chunk])
-        self._since_vad += len(chunk)
         events: list[Event] = []
-        if self._speaking and (speculation := self._settled(len(chunk))) is not None:
-            events.append(speculation)
-        if self._since_vad < self.vad_window // 2:
-            return events
-        self._since_vad = 0
-        voiced = self.detect(self._buf[-self.vad_window :])
-        if not self._speaking:
-            if voiced:
-                self._speaking, self._silent, self._since_interim = True, 0, 0
-                self._heard = True
-            else:
-                self._buf = self._buf[-self.keep :]  # pre-roll: the start of the first word
-            return events
-        # A silent window means at least a window's worth of silence.
-        step = self.vad_window // 2
-        self._silent = 0 if voiced else (self._silent + step if self._silent else self.vad_window)
-        self._since_interim += step
-        if self._silent >= self.end_silence or len(self._buf) >= self.max_samples:
-            events.append(Final(self._buf[: self.max_samples]))
-            self.utterances += 1
-            self._buf = np.zeros(0, np.float32)
-            self._speaking = False
-            return events
-        if self._since_interim >= self.interim_step:
-            self._since_interim = 0
-            events.append(Interim(self._buf))
+        if self.score is not None and self._scored + FRAME <= len(self._buf):
+            n = (len(self._buf) - self._scored) // FRAME
+            probs = np.ravel(self.score(self._buf[self._scored : self._scored + n * FRAME]))
+            for prob in probs[:n]:
+                events += self._frame(float(prob))
+        if self.mode == "ptt":
+            self._since_interim += len(chunk)
+            if self._since_interim >= self.interim_step and not events:
+                self._since_interim = 0
+                events.append(Interim(self._buf))
+        elif self._start is None and self._scored >= self.keep + FRAME:
+            # Pre-roll only (the start of the first word); whole frames, so that frames stay
+            # where they were in the stream, whatever was dropped.
+            drop = (self._scored - self.keep) // FRAME * FRAME
+            self._buf, self._scored = self._buf[drop:], self._scored - drop
         return events
+
+    def _frame(self, prob: float) -> list[Event]:
+        """The next frame's speech probability moves the end-pointer (Silero's hysteresis)."""
+        at = self._scored
+        self._scored += FRAME
+        if self._start is None:
+            if prob < THRESHOLD:
+                return []
+            self._start, self._quiet_from, self._since_interim = max(0, at - self.pre), None, 0
+            return []
+        if prob >= THRESHOLD:
+            if self._quiet_from is not None:  # spoke again: the speculation was premature
+                self._quiet_from, self._spec, self._decisive = None, None, False
+            return self._interim_while_speaking()
+        if prob >= NEG_THRESHOLD:
+            return [] if self._quiet_from is not None else self._interim_while_speaking()
+        if self._quiet_from is None:
+            self._quiet_from = at
+        return self._after_silence()
+
+    def _interim_while_speaking(self) -> list[Event]:
+        if self.mode != "handsfree":
+            return []
+        self._since_interim += FRAME
+        if self._start is not None and self._scored - self._start >= self.max_samples:
+            cut = self._buf[self._start : self._start + self.max_samples]
+            return self._final(cut, trimmed=True)
+        if self._since_interim < self.interim_step:
+            return []
+        self._since_interim = 0
+        return [Interim(self._buf[self._start : self._scored])]
+
+    def _after_silence(self) -> list[Event]:
+        assert self._quiet_from is not None and self._start is not None
+        quiet = self._scored - self._quiet_from
+        events: list[Event] = []
+        if self._spec is None and quiet >= self.settle:
+            self._serial += 1
+            self._spec = self._buf[self._start : self._quiet_from + self.settle]
+            self._spec_serial, self._decisive = self._serial, False
+            self.speculated += 1
+            events.append(Speculation(self._spec, self._serial))
+        ends = (self._decisive and quiet >= self.commit) or quiet >= self.end_silence
+        if self.mode == "handsfree" and self._spec is not None and ends:
+            self.committed += quiet < self.end_silence
+            events += self._final(self._spec, trimmed=True)
+        return events
+
+    def decided(self, serial: int, decisive: bool) -> list[Event]:
+        """The reading of :class:`Speculation` ``serial``: decisive or not. Hands-free, a
+        decisive reading of speech still followed only by silence ends the utterance once
+        ``commit_s`` of silence has passed (at once, if it has)."""
+        if serial != self._spec_serial or self._spec is None:
+            return []  # speech resumed, or the utterance ended: stale
+        self._decisive = decisive
+        if self.mode != "handsfree" or not decisive or self._quiet_from is None:
+            return []
+        if self._scored - self._quiet_from < self.commit:
+            return []
+        self.committed += 1
+        return self._final(self._spec, trimmed=True)
+
+    def _final(self, samples: Samples, *, trimmed: bool) -> list[Event]:
+        """Hands-free: the utterance ends; what follows it starts the next one."""
+        rest = self._buf[self._scored :]
+        # Pre-roll for the next utterance: the silence after this one, never its speech.
+        quiet = self._scored if self._quiet_from is None else self._quiet_from
+        self._reset(keep=self._buf[max(quiet, self._scored - self.keep) : self._scored])
+        self._buf = np.concatenate([self._buf, rest])
+        self.utterances += 1
+        return [Final(samples, trimmed=trimmed)]
 
     def end(self) -> list[Event]:
         """Push-to-talk released (or hands-free stopped): the utterance so far, if any."""
-        buf, overflow, speaking = self._buf, self._overflow, self._speaking
+        buf, overflow, start, spec = self._buf, self._overflow, self._start, self._spec
+        quiet_from = self._quiet_from
         self.cancel()
         if overflow or buf.size == 0:
             return []
-        if self.mode == "handsfree" and not speaking:
+        if self.mode == "handsfree" and start is None:
             return []
         self.utterances += 1
-        return [Final(buf)]
+        if spec is not None:
+            return [Final(spec, trimmed=True)]  # nothing but silence followed it
+        if start is None:
+            return [Final(buf)]  # no voice detector, or it heard nothing: the recogniser's VAD
+        stop = len(buf) if quiet_from is None else min(len(buf), quiet_from + self.settle)
+        return [Final(buf[start:stop], trimmed=True)]
 
     def cancel(self) -> None:
         """Drop whatever was heard."""
-        self._buf = np.zeros(0, np.float32)
-        self._since_interim = self._since_vad = self._silent = self._since_settle = 0
-        self._overflow = self._speaking = self._heard = False
+        self._reset(keep=np.zeros(0, np.float32))
+        self._overflow = False
+
+    def _reset(self, keep: Samples) -> None:
+        self._buf = keep
+        self._scored = len(keep)
+        self._start = self._quiet_from = None
+        self._spec = None
+        self._spec_serial = 0
+        self._decisive = False
+        self._since_interim = 0

@@ -315,3 +315,46 @@ def test_auto_listens_offline_and_leaves_a_failing_browser_recogniser_saying_so_
     finally:
         own.close()
         tls_server.http.post("/api/v1/drones/uav1/land")
+
+
+def test_handsfree_flies_a_spoken_command_ended_by_its_short_pause(
+    browser: Any, tls_server: TlsServer, tmp_path: Path
+) -> None:
+    """Hands-free through the fake microphone: "take off" once, then silence. The server's
+    end-pointer ends the utterance at the pause (a decisive reading after 0.3 s, else 0.7 s of
+    silence: server/speech/stream.py), with no press or release, and the drone takes off."""
+    wav = synthesise(tmp_path / "takeoff.wav", "take off", voice="en-us", speed=150, pad_s=1.0)
+    fake = tmp_path / "fake.wav"
+    subprocess.run(["sox", str(wav), str(fake), "pad", "1", "6"], check=True)
+    ok, last, _ = wait_until(tls_server.truth, lambda t: not t["flying"], 30.0)
+    assert ok, last  # an earlier test's landing is over
+    own = launch(browser.browser_type, tls_server, Path(f"{fake}%noloop"))
+    try:
+        ctx = own.new_context(
+            viewport={"width": 1280, "height": 800}, service_workers="block", bypass_csp=True
+        )
+        page = ctx.new_page()
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(tls_server.url())
+        page.wait_for_selector("#conn[data-state='open']", timeout=20_000)
+        page.evaluate("window.uavConsole.dialog.muted = true")  # no reply to pause the mic
+        page.wait_for_function("!document.getElementById('handsfree').disabled")
+        page.check("#handsfree")
+        page.wait_for_function("document.body.dataset.listening === 'server'")
+        try:
+            page.wait_for_function(
+                "[...document.querySelectorAll('#dialog .msg-user')]"
+                ".some(e => /spoken/.test(e.textContent) && /takeoff/.test(e.textContent))",
+                timeout=60_000,
+            )
+        except Exception as exc:
+            raise AssertionError(tls_server.why(page)) from exc
+        ok, last, _ = wait_until(tls_server.truth, lambda t: t["flying"] and t["z"] > 0.5, 30.0)
+        assert ok, (last, errors, tls_server.why(page))
+        assert page.evaluate("document.body.dataset.listening") == "server"  # still listening
+        page.uncheck("#handsfree")
+        assert errors == []
+    finally:
+        own.close()
+        tls_server.http.post("/api/v1/drones/uav1/land")

@@ -355,6 +355,58 @@ def test_handsfree_stream_cuts_the_utterance_at_the_pause(served: Served) -> Non
     assert final["type"] == "final" and final["commands"] == [{"action": "takeoff"}], final
 
 
+async def _frames(ws: Any, samples: np.ndarray) -> None:
+    """Send ``samples`` in the worklet's 32 ms frames."""
+    pcm = (np.clip(samples, -1, 1) * 32767).astype("<i2").tobytes()
+    for i in range(0, len(pcm), 1024):
+        await ws.send(pcm[i : i + 1024])
+        await asyncio.sleep(0.005)
+
+
+async def _until(ws: Any, kinds: tuple[str, ...], text: str = "") -> dict[str, Any]:
+    """The next message of one of ``kinds`` (an interim only if its text holds ``text``)."""
+    while True:
+        msg = json.loads(await asyncio.wait_for(ws.recv(), 60))
+        if msg["type"] in kinds and (msg["type"] != "interim" or text in msg["text"].lower()):
+            return dict(msg)
+
+
+def test_handsfree_ends_a_decisive_command_after_a_short_silence(served: Served) -> None:
+    """0.35 s of silence after "take off" is all the server gets: a decisive reading ends the
+    utterance there (the full end of an utterance needs 0.7 s)."""
+    speech = read_wav(served.clip("take off", voice="en-us", speed=150, pad_s=0.0))
+    quiet = np.zeros(int(0.35 * 16000), np.float32)
+
+    async def talk() -> dict[str, Any]:
+        async with connect(_stream_url(served, "handsfree"), ssl=_ws_ssl(served)) as ws:
+            assert json.loads(await ws.recv())["type"] == "ready"
+            await _frames(ws, np.concatenate([np.zeros(8000, np.float32), speech, quiet]))
+            return await _until(ws, ("final", "error"))  # no more audio, no "end"
+
+    final = asyncio.run(talk())
+    assert final["type"] == "final" and final["commands"] == [{"action": "takeoff"}], final
+
+
+def test_handsfree_waits_for_the_full_silence_when_the_command_may_go_on(served: Served) -> None:
+    """ "Turn left" may go on ("… ninety degrees"): after 0.45 s of silence the server has
+    read it (interim text) but not ended the utterance; 0.3 s more silence ends it."""
+    speech = read_wav(served.clip("turn left", voice="en-us", speed=150, pad_s=0.0))
+    quiet = np.zeros(int(0.45 * 16000), np.float32)
+
+    async def talk() -> tuple[dict[str, Any], dict[str, Any]]:
+        async with connect(_stream_url(served, "handsfree"), ssl=_ws_ssl(served)) as ws:
+            assert json.loads(await ws.recv())["type"] == "ready"
+            await _frames(ws, np.concatenate([np.zeros(8000, np.float32), speech, quiet]))
+            first = await _until(ws, ("interim", "final", "error"), "turn")
+            await _frames(ws, np.zeros(int(0.3 * 16000), np.float32))
+            return first, await _until(ws, ("final", "error"))
+
+    first, final = asyncio.run(talk())
+    assert first["type"] == "interim", first
+    assert final["type"] == "final", final
+    assert final["commands"] == [{"action": "turn", "direction": "left"}], final
+
+
 def test_twenty_streams_at_once_and_one_that_stops_mid_word(served: Served) -> None:
     speech = read_wav(served.clip("take off", voice="en-us", speed=150))
     half = (speech[: len(speech) // 2] * 32767).astype("<i2").tobytes()

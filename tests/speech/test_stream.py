@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from server.speech.audio import SAMPLE_RATE
-from server.speech.stream import Final, Interim, Problem, StreamSession, control_kind
+from server.speech.stream import (
+    FRAME,
+    Final,
+    Interim,
+    Problem,
+    Speculation,
+    StreamSession,
+    control_kind,
+)
 
 
 def pcm(seconds: float, loud: bool) -> bytes:
@@ -15,13 +23,15 @@ def pcm(seconds: float, loud: bool) -> bytes:
     return x.astype("<i2").tobytes()
 
 
-def energy(samples: np.ndarray) -> bool:
-    """A stand-in detector for unit tests: speech = loud (the server uses Silero VAD)."""
-    return float(np.sqrt(np.mean(samples**2))) > 0.05
+def energy(samples: np.ndarray) -> np.ndarray:
+    """A stand-in scorer for unit tests: a frame is speech when loud (the server uses Silero
+    VAD's probability)."""
+    frames = samples[: len(samples) - len(samples) % FRAME].reshape(-1, FRAME)
+    return (np.sqrt(np.mean(frames**2, axis=1)) > 0.05).astype(np.float32)
 
 
-def feed(session: StreamSession, data: bytes, chunk_s: float = 0.1) -> list[object]:
-    step = int(chunk_s * SAMPLE_RATE) * 2
+def feed(session: StreamSession, data: bytes, chunk_s: float = FRAME / SAMPLE_RATE) -> list[object]:
+    step = round(chunk_s * SAMPLE_RATE) * 2
     events: list[object] = []
     for i in range(0, len(data), step):
         events += session.feed(data[i : i + step])
@@ -60,7 +70,7 @@ def test_odd_byte_frames_and_empty_frames_are_harmless() -> None:
 
 
 def test_handsfree_cuts_utterances_at_silence_and_drops_silence() -> None:
-    s = StreamSession("handsfree", detect=energy, end_silence_s=0.6, keep_s=0.5)
+    s = StreamSession("handsfree", score=energy, end_silence_s=0.6, keep_s=0.5)
     events = feed(s, pcm(3.0, False))  # a quiet room: nothing, and only pre-roll kept
     assert events == [] and s.buffered_s <= 0.5 + 0.1  # keep_s=0.5 here
     events = feed(s, pcm(1.2, True) + pcm(1.0, False) + pcm(0.8, True) + pcm(1.0, False))
@@ -71,7 +81,7 @@ def test_handsfree_cuts_utterances_at_silence_and_drops_silence() -> None:
 
 
 def test_handsfree_long_speech_is_cut_at_the_limit() -> None:
-    s = StreamSession("handsfree", detect=energy, max_utterance_s=2.0)
+    s = StreamSession("handsfree", score=energy, max_utterance_s=2.0)
     events = feed(s, pcm(5.0, True))
     finals = [e for e in events if isinstance(e, Final)]
     assert finals and all(len(f.samples) <= 2.0 * SAMPLE_RATE for f in finals)
@@ -102,28 +112,121 @@ def test_text_frames_name_a_control_or_nothing(text: str, kind: str | None) -> N
 
 
 def test_push_to_talk_decodes_speculatively_when_speech_falls_silent() -> None:
-    s = StreamSession("ptt", detect=energy, interim_step_s=5.0, settle_s=0.4)
-    assert feed(s, pcm(0.3, False)) == []  # silence before any speech: nothing to decode
+    s = StreamSession("ptt", score=energy, interim_step_s=5.0, settle_s=0.2, pre_s=0.3)
+    assert feed(s, pcm(0.5, False)) == []  # silence before any speech: nothing to decode
     assert feed(s, pcm(1.0, True)) == []  # speaking (no interim step reached)
     events = feed(s, pcm(0.8, False))  # the operator stops, still holding the button
-    assert [type(e) for e in events] == [Interim] and s.speculated == 1
-    spoken = len(events[0].samples) / SAMPLE_RATE  # type: ignore[attr-defined]
-    assert 1.7 - 1e-9 <= spoken <= 2.1  # all the speech and >= settle_s of silence after it
+    assert [type(e) for e in events] == [Speculation] and s.speculated == 1
+    spec = events[0]
+    assert isinstance(spec, Speculation)
+    # The speech only: the pre-roll, the speech, settle_s of silence (frame-exact).
+    spoken = len(spec.samples) / SAMPLE_RATE
+    assert 0.3 + 1.0 + 0.2 - 0.07 <= spoken <= 0.3 + 1.0 + 0.2 + 0.07
     assert feed(s, pcm(0.5, False)) == []  # more silence: no second speculation
+    assert s.decided(spec.serial, True) == []  # push-to-talk ends on release only
+    (final,) = s.end()
+    assert isinstance(final, Final) and final.trimmed
+    assert np.array_equal(final.samples, spec.samples)  # the same speech: the decode is reused
+
+
+def test_push_to_talk_speaking_again_voids_the_speculation() -> None:
+    s = StreamSession("ptt", score=energy, interim_step_s=5.0)
+    feed(s, pcm(0.6, True))
+    (spec,) = feed(s, pcm(0.4, False))
+    assert isinstance(spec, Speculation)
     feed(s, pcm(0.5, True))
-    assert [type(e) for e in feed(s, pcm(0.6, False))] == [Interim]  # spoke again, fell silent
-    assert [type(e) for e in s.end()] == [Final] and s.speculated == 2
+    (final,) = s.end()  # released while speaking: all the speech, up to the release
+    assert isinstance(final, Final) and final.trimmed
+    assert len(final.samples) == int(1.5 * SAMPLE_RATE) > len(spec.samples)
 
 
-def test_handsfree_decodes_speculatively_before_the_end_of_the_utterance() -> None:
-    s = StreamSession("handsfree", detect=energy, end_silence_s=0.7, settle_s=0.4)
-    events = feed(s, pcm(1.2, True) + pcm(1.2, False))
-    kinds = [type(e) for e in events]
-    assert kinds.count(Final) == 1 and s.speculated == 1
-    speculative = [e for e in events if isinstance(e, Interim)][-1]
-    final = next(e for e in events if isinstance(e, Final))
-    assert kinds.index(Final) > kinds.index(Interim)
-    # The final only adds silence to what the speculative decode had.
-    n = len(speculative.samples)
-    assert np.array_equal(final.samples[:n], speculative.samples)
-    assert not np.any(final.samples[n:])
+def test_push_to_talk_without_a_detector_hands_over_everything() -> None:
+    s = StreamSession("ptt", interim_step_s=5.0)
+    feed(s, pcm(0.4, False) + pcm(0.4, True))
+    (final,) = s.end()
+    assert isinstance(final, Final) and not final.trimmed
+    assert len(final.samples) == int(0.8 * SAMPLE_RATE)
+
+
+def handsfree(**options: float) -> StreamSession:
+    return StreamSession(
+        "handsfree", score=energy, interim_step_s=5.0, settle_s=0.2, commit_s=0.3,
+        end_silence_s=0.7, **options,
+    )  # fmt: skip
+
+
+def test_handsfree_decisive_reading_ends_the_utterance_after_the_short_silence() -> None:
+    s = handsfree()
+    events = feed(s, pcm(0.5, False) + pcm(1.0, True) + pcm(0.25, False))
+    (spec,) = [e for e in events if isinstance(e, Speculation)]
+    assert not any(isinstance(e, Final) for e in events)
+    # The reading comes back before commit_s of silence: the utterance ends at commit_s.
+    assert s.decided(spec.serial, True) == []
+    events = feed(s, pcm(0.1, False))
+    (final,) = events
+    assert isinstance(final, Final) and final.trimmed
+    assert np.array_equal(final.samples, spec.samples)
+    assert s.committed == 1 and s.utterances == 1
+
+
+def test_handsfree_decisive_reading_after_the_short_silence_ends_it_at_once() -> None:
+    s = handsfree()
+    events = feed(s, pcm(1.0, True) + pcm(0.4, False))  # a slow decode: 0.4 s of silence
+    (spec,) = [e for e in events if isinstance(e, Speculation)]
+    (final,) = s.decided(spec.serial, True)
+    assert isinstance(final, Final) and final.samples is spec.samples
+    assert feed(s, pcm(1.0, False)) == []  # the utterance is over: nothing more
+    assert s.utterances == 1
+
+
+def test_handsfree_doubtful_reading_waits_for_the_full_silence() -> None:
+    s = handsfree()
+    events = feed(s, pcm(1.0, True) + pcm(0.3, False))
+    (spec,) = [e for e in events if isinstance(e, Speculation)]
+    assert s.decided(spec.serial, False) == []
+    assert feed(s, pcm(0.3, False)) == []  # 0.6 s of silence: not yet
+    (final,) = feed(s, pcm(0.15, False))
+    assert isinstance(final, Final) and np.array_equal(final.samples, spec.samples)
+    assert s.committed == 0
+
+
+def test_handsfree_pause_mid_sentence_is_not_cut_even_if_the_first_half_reads_whole() -> None:
+    """ "Take off … and go to marker three": the first half is decisive, but the operator
+    speaks again before commit_s of silence; the utterance is the whole sentence."""
+    s = handsfree()
+    events = feed(s, pcm(0.8, True) + pcm(0.25, False))
+    (spec,) = [e for e in events if isinstance(e, Speculation)]
+    events = feed(s, pcm(0.8, True))  # speech resumes
+    assert s.decided(spec.serial, True) == []  # stale: the speech went on
+    events += feed(s, pcm(0.8, False))
+    finals = [e for e in events if isinstance(e, Final)]
+    assert len(finals) == 1 and s.speculated == 2
+    assert len(finals[0].samples) >= (0.8 + 0.25 + 0.8) * SAMPLE_RATE
+
+
+def test_handsfree_next_utterance_starts_clean_after_an_early_end() -> None:
+    s = handsfree()
+    events = feed(s, pcm(0.8, True) + pcm(0.35, False))
+    (spec,) = [e for e in events if isinstance(e, Speculation)]
+    (first,) = s.decided(spec.serial, True)
+    events = feed(s, pcm(0.4, False) + pcm(0.6, True) + pcm(0.8, False))
+    (second,) = [e for e in events if isinstance(e, Final)]
+    assert isinstance(first, Final) and isinstance(second, Final)
+    # The second has its own pre-roll of silence and none of the first's speech.
+    lead = second.samples[: int(0.25 * SAMPLE_RATE)]
+    assert not np.any(lead) and s.utterances == 2
+
+
+def test_bad_end_pointing_options() -> None:
+    with pytest.raises(ValueError, match="settle_s"):
+        StreamSession("ptt", settle_s=0.5, commit_s=0.3)
+
+
+def test_frames_that_queued_up_end_point_as_if_fed_one_by_one() -> None:
+    """A server that fell behind feeds what queued up in one batch: the same utterances."""
+    audio = pcm(0.4, False) + pcm(0.9, True) + pcm(0.9, False) + pcm(0.5, True) + pcm(1.0, False)
+    one, batched = handsfree(), handsfree()
+    a = [e for e in feed(one, audio) if isinstance(e, Final | Speculation)]
+    b = [e for e in feed(batched, audio, chunk_s=0.7) if isinstance(e, Final | Speculation)]
+    assert [type(e) for e in a] == [type(e) for e in b] == [Speculation, Final] * 2
+    assert all(np.array_equal(x.samples, y.samples) for x, y in zip(a, b, strict=True))

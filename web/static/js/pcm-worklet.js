@@ -1,11 +1,13 @@
 // AudioWorklet: the microphone at the context's rate -> 16 kHz mono 16-bit PCM, posted to the
-// page in 100 ms chunks (Whisper's input rate; openai/whisper audio.py SAMPLE_RATE).
+// page in 32 ms chunks (Whisper's input rate; openai/whisper audio.py SAMPLE_RATE). One chunk is
+// one frame of the server's voice detector (Silero VAD: 512 samples at 16 kHz), so the end of
+// speech is seen one frame after it is spoken, not up to a 100 ms chunk later.
 //
 // Downsampling averages the input samples that fall in each output sample's interval (a box
 // filter): a cheap low-pass that keeps 44.1/48 kHz microphones from aliasing into speech band.
 
 const OUT_RATE = 16000;
-const CHUNK = 1600; // 100 ms at 16 kHz
+const CHUNK = 512; // 32 ms at 16 kHz
 
 class PcmDownsampler extends AudioWorkletProcessor {
   constructor() {
