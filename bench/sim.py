@@ -25,7 +25,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drone.ardrone import at
-from drone.ardrone.driver import DriverProtocol
 from drone.ardrone.navdata import (
     CtrlState,
     Demo,
@@ -34,6 +33,7 @@ from drone.ardrone.navdata import (
     decode_navdata,
     encode_navdata,
 )
+from drone.ardrone.protocol import DriverProtocol
 from drone.sim.drone import SimDrone
 from drone.sim.link import InMemoryLink
 

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from drone.ardrone.driver import DriverProtocol
+from drone.ardrone.protocol import DriverProtocol
 from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
 from drone.control.clock import VirtualClock

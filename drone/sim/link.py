@@ -1,6 +1,6 @@
 """``InMemoryLink``: the driver core and the simulator joined by bytes, with no sockets.
 
-Lockstep flights run the real code path — :class:`~drone.ardrone.driver.DriverProtocol` encodes
+Lockstep flights run the real code path — :class:`~drone.ardrone.protocol.DriverProtocol` encodes
 AT datagrams, :class:`~drone.sim.drone.SimDrone` parses them, and navdata bytes go back the same
 way — on a virtual clock, far faster than real time and deterministic for a seed.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from drone.ardrone.driver import DriverEvent, DriverProtocol
+from drone.ardrone.protocol import DriverEvent, DriverProtocol
 from drone.sim.drone import SimDrone
 from drone.sim.errors import SimConfigError
 

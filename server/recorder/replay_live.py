@@ -37,7 +37,7 @@ from server.recorder.errors import CorruptRecording, FlightNotFound
 from server.recorder.index import FlightIndex, drones_of, iso
 from server.recorder.mcapfile import Recording
 from server.recorder.replay import Played, Player, Timeline, flight_start_ns, load
-from server.recorder.replay_app import ReplayCommand, ReplayDrone
+from server.recorder.replay_drone import ReplayCommand, ReplayDrone
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge, setup_graph
 from server.security import PilotLease, Role, Security, token_from

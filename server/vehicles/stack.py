@@ -14,7 +14,8 @@ import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import TYPE_CHECKING, Any
 
-from drone.ardrone.driver import ARDroneDriver, DriverConfig
+from drone.ardrone.driver import ARDroneDriver
+from drone.ardrone.protocol import DriverConfig
 from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
 from drone.commands import DirectAction

@@ -12,16 +12,10 @@ import threading
 
 import pytest
 
-from drone.ardrone.driver import (
-    DECODE_S_DECAY,
-    DECODE_S_INITIAL,
-    ARDroneDriver,
-    DriverEvent,
-    LinkLost,
-    LinkRestored,
-)
+from drone.ardrone.driver import DECODE_S_DECAY, DECODE_S_INITIAL, ARDroneDriver
 from drone.ardrone.errors import DriverNotStartedError
 from drone.ardrone.navdata import CtrlState, DroneState, Navdata, encode_navdata
+from drone.ardrone.protocol import DriverEvent, LinkLost, LinkRestored
 from drone.sim.server import SimServer
 from tests.support.loopback import fresh_address
 

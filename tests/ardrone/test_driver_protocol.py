@@ -7,7 +7,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drone.ardrone import at
-from drone.ardrone.driver import (
+from drone.ardrone.errors import ATEncodeError, DriverNotStartedError
+from drone.ardrone.navdata import CtrlState, Demo, DroneState, Navdata, encode_navdata
+from drone.ardrone.protocol import (
     DriverProtocol,
     HandshakeDone,
     LinkLost,
@@ -16,8 +18,6 @@ from drone.ardrone.driver import (
     NavdataReceived,
     NavdataRejected,
 )
-from drone.ardrone.errors import ATEncodeError, DriverNotStartedError
-from drone.ardrone.navdata import CtrlState, Demo, DroneState, Navdata, encode_navdata
 
 
 def nav(seq: int, state: DroneState = DroneState.NAVDATA_DEMO, demo: bool = True) -> bytes:

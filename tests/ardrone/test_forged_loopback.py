@@ -19,8 +19,9 @@ import asyncio
 
 import pytest
 
-from drone.ardrone.driver import ARDroneDriver, DriverEvent, NavdataDoubt
+from drone.ardrone.driver import ARDroneDriver
 from drone.ardrone.navdata import CtrlState, Demo, DroneState, Navdata, encode_navdata
+from drone.ardrone.protocol import DriverEvent, NavdataDoubt
 from drone.sim.server import SimServer
 from tests.support.loopback import for_worker
 

@@ -17,7 +17,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_driver_protocol import handshake
 
-from drone.ardrone.driver import (
+from drone.ardrone.navdata import CtrlState, Demo, DroneState, Navdata, encode_navdata
+from drone.ardrone.plausibility import (
+    BatteryEnvelope,
+    NavdataPlausibility,
+    PlausibilityConfig,
+    SequenceGuard,
+    load_of,
+)
+from drone.ardrone.protocol import (
     DriverProtocol,
     LinkLost,
     LinkRestored,
@@ -26,14 +34,6 @@ from drone.ardrone.driver import (
     NavdataReceived,
     NavdataRejected,
     NavdataTrusted,
-)
-from drone.ardrone.navdata import CtrlState, Demo, DroneState, Navdata, encode_navdata
-from drone.ardrone.plausibility import (
-    BatteryEnvelope,
-    NavdataPlausibility,
-    PlausibilityConfig,
-    SequenceGuard,
-    load_of,
 )
 
 FLYING = CtrlState.FLYING << 16

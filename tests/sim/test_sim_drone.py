@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drone.ardrone import at
-from drone.ardrone.driver import DriverProtocol, HandshakeDone, LinkLost, LinkRestored
 from drone.ardrone.navdata import TAG_GPS, CtrlState, DroneState, decode_navdata
+from drone.ardrone.protocol import DriverProtocol, HandshakeDone, LinkLost, LinkRestored
 from drone.sim.drone import SimConfig, SimDrone
 from drone.sim.errors import FaultError, SimConfigError
 from drone.sim.link import InMemoryLink
