@@ -29,7 +29,7 @@ frames and messages of at most 64 KB), pilot without the lease.
 
 Then: the attacks that reach a worker, with the pool's processes against threads (the GIL:
 ``json.loads`` holds it for a whole call); the permessage-deflate attacks with the transport's
-inflation metered and not (``server.ws_guard.InflateLimits``); the 16 MB pre-auth floods of
+inflation metered and not (``server.http.ws_guard.InflateLimits``); the 16 MB pre-auth floods of
 issue 14 against the capped and the plain transport; and, outside the server, the per-row PNG
 decoder of before (rows sliced one by one in Python) against the linear one, at width 1 and
 1000.
@@ -70,13 +70,13 @@ from fastapi import FastAPI  # noqa: E402
 from websockets.asyncio.client import connect  # noqa: E402
 
 from server.graph import Graph  # noqa: E402
+from server.http.security import Security, TokenStore  # noqa: E402
+from server.http.ws_guard import InflateLimits, preauth_capped_ws  # noqa: E402
 from server.rosbridge.budget import DecodeBudget, png_text  # noqa: E402
 from server.rosbridge.context import BridgeContext  # noqa: E402
 from server.rosbridge.encode import PNG_SIGNATURE, fragments, png_encode  # noqa: E402
 from server.rosbridge.endpoint import make_router  # noqa: E402
-from server.security import Security, TokenStore  # noqa: E402
 from server.settings import Settings  # noqa: E402
-from server.ws_guard import InflateLimits, preauth_capped_ws  # noqa: E402
 
 HOST = "127.0.14.20"
 TICK_S = 0.005

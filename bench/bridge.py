@@ -52,9 +52,9 @@ def serve_rosbridge(port: int, data_dir: str) -> None:
     from fastapi import FastAPI
 
     from server.graph import Graph
+    from server.http.security import Security, TokenStore
     from server.rosbridge.context import BridgeContext
     from server.rosbridge.endpoint import make_router
-    from server.security import Security, TokenStore
     from server.settings import Settings
 
     settings = Settings(port=port, data_dir=Path(data_dir), rate_limit_per_s=1e6, rate_burst=10**6)

@@ -1,6 +1,6 @@
 """What the checks and the audit cost a direct action (issue 18), measured on the real stack.
 
-``POST /api/v1/drones/uav1/emergency`` now goes through ``server.direct_actions.perform``:
+``POST /api/v1/drones/uav1/emergency`` now goes through ``server.vehicles.direct_actions.perform``:
 preflight check, the command to the driver, the dialog told, an audit row written (SQLite,
 ``synchronous=FULL``). The baseline, in the same run on the same app, is what the endpoint did
 before: ``DroneStack.direct`` alone. Both are timed from the call to (a) the return and (b) the
@@ -23,9 +23,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from server.direct_actions import perform  # noqa: E402
 from server.runtime import Runtime  # noqa: E402
 from server.settings import Settings  # noqa: E402
+from server.vehicles.direct_actions import perform  # noqa: E402
 
 ADDR = "127.0.18.50"
 

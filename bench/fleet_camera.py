@@ -11,7 +11,7 @@ and, for each drone in turn, selects it and samples what the page shows for ``--
 Baselines: one drone (``--fleets 1,2``) in the same run, and another checkout's server and page
 (``--root /path/to/checkout``, e.g. the code before a change) run back to back. Targets (issue
 29): with two drones each camera keeps >= 10 fps and <= 200 ms. The stamp is taken when the
-vehicle has encoded the JPEG (server/vehicle_node.py), so rendering and perception are not
+vehicle has encoded the JPEG (server/nodes/vehicle_node.py), so rendering and perception are not
 included. "throttle at end" is the page's camera throttle (camera_feed.js) when sampling ended.
 
 Usage: ``python bench/fleet_camera.py [--fleets 1,2] [--seconds 15] [--vehicles process]

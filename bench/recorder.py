@@ -44,12 +44,12 @@ from drone.sim.camera import Renderer  # noqa: E402
 from drone.sim.world import load_world  # noqa: E402
 from server import msgs  # noqa: E402
 from server.graph import Graph  # noqa: E402
+from server.nodes.vehicle_node import VehicleNode  # noqa: E402
 from server.recorder.mcapfile import FlightFile  # noqa: E402
 from server.recorder.recorder import Recorder, RecorderConfig  # noqa: E402
 from server.rosbridge import cborraw  # noqa: E402
 from server.rosbridge.values import to_cbor_value, to_json_text  # noqa: E402
 from server.tasks.manager import TaskManager  # noqa: E402
-from server.vehicle_node import VehicleNode  # noqa: E402
 
 NAVDATA = "ardrone_autonomy/Navdata"
 IMAGE = "sensor_msgs/CompressedImage"
@@ -67,9 +67,9 @@ def serve(mode: str, port: int, data_dir: str) -> None:
     import uvicorn
     from fastapi import FastAPI
 
+    from server.http.security import Security, TokenStore
     from server.rosbridge.context import BridgeContext
     from server.rosbridge.endpoint import make_router
-    from server.security import Security, TokenStore
     from server.settings import Settings
 
     settings = Settings(port=port, data_dir=Path(data_dir), rate_limit_per_s=1e6, rate_burst=10**6)

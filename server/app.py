@@ -18,14 +18,14 @@ from server import __version__
 from server.api import drones, flights, language, sim, speech, strict, system, tls, tts
 from server.api.deps import fleet_access, fleet_deadline
 from server.api.models import add_command_schemas
-from server.audit_trail import RestAuditMiddleware
-from server.deadlines import CommandExpired
-from server.http_guard import HttpGuard, content_security_policy
-from server.map_tiles import tile_source
+from server.http.audit_trail import RestAuditMiddleware
+from server.http.http_guard import HttpGuard, content_security_policy
+from server.http.map_tiles import tile_source
 from server.recorder import replay_live
 from server.recorder.replay_live import ReplayHub
 from server.runtime import Runtime
 from server.settings import Settings
+from server.vehicles.deadlines import CommandExpired
 from server.vehicles.door import advertised_url
 from server.vehicles.errors import VehicleUnavailable
 

@@ -201,7 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "serve":
             return _serve(args)
         if args.command == "sim" and args.protocol == "mavlink":
-            from server.mavlink_stack import sim_main
+            from server.vehicles.mavlink_stack import sim_main
 
             return sim_main(args)
         if args.command == "sim":
@@ -263,8 +263,8 @@ def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from server.app import create_app
-    from server.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
-    from server.ws_guard import preauth_capped_ws
+    from server.http.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
+    from server.http.ws_guard import preauth_capped_ws
 
     settings = Settings.from_env(
         host=args.host,
@@ -297,19 +297,19 @@ def _serve(args: argparse.Namespace) -> int:
         raise SettingsError(
             f"recognizer must be server, browser or auto, not {settings.recognizer!r}"
         )
-    from server.mavlink_stack import drone_kind, is_mavlink
+    from server.vehicles.mavlink_stack import drone_kind, is_mavlink
 
     kinds = [drone_kind(settings.drone, i) for i in range(max(1, settings.fleet))]
     for kind in kinds:  # a bad connection string: refused up front
         is_mavlink(kind)
     if settings.drone != "none":  # simulators on addresses nobody else holds (module simaddr)
-        from server.simaddr import choose_sim_base
+        from server.vehicles.simaddr import choose_sim_base
 
         choice = choose_sim_base(settings, kinds, fixed=args.sim_addr is not None)
         if choice.note:
             print(f"uav-console: {choice.note}", flush=True)
             settings = settings.with_(sim_base_addr=choice.base)
-    from server.tls import TLSError, tls_for
+    from server.http.tls import TLSError, tls_for
 
     try:
         tls_files = tls_for(settings)

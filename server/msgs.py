@@ -12,7 +12,7 @@ import math
 import time
 from typing import Any
 
-from server.mavros_msgs import MAVROS_MESSAGES
+from server.nodes.mavros_msgs import MAVROS_MESSAGES
 
 Field = tuple[str, str]
 

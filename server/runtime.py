@@ -20,7 +20,6 @@ from fastapi import APIRouter
 
 from drone.sim.world import World, load_world
 from drone.vehicle import Vehicle
-from server.audit_trail import AuditTrail
 from server.captioner import (
     Captioner,
     CaptionerUnavailable,
@@ -32,22 +31,23 @@ from server.dialog.addressing import parse_address
 from server.dialog.manager import UTTERANCE, DialogManager
 from server.fleet.service import FleetService
 from server.graph import Graph
+from server.http.audit_trail import AuditTrail
+from server.http.security import Security, TokenStore
+from server.http.tls import TLSFiles, display_host
 from server.language.nlu import default_nlu
-from server.mavlink_stack import drone_kind
+from server.nodes.rosout import Rosout
 from server.recorder.index import FlightIndex, FlightInfo
 from server.recorder.recorder import Recorder, config_from_settings
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router, serve_rosbridge_port
-from server.rosout import Rosout
-from server.security import Security, TokenStore
 from server.settings import Settings
 from server.speech.gaps import FILE_NAME as GAP_FILE
 from server.speech.service import SpeechConfig, SpeechService
 from server.store import AuditLog
 from server.tasks.manager import TaskManager
-from server.tls import TLSFiles, display_host
 from server.vehicles import names
 from server.vehicles.central import VehicleCentral
+from server.vehicles.mavlink_stack import drone_kind
 from server.vehicles.stack import DroneStack, build_drone_stack
 
 UTTERANCE_TYPE = "uav_console/Utterance"

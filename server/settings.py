@@ -17,7 +17,7 @@ from pydantic_settings import BaseSettings, EnvSettingsSource, NoDecode, Setting
 
 from drone.deadline import DEFAULT_DEADLINE_S, check_deadline_s
 from drone.share import SOURCE_ROOT, share_dir
-from server.map_tiles import DEFAULT_TILE_URL, check_tile_url
+from server.http.map_tiles import DEFAULT_TILE_URL, check_tile_url
 
 ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
 ENV_PREFIX = "UAVC_"

@@ -10,9 +10,9 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request
 
 from drone.deadline import Expired, expires, label
-from server import deadlines
+from server.http.security import SAFETY_ACTIONS, TOKEN_COOKIE
 from server.runtime import Runtime
-from server.security import SAFETY_ACTIONS, TOKEN_COOKIE
+from server.vehicles import deadlines
 from server.vehicles.stack import DroneStack
 
 REST_HOLDER = "rest"  # the lease holder id of REST callers after a take-over

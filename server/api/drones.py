@@ -12,8 +12,8 @@ from fastapi.responses import StreamingResponse
 from drone.commands import DirectAction
 from server.api.deps import DroneDep, IssuedDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import BINARY, ActionBody, ActionResult, Describe, DroneInfo
-from server.direct_actions import command_source, perform_async, perform_stop_async
 from server.runtime import Runtime
+from server.vehicles.direct_actions import command_source, perform_async, perform_stop_async
 from server.vehicles.door import advertised_url
 from server.vehicles.door_protocol import STOP_ACTIONS
 

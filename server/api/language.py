@@ -5,11 +5,11 @@ from __future__ import annotations
 from fastapi import APIRouter, HTTPException, Request
 
 from drone.deadline import Expired
-from server import deadlines
 from server.api.deps import IssuedDep, PilotDep, RoleDep, RuntimeDep, check_lease
 from server.api.models import CommandRequest, CommandResponse, InterpretRequest, InterpretResponse
 from server.dialog.addressing import parse_address, recipients
 from server.dialog.manager import DialogResult
+from server.vehicles import deadlines
 from server.vehicles.errors import VehicleUnavailable
 
 router = APIRouter(tags=["language"])

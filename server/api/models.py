@@ -185,7 +185,7 @@ class DroneInfo(OpenResponse):
 
     name: str
     simulated: bool
-    link_ok: bool
+    link_ok: bool | None = Field(description="None: not known yet (a replay before its navdata)")
     task: dict[str, Any] | None = Field(default=None, description="the running task")
     vehicle: VehicleProcess | None = None
 

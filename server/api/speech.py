@@ -22,7 +22,8 @@ from pydantic import BaseModel, Field
 
 from server.api.deps import RoleDep, RuntimeDep, check_lease
 from server.api.models import CommandList, SpeechStatus
-from server.security import Role, token_from
+from server.http.security import Role, token_from
+from server.http.ws_guard import lift_frame_cap
 from server.speech.audio import MAX_REQUEST_S, SAMPLE_RATE, Samples
 from server.speech.errors import AudioError, AudioTooLong, Busy, ModelError
 from server.speech.recognizer import Recognition, SileroStream
@@ -37,7 +38,6 @@ from server.speech.stream import (
     StreamSession,
     control_kind,
 )
-from server.ws_guard import lift_frame_cap
 
 log = logging.getLogger("uav_console.speech")
 router = APIRouter(tags=["speech"])

@@ -8,7 +8,7 @@ advertises ``/NAME/fleet/ltm_status`` (std_msgs/String) and the service
 ``VehicleClient`` is the asyncio driver (``websockets``): it keeps the LTM stepping whether or
 not the central server is reachable (so the LTM's own "CTM silent → fly home" rule works) and
 reconnects with exponential backoff (0.5 s doubling to 5 s) through
-:class:`~server.central_connection.CentralConnection`.
+:class:`~server.vehicles.central_connection.CentralConnection`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from server.central_connection import CentralConnection, CentralServer
 from server.fleet.errors import ClientError, FleetError
 from server.fleet.ltm import LocalTaskManager
 from server.fleet.messages import (
@@ -36,7 +35,8 @@ from server.fleet.messages import (
     STATUS_TYPE,
     LtmStatus,
 )
-from server.tls import TLSError
+from server.http.tls import TLSError
+from server.vehicles.central_connection import CentralConnection, CentralServer
 
 log = logging.getLogger(__name__)
 
@@ -225,7 +225,7 @@ async def _vehicle(
         station = Enu(float(p[0]), float(p[1]), float(p[2]))
     else:
         station = Enu(world.start.x, world.start.y, 0.0)
-    from server.mavlink_stack import is_mavlink
+    from server.vehicles.mavlink_stack import is_mavlink
 
     if is_mavlink(drone):  # a PX4/ArduPilot drone: tcp:…, udpin:…, sim-mavlink
         await _mavlink_vehicle(central, name, drone, index, world, station, token)
@@ -272,9 +272,9 @@ async def _mavlink_vehicle(
 ) -> None:
     """``vehicle --drone tcp:…``: a MAVLink drone's stack joining the central server."""
     from server.fleet.geo import origin_of
-    from server.mavlink_stack import start_mavlink
     from server.settings import Settings
     from server.tasks.manager import TaskManager
+    from server.vehicles.mavlink_stack import start_mavlink
 
     parts = await start_mavlink(name, drone, index, world, Settings.from_env())
     vehicle = parts.vehicle

@@ -12,5 +12,5 @@
   the console served read-only on a recording.
 
 Elsewhere: ``server.ros1`` (ROS 1 definitions and serialisation), ``server.rosbridge.cborraw``
-(``compression: "cbor-raw"``), ``server.rosout`` (``/rosout``), ``server.api.flights`` (REST).
+(``compression: "cbor-raw"``), ``server.nodes.rosout`` (``/rosout``), ``server.api.flights`` (REST).
 """

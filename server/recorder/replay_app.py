@@ -18,34 +18,13 @@ from pathlib import Path
 from typing import Any, cast
 
 from fastapi import APIRouter, FastAPI, HTTPException, Request
-from pydantic import BaseModel, ConfigDict
 
 from server.api.deps import RoleDep
 from server.recorder.index import drones_of, iso
 from server.recorder.mcapfile import Recording
 from server.recorder.replay import Played, Player, Timeline, flight_start_ns
-from server.recorder.replay_drone import ReplayCommand, ReplayDrone
+from server.recorder.replay_drone import ReplayCommand, ReplayDrone, ReplayStatus
 from server.settings import Settings
-
-
-class ReplayStatus(BaseModel):
-    """``GET``/``POST /replay``: the recording and where the timeline stands."""
-
-    model_config = ConfigDict(extra="allow")
-
-    file: str
-    id: str
-    drones: list[str]
-    complete: bool
-    playing: bool
-    speed: float
-    position_s: float
-    duration_s: float
-    start_ns: int
-    end_ns: int
-    messages: int
-    started: str | None
-    ended: str | None
 
 
 def _player(request: Request) -> Player:

@@ -51,7 +51,7 @@ def replay_main(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     print(f"http://{settings.host}:{settings.port}/?token={token}", flush=True)
-    from server.ws_guard import preauth_capped_ws
+    from server.http.ws_guard import preauth_capped_ws
 
     config = uvicorn.Config(
         app,

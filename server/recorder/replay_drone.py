@@ -9,7 +9,7 @@ from typing import Any, Literal, cast
 
 import numpy as np
 from fastapi import HTTPException
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from server.recorder.replay import Player
 from server.vehicles.stack import DroneStack
@@ -108,3 +108,23 @@ class ReplayCommand(BaseModel):
     action: Literal["play", "pause", "seek", "speed"]
     position_s: float | None = Field(default=None, ge=0)
     speed: float | None = Field(default=None, gt=0, le=100)
+
+
+class ReplayStatus(BaseModel):
+    """``GET``/``POST /replay``: the recording and where the timeline stands."""
+
+    model_config = ConfigDict(extra="allow")
+
+    file: str
+    id: str
+    drones: list[str]
+    complete: bool
+    playing: bool
+    speed: float
+    position_s: float
+    duration_s: float
+    start_ns: int
+    end_ns: int
+    messages: int
+    started: str | None
+    ended: str | None

@@ -32,15 +32,16 @@ from fastapi import APIRouter, HTTPException, Request, WebSocket
 
 from drone.sim.world import WorldError, load_world
 from server.api.deps import RoleDep
+from server.api.models import ActionResult, DroneInfo, WorldInfo
 from server.graph import Graph
+from server.http.security import PilotLease, Role, Security, token_from
 from server.recorder.errors import CorruptRecording, FlightNotFound
 from server.recorder.index import FlightIndex, drones_of, iso
 from server.recorder.mcapfile import Recording
 from server.recorder.replay import Played, Player, Timeline, flight_start_ns, load
-from server.recorder.replay_drone import ReplayCommand, ReplayDrone
+from server.recorder.replay_drone import ReplayCommand, ReplayDrone, ReplayStatus
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge, setup_graph
-from server.security import PilotLease, Role, Security, token_from
 
 log = logging.getLogger("uav_console.replay")
 
@@ -224,14 +225,14 @@ def _hub(request: Request | WebSocket) -> ReplayHub:
 router = APIRouter(prefix="/replays/{flight_id}", tags=["replay"])
 
 
-@router.get("")
-@router.get("/replay")
+@router.get("", response_model=ReplayStatus)
+@router.get("/replay", response_model=ReplayStatus)
 async def replay_status(flight_id: str, request: Request, _role: RoleDep) -> dict[str, Any]:
     """The replay's timeline: position, duration, playing, speed, drones (opens it)."""
     return (await _hub(request).get(flight_id)).status()
 
 
-@router.post("/replay")
+@router.post("/replay", response_model=ReplayStatus)
 async def replay_control(
     flight_id: str, body: ReplayCommand, request: Request, _role: RoleDep
 ) -> dict[str, Any]:
@@ -253,20 +254,20 @@ async def replay_control(
     return session.status()
 
 
-@router.get("/world")
+@router.get("/world", response_model=WorldInfo, response_model_exclude_unset=True)
 async def replay_world(flight_id: str, request: Request, _role: RoleDep) -> dict[str, Any]:
     """The world the flight was flown in."""
     return (await _hub(request).get(flight_id)).world
 
 
-@router.get("/drones")
+@router.get("/drones", response_model=list[DroneInfo], response_model_exclude_unset=True)
 async def replay_drones(flight_id: str, request: Request, _role: RoleDep) -> list[dict[str, Any]]:
     """Every recorded drone as it reported at this point of the replay."""
     session = await _hub(request).get(flight_id)
     return [d.telemetry() for d in session.drones.values()]
 
 
-@router.get("/drones/{name}")
+@router.get("/drones/{name}", response_model=DroneInfo, response_model_exclude_unset=True)
 async def replay_drone(
     flight_id: str, name: str, request: Request, _role: RoleDep
 ) -> dict[str, Any]:
@@ -278,7 +279,11 @@ async def replay_drone(
     return drone.telemetry()
 
 
-@router.post("/drones/{name}/{action}")
+@router.post(
+    "/drones/{name}/{action}",
+    response_model=ActionResult,
+    responses={409: {"description": "always: a replay commands nothing"}},
+)
 async def replay_refuses(flight_id: str, name: str, action: str, _role: RoleDep) -> None:
     """A replay commands nothing."""
     raise HTTPException(

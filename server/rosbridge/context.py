@@ -11,13 +11,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from server.graph import Graph
+from server.http.security import Role, Security
+from server.http.ws_guard import PREAUTH_MAX_BYTES
 from server.rosbridge.budget import DecodeBudget
 from server.rosbridge.decoder import Backend, InboundDecoder
 from server.rosbridge.protocol import OFFLOAD_BINARY_BYTES, OFFLOAD_TEXT_BYTES
 from server.rosbridge.values import to_json_text
-from server.security import Role, Security
 from server.settings import Settings
-from server.ws_guard import PREAUTH_MAX_BYTES
 
 
 class JsonCache:
@@ -66,7 +66,7 @@ class BridgeContext:
         preauth_max_bytes: the largest frame a connection may send before it authenticates
             (an ``auth`` frame is ~100 bytes; issue 14: 16 MB frames before auth starved the
             auth deadline, one PNG frame froze the loop). Under ``serve`` the transport refuses
-            a larger one at its frame header (``server.ws_guard``); the endpoint's own check
+            a larger one at its frame header (``server.http.ws_guard``); the endpoint's own check
             covers servers without that.
         offload_decode_bytes / offload_binary_bytes: text / binary frames (and reassembled
             fragment texts) larger than this are decoded by the worker pool ``decoder``, as is
@@ -113,7 +113,7 @@ class BridgeContext:
     json_cache: JsonCache = field(default_factory=JsonCache)
     # service type -> request field names in order, to map list ``args`` (rosapi fills this)
     request_fields: dict[str, tuple[str, ...]] = field(default_factory=dict)
-    # intent/outcome rows for /ardrone/* commands (server.audit_trail.AuditTrail), if any
+    # intent/outcome rows for /ardrone/* commands (server.http.audit_trail.AuditTrail), if any
     audit: Any = None
     _conn_ids: itertools.count[int] = field(default_factory=lambda: itertools.count(1))
     _decoder: InboundDecoder | None = field(default=None, repr=False)

@@ -24,6 +24,8 @@ from fastapi import APIRouter, WebSocket
 from pydantic import BaseModel
 from starlette.websockets import WebSocketDisconnect, WebSocketState
 
+from server.http.security import LEASE_SERVICE, Role, token_from
+from server.http.ws_guard import lift_frame_cap
 from server.rosbridge.budget import peek_id
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.errors import FrameTooLarge
@@ -32,8 +34,6 @@ from server.rosbridge.limits import OutQueue, TokenBucket
 from server.rosbridge.protocol import PROTOCOL_VERSION, BridgeProtocol
 from server.rosbridge.rosapi import register_rosapi
 from server.rosbridge.session import BridgeSession
-from server.security import LEASE_SERVICE, Role, token_from
-from server.ws_guard import lift_frame_cap
 
 __all__ = [
     "BridgeContext",
@@ -153,7 +153,7 @@ class _Connection:
             if self.session.role is None and size > ctx.preauth_max_bytes:
                 # Nothing but a small auth frame before authenticating (issue 14): refused
                 # unread, and the connection closed. (Under ``serve`` the transport already
-                # refused it at its header, 1009: ``server.ws_guard``.)
+                # refused it at its header, 1009: ``server.http.ws_guard``.)
                 self.protocol.send_status(
                     "error",
                     f"not authenticated: a frame of {size} bytes before auth (at most "
@@ -365,9 +365,9 @@ async def serve_rosbridge_port(
     import uvicorn
     from fastapi import FastAPI
 
-    from server.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
-    from server.http_guard import HttpGuard
-    from server.ws_guard import preauth_capped_ws
+    from server.http.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
+    from server.http.http_guard import HttpGuard
+    from server.http.ws_guard import preauth_capped_ws
 
     app = FastAPI(title="uav-console rosbridge")
     app.add_middleware(HttpGuard, security=ctx.security)

@@ -25,8 +25,8 @@ from drone.deadline import (
     not_flown,
     stamp,
 )
-from server import deadlines
 from server import graph as g
+from server.http.security import LEASE_SERVICE, LeaseHeld, Role
 from server.rosbridge import cborraw, ops
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.errors import (
@@ -41,7 +41,7 @@ from server.rosbridge.errors import (
 from server.rosbridge.protocol import BridgeProtocol
 from server.rosbridge.streams import SubParams, TopicStream
 from server.rosbridge.values import check_message, is_known_type, to_json_text
-from server.security import LEASE_SERVICE, LeaseHeld, Role
+from server.vehicles import deadlines
 
 Schedule = Callable[[float, Callable[[], None]], object]
 # Drone commands over rosbridge that the audit trail records (issue 14).
@@ -338,7 +338,7 @@ class BridgeSession:
     def _audited_publish(
         self, key: str, msg: dict[str, Any], what: str, prefix: str, issued: float | None = None
     ) -> None:
-        """Publish a drone command with its audit rows (server.audit_trail): land and
+        """Publish a drone command with its audit rows (server.http.audit_trail): land and
         emergency first and the rows after; the others after their intent row is committed."""
         trail = self.ctx.audit
         drone = prefix.strip("/") or "uav1"

@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from server.fleet.messages import PATROL_SERVICE
-from server.security import SERVER_TOPIC_RE, Role, Security, TokenStore
+from server.http.security import SERVER_TOPIC_RE, Role, Security, TokenStore
 from server.settings import Settings
 from server.vehicles.keys import VehicleKeys
 

@@ -28,7 +28,7 @@ from drone.bus.payloads import Status, Telemetry
 from server.dialog.manager import UTTERANCE
 from server.graph import GraphError, ServiceError
 from server.msgs import header
-from server.vehicle_node import EMPTY, IMAGE, TWIST
+from server.nodes.vehicle_node import EMPTY, IMAGE, TWIST
 from server.vehicles import names
 from server.vehicles.errors import RemoteCallError
 from server.vehicles.link_core import TopicSpec

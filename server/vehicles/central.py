@@ -42,15 +42,15 @@ from drone.bus.config import BusTLS, endpoint_host, on_loopback, wants_tls
 from drone.bus.console import ConsoleBus
 from drone.bus.errors import BusError
 from drone.bus.session import DEFAULT_LISTEN
-from server.mavlink_stack import SIM_MAVLINK, drone_kind
+from server.http.tls import TLSError, ensure_ca, ensure_server_cert
 from server.msgs import header
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge
 from server.settings import Settings, SettingsError
-from server.tls import TLSError, ensure_ca, ensure_server_cert
 from server.vehicles import names
 from server.vehicles.access import VehicleLinkSecurity
 from server.vehicles.keys import VehicleKeys, vehicle_env
+from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.vehicles.relay import DialogRelay
 from server.vehicles.tickets import TICKET_TTL_S, DoorSecrets, mint
 

@@ -43,7 +43,7 @@ from websockets.frames import Frame, Opcode
 from websockets.http11 import Request
 from websockets.server import ServerProtocol
 
-from server.security import parse_host
+from server.http.security import parse_host
 from server.vehicles.door_protocol import (
     AUTH_DEADLINE_S,
     MAX_FRAME_BYTES,

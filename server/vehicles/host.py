@@ -47,9 +47,9 @@ from drone.bus.vehicle import VehicleBus
 from drone.deadline import BadIssued, ClockOffset, parse_issued
 from drone.sim.errors import AddressInUse
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
+from server.http.tls import TLSError, server_context
 from server.settings import Settings
 from server.timewarp import guard_s
-from server.tls import TLSError, server_context
 from server.vehicles import names
 from server.vehicles.bus_vehicle import BusVehicleSide
 from server.vehicles.door import SafetyDoor, door_authenticator, loopback_origin, page_origin
@@ -74,7 +74,7 @@ from server.vehicles.watch import CentralWatch, LossAction
 
 if TYPE_CHECKING:
     from drone.supervisor import Alarm
-    from server.direct_actions import DirectOutcome
+    from server.vehicles.direct_actions import DirectOutcome
     from server.vehicles.stops import StopVerdict
 
 log = logging.getLogger("uav_console.vehicle")
@@ -126,8 +126,17 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         STATUS_TOPIC,
         STATUS_TYPE,
     )
-    from server.mavros_node import MAVROS_LATCHED, MAVROS_TOPICS
-    from server.vehicle_node import EMPTY, IMAGE, MARKERS, NAVDATA, NAVDATA_GPS, POSE, TASK, TWIST
+    from server.nodes.mavros_node import MAVROS_LATCHED, MAVROS_TOPICS
+    from server.nodes.vehicle_node import (
+        EMPTY,
+        IMAGE,
+        MARKERS,
+        NAVDATA,
+        NAVDATA_GPS,
+        POSE,
+        TASK,
+        TWIST,
+    )
 
     p = prefix
     if mavlink:
@@ -242,8 +251,8 @@ class VehicleHost:
         from server.fleet.patrol import station_positions
         from server.graph import Graph
         from server.language.nlu import default_nlu
-        from server.mavlink_stack import is_mavlink
         from server.store import AuditLog
+        from server.vehicles.mavlink_stack import is_mavlink
         from server.vehicles.stack import build_drone_stack
 
         s, o = self.settings, self.options
@@ -419,7 +428,7 @@ class VehicleHost:
         followed (or its refusal said) by this vehicle's dialog, as in-process; one past its
         deadline (``issued`` on our clock) is not sent. The central server writes the audit
         row."""
-        from server.direct_actions import perform
+        from server.vehicles.direct_actions import perform
 
         low = self.settings.battery_low_pct if battery_low_pct is None else battery_low_pct
         return perform(
@@ -465,7 +474,7 @@ class VehicleHost:
         """A stop from either road (the door, or the console's ``direct`` with an ``id``):
         run once per id, never once superseded. A door stop is audited here (the console may
         be stopped); the console audits what it forwards."""
-        from server.direct_actions import perform_stop
+        from server.vehicles.direct_actions import perform_stop
 
         return perform_stop(
             self.stack,

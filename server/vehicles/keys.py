@@ -206,7 +206,7 @@ class VehicleKeys:
 
     def _write(self, name: str) -> VehicleKey:
         # Lazily: the vehicle process reads keys and must not import the web stack for that.
-        from server.security import secure_dir, write_private_atomically
+        from server.http.security import secure_dir, write_private_atomically
 
         path = self.path_of(name)
         key = new_key()

@@ -10,7 +10,8 @@ can tell a stalled central server from a quiet one (the server sends a heartbeat
 verified with ``ca_file`` (else the system's CAs) or pinned by its SHA-256 ``fingerprint``
 (``serve`` pins its own for the vehicles it spawns); an untrusted certificate stops the link
 with the reason (:class:`~server.vehicles.errors.LinkError`), it is not retried. The reconnect
-loop is :class:`~server.central_connection.CentralConnection`, shared with the fleet client.
+loop is :class:`~server.vehicles.central_connection.CentralConnection`, shared with the fleet
+client.
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
-from server.central_connection import CentralConnection, CentralServer
-from server.tls import TLSError
+from server.http.tls import TLSError
+from server.vehicles.central_connection import CentralConnection, CentralServer
 from server.vehicles.errors import LinkError
 from server.vehicles.link_core import GraphLinkCore
 

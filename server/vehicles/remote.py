@@ -32,10 +32,10 @@ from typing import TYPE_CHECKING, Any, cast
 from drone.deadline import Expired
 from server.captioner.grounding import SeenMarker, bearing_deg
 from server.dialog.manager import DialogResult
-from server.direct_actions import DirectOutcome
 from server.graph import Graph, GraphError, NotFound, ServiceError
 from server.msgs import header
 from server.vehicles import names
+from server.vehicles.direct_actions import DirectOutcome
 from server.vehicles.errors import RemoteCallError, VehicleUnavailable
 from server.vehicles.stack import DroneStack
 from server.vehicles.stops import StopVerdict

@@ -24,12 +24,12 @@ from drone.sim.world import World
 from drone.supervisor import Supervisor, keep_away_of, supervise
 from drone.vehicle import Vehicle
 from server.graph import Graph
-from server.mavlink_stack import is_mavlink, start_mavlink
-from server.mavros_node import MavrosNode
+from server.nodes.mavros_node import MavrosNode
+from server.nodes.vehicle_node import VehicleNode
 from server.settings import Settings
 from server.tasks.manager import TaskManager
 from server.timewarp import guard_s
-from server.vehicle_node import VehicleNode
+from server.vehicles.mavlink_stack import is_mavlink, start_mavlink
 from server.vehicles.stops import StopLedger
 
 if TYPE_CHECKING:  # the captioner is the console's: a vehicle process never loads it

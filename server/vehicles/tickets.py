@@ -102,7 +102,7 @@ class DoorSecrets:
         found = self._secrets.get(name)
         if found is not None:
             return found
-        from server.security import secure_dir, write_private_atomically
+        from server.http.security import secure_dir, write_private_atomically
 
         secret = secrets.token_bytes(SECRET_BYTES)
         self._secrets[name] = secret

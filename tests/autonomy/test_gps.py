@@ -145,7 +145,7 @@ def test_the_vehicle_publishes_navdata_gps_per_fix_with_ardrone_autonomy_fields(
     import pymap3d
 
     from server.graph import Graph
-    from server.vehicle_node import NAVDATA_GPS, VehicleNode
+    from server.nodes.vehicle_node import NAVDATA_GPS, VehicleNode
     from tests.autonomy.flight import Flight
 
     world = load_world("outdoor")
@@ -177,7 +177,7 @@ def test_the_vehicle_publishes_navdata_gps_per_fix_with_ardrone_autonomy_fields(
 
 def test_indoors_there_is_no_navdata_gps() -> None:
     from server.graph import Graph
-    from server.vehicle_node import VehicleNode
+    from server.nodes.vehicle_node import VehicleNode
     from server.vehicles.host import link_spec
     from tests.autonomy.flight import Flight
 
@@ -193,9 +193,9 @@ def test_indoors_there_is_no_navdata_gps() -> None:
 
 
 def test_navdata_gps_has_a_ros1_definition_and_serialisation() -> None:
+    from server.nodes.vehicle_node import navdata_gps_message
     from server.ros1 import codec_for
     from server.rosbridge.rosapi import full_text, typedefs
-    from server.vehicle_node import navdata_gps_message
 
     text = full_text("ardrone_autonomy/navdata_gps")
     assert text.startswith("std_msgs/Header header\nuint16 tag\nuint16 size\nfloat64 latitude")

@@ -12,7 +12,7 @@ import pytest
 
 from drone.sim.world import World, load_world
 from server.graph import Graph
-from server.vehicle_node import VehicleNode
+from server.nodes.vehicle_node import VehicleNode
 from tests.autonomy.flight import Flight
 
 

@@ -25,8 +25,8 @@ from drone.bus.payloads import Telemetry, decode_telemetry, encode
 from drone.bus.session import open_session
 from drone.bus.vehicle import VehicleBus
 from server.cli import main as cli_main
+from server.http.tls import ensure_ca
 from server.settings import Settings
-from server.tls import ensure_ca
 from server.vehicles.central import bus_tls
 from server.vehicles.host import join_bus
 from tests.isolation.conftest import HOST, ROOT, serve

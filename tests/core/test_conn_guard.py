@@ -9,7 +9,7 @@ from collections.abc import Iterator
 
 from fastapi import FastAPI
 
-from server.conn_guard import ConnectionLimits, guarded_h11
+from server.http.conn_guard import ConnectionLimits, guarded_h11
 from tests.support.loopback import fresh_address
 from tests.support.polling import until
 from tests.support.servers import threaded_server

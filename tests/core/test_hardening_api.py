@@ -24,7 +24,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from server.security import TOKEN_COOKIE, TokenStore
+from server.http.security import TOKEN_COOKIE, TokenStore
 from server.store import AuditLog
 from tests.app_client import app_fixture
 from tests.support.polling import until_async

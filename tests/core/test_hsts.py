@@ -1,6 +1,6 @@
 """Strict-Transport-Security from the HTTP door's guard: on every answer served over TLS, never
 over plain HTTP (RFC 6797 §7.2). A real uvicorn on loopback with the console's own CA and
-server certificate (server/tls.py), and the same guard without TLS beside it."""
+server certificate (server/http/tls.py), and the same guard without TLS beside it."""
 
 from __future__ import annotations
 
@@ -15,10 +15,10 @@ from typing import Any
 import httpx
 import uvicorn
 
-from server.http_guard import HttpGuard
-from server.security import Security, TokenStore
+from server.http.http_guard import HttpGuard
+from server.http.security import Security, TokenStore
+from server.http.tls import ensure_server_cert
 from server.settings import Settings
-from server.tls import ensure_server_cert
 from tests.support.loopback import free_port
 
 HOST = "127.0.0.1"

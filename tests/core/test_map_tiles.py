@@ -1,4 +1,4 @@
-"""The map's tile URL setting and the CSP source it allows (server/map_tiles.py)."""
+"""The map's tile URL setting and the CSP source it allows (server/http/map_tiles.py)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from server.http_guard import content_security_policy
-from server.map_tiles import DEFAULT_TILE_URL, TileUrlError, check_tile_url, tile_source
+from server.http.http_guard import content_security_policy
+from server.http.map_tiles import DEFAULT_TILE_URL, TileUrlError, check_tile_url, tile_source
 from server.settings import Settings, SettingsError
 
 

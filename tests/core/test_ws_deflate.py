@@ -1,4 +1,4 @@
-"""Per-message deflate that sends camera frames uncompressed (server/ws_deflate.py).
+"""Per-message deflate that sends camera frames uncompressed (server/http/ws_deflate.py).
 
 websockets' sans-I/O client and server protocols shake hands in memory: the server with the
 console's extension factories, the client with websockets' stock deflate (as a browser offers
@@ -21,7 +21,7 @@ from websockets.frames import Frame, Opcode
 from websockets.server import ServerProtocol
 from websockets.uri import parse_uri
 
-from server.ws_deflate import (
+from server.http.ws_deflate import (
     PLAIN_BYTES,
     PlainLargeClientFactory,
     PlainLargeDeflate,

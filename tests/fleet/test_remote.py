@@ -36,9 +36,9 @@ from server.fleet.messages import PlanKind, Role
 from server.fleet.node import CtmNode
 from server.fleet.router import make_fleet_router
 from server.graph import Graph
+from server.http.security import Security, TokenStore
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
-from server.security import Security, TokenStore
 from server.settings import ROOT, Settings
 from tests.support.loopback import free_port
 

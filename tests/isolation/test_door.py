@@ -24,7 +24,7 @@ from websockets.frames import Frame
 from websockets.protocol import State
 from websockets.uri import parse_uri
 
-from server.tls import ensure_server_cert, server_context
+from server.http.tls import ensure_server_cert, server_context
 from server.vehicles.door import DoorLimits, SafetyDoor, door_authenticator
 from server.vehicles.door_protocol import (
     MAX_FRAME_BYTES,

@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from server.cli import main as cli_main
-from server.security import CONTROL_TOPIC_RE, SERVER_TOPIC_RE, Role, Security, TokenStore
+from server.http.security import CONTROL_TOPIC_RE, SERVER_TOPIC_RE, Role, Security, TokenStore
 from server.settings import Settings
 from server.vehicles.access import VehicleLinkSecurity, scope_for
 from server.vehicles.errors import VehicleKeyError

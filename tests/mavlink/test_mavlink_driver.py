@@ -211,8 +211,8 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) 
 
 
 def test_drone_flag_and_signing_key_errors_are_clear() -> None:
-    from server.mavlink_stack import drone_kind, is_mavlink, signing_key
     from server.settings import SettingsError
+    from server.vehicles.mavlink_stack import drone_kind, is_mavlink, signing_key
 
     assert drone_kind("sim,sim-mavlink", 0) == "sim"
     assert drone_kind("sim,sim-mavlink", 5) == "sim-mavlink"  # the last kind repeats

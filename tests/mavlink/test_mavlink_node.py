@@ -11,8 +11,8 @@ import pytest
 from drone.mavlink.lockstep import MavlinkLockstepRig
 from drone.sim.world import load_world
 from server.graph import Graph
-from server.mavros_node import MAVROS_TOPICS, MavrosNode
 from server.msgs import MESSAGES
+from server.nodes.mavros_node import MAVROS_TOPICS, MavrosNode
 from server.tasks.manager import TaskManager
 
 

@@ -22,9 +22,9 @@ from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import Enu, origin_of
 from server.fleet.node import CtmNode
 from server.graph import Graph
+from server.http.security import Security, TokenStore
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
-from server.security import Security, TokenStore
 from server.settings import ROOT, Settings
 from tests.support.loopback import bound_socket
 from tests.support.polling import until_async

@@ -500,8 +500,8 @@ def test_passphrase_file_is_made_once_private_and_shared(tmp_path: Path) -> None
 async def test_serve_sim_mavlink_signs_the_console_link_with_the_data_dir_key(
     tmp_path: Path, world: Any
 ) -> None:
-    from server.mavlink_stack import start_mavlink
     from server.settings import Settings
+    from server.vehicles.mavlink_stack import start_mavlink
 
     settings = Settings(data_dir=tmp_path, sim_base_addr="127.0.16.66", world="outdoor")
     parts = await start_mavlink("uav1", "sim-mavlink", 0, world, settings)

@@ -1,8 +1,8 @@
 """A short flight written by the real recorder from the messages a drone stack publishes.
 
 Used where a test needs a recording but not a simulator run (the browser replay test): the
-topics, types and rates are those of ``server.vehicle_node`` and the dialog manager, the camera
-frames are real JPEGs, the drone takes off, flies a 1 m square and lands.
+topics, types and rates are those of ``server.nodes.vehicle_node`` and the dialog manager, the
+camera frames are real JPEGs, the drone takes off, flies a 1 m square and lands.
 """
 
 from __future__ import annotations

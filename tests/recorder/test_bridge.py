@@ -8,8 +8,8 @@ from typing import Any
 import cbor2
 
 from server.graph import Graph
+from server.nodes.rosout import ERROR, INFO, WARN, Rosout
 from server.ros1 import codec_for, definition
-from server.rosout import ERROR, INFO, WARN, Rosout
 from tests.rosbridge.server_fixture import RunningServer
 from tests.rosbridge.wsclient import RawClient
 from tests.support.polling import until_async

@@ -12,11 +12,11 @@ from typing import Any, TypeVar
 from fastapi import FastAPI
 
 from server.graph import Graph
+from server.http.security import Security, TokenStore
+from server.http.ws_guard import preauth_capped_ws
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
-from server.security import Security, TokenStore
 from server.settings import Settings
-from server.ws_guard import preauth_capped_ws
 from tests.support.loopback import bound_socket
 from tests.support.servers import threaded_server
 
@@ -56,7 +56,7 @@ def running_server(
     tmp: Path, *, ws: str | type[Any] | None = None, **ctx_overrides: Any
 ) -> Iterator[RunningServer]:
     """``ws``: uvicorn's WebSocket implementation; by default the one ``serve`` uses (the
-    transport's pre-auth frame cap, ``server.ws_guard``)."""
+    transport's pre-auth frame cap, ``server.http.ws_guard``)."""
     settings_overrides = {
         k: ctx_overrides.pop(k) for k in list(ctx_overrides) if k in Settings.model_fields
     }

@@ -18,8 +18,8 @@ from typing import Any
 from hypothesis import given
 from hypothesis import strategies as st
 
-from server.audit_trail import AuditTrail
 from server.graph import Graph
+from server.http.audit_trail import AuditTrail
 from server.rosbridge import ops
 from server.rosbridge.protocol import BridgeProtocol
 from server.store import AuditLog

@@ -74,7 +74,7 @@ async def test_png_bomb_before_auth_is_refused_unread(srv14: RunningServer) -> N
     frame = json.dumps({"op": "png", "data": base64.b64encode(png).decode()})
     async with await RawClient.open(srv14.url(None)) as c:
         await c.send(frame)
-        # the transport refuses it at the frame header (server.ws_guard; more in
+        # the transport refuses it at the frame header (server.http.ws_guard; more in
         # test_preauth_cap.py); the app never sees it
         assert await closed_with(c) == 1009
 
@@ -314,7 +314,7 @@ async def test_any_pilot_may_land_without_the_lease(srv14: RunningServer) -> Non
 
 
 async def test_drone_commands_over_rosbridge_are_audited(tmp_path: Path) -> None:
-    from server.audit_trail import AuditTrail
+    from server.http.audit_trail import AuditTrail
     from server.store import AuditLog
 
     log = AuditLog(tmp_path / "audit.db")

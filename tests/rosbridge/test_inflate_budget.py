@@ -1,4 +1,4 @@
-"""The transport's permessage-deflate budget (``server.ws_guard.InflateLimits``): sans-I/O
+"""The transport's permessage-deflate budget (``server.http.ws_guard.InflateLimits``): sans-I/O
 against websockets' own client protocol with a virtual clock, then over real sockets
 (127.0.226.3)."""
 
@@ -18,7 +18,7 @@ from websockets.extensions.permessage_deflate import (
 from websockets.frames import Frame
 from websockets.uri import parse_uri
 
-from server.ws_guard import CappedServerProtocol, InflateLimits
+from server.http.ws_guard import CappedServerProtocol, InflateLimits
 from tests.support.loopback import for_worker
 
 from .server_fixture import RunningServer, running_server

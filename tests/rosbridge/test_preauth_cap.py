@@ -1,4 +1,4 @@
-"""The transport's pre-auth frame cap (``server.ws_guard``, issue 14) over real sockets
+"""The transport's pre-auth frame cap (``server.http.ws_guard``, issue 14) over real sockets
 (127.0.78.x), with raw frames written under the ``websockets`` client:
 
 | sent without a token                                  | answer                              |

@@ -1,4 +1,5 @@
-"""server.security without sockets: tokens on disk, roles, the lease, Origin, REST dependency."""
+"""server.http.security without sockets: tokens on disk, roles, the lease, Origin, REST
+dependency."""
 
 from __future__ import annotations
 
@@ -13,9 +14,9 @@ import pytest
 from fastapi import Depends, FastAPI
 
 from server.graph import Graph
+from server.http.security import LeaseHeld, PilotLease, Role, Security, TokenStore, require_role
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import serve_rosbridge_port
-from server.security import LeaseHeld, PilotLease, Role, Security, TokenStore, require_role
 from server.settings import Settings
 from tests.support.loopback import free_port
 
@@ -145,7 +146,7 @@ async def test_serve_rosbridge_port(tmp_path: Path) -> None:
 
 
 def test_generated_tokens_never_look_like_a_command_line_option() -> None:
-    from server.security import new_token
+    from server.http.security import new_token
 
     tokens = {new_token() for _ in range(2000)}
     assert len(tokens) == 2000

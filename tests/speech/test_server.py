@@ -29,8 +29,8 @@ import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed
 
+from server.http.tls import fingerprint
 from server.speech.audio import read_wav, to_wav
-from server.tls import fingerprint
 from tests.speech.conftest import HAVE_TTS, synthesise
 from tests.support.loopback import free_port
 
@@ -257,7 +257,7 @@ def test_microphone_stream_push_to_talk_over_wss(served: Served) -> None:
         async with connect(url, ssl=_ws_ssl(served)) as ws:
             got.append(json.loads(await ws.recv()))
             # the first 400 ms in one frame: over the transport's 4 KB limit before auth, which
-            # the token at the handshake lifted (server/ws_guard.py)
+            # the token at the handshake lifted (server/http/ws_guard.py)
             await ws.send(pcm[:12800])
             for i in range(12800, len(pcm), 3200):  # 100 ms frames, as the worklet sends
                 await ws.send(pcm[i : i + 3200])

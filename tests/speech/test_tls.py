@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 from cryptography import x509
 
-from server.settings import Settings
-from server.tls import (
+from server.http.tls import (
     TLSError,
     check_pinned,
     client_context,
@@ -24,6 +23,7 @@ from server.tls import (
     user_files,
     wants_tls,
 )
+from server.settings import Settings
 
 
 def test_loopback_stays_http_and_other_hosts_get_https(tmp_path: Path) -> None:

@@ -3,7 +3,7 @@
 // button for each: the replay opens in a tab of its own (replay.js), the live console stays.
 //
 // Downloads and replays carry no credential in their addresses: the browser sends the HttpOnly
-// cookie the console's first load set (server/http_guard.py), with the download (streamed to
+// cookie the console's first load set (server/http/http_guard.py), with the download (streamed to
 // disk, saved under the server's Content-Disposition name) and with the replay's rosbridge
 // socket. A token in a URL would end up in history and logs.
 

@@ -4,7 +4,8 @@ link (:mod:`server.vehicles.link`).
 
 :meth:`CentralConnection.run` connects to a ``ws://`` or ``wss://`` URL (``Authorization:
 Bearer`` token; a ``wss://`` certificate verified with a CA file, else the system's CAs, or
-pinned by its SHA-256 fingerprint, see :mod:`server.tls`), sends the caller's hello frames, then
+pinned by its SHA-256 fingerprint, see :mod:`server.http.tls`), sends the caller's hello
+frames, then
 races the caller's session coroutines (its reader, a writer) against ``stop`` until one ends,
 cancels the rest and reconnects after an exponential backoff (``backoff_s[0]`` doubling to
 ``backoff_s[1]``; longer after :meth:`CentralConnection.drop` with a hold). An unreachable server
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from server.tls import TLSError, check_pinned, client_context, untrusted
+from server.http.tls import TLSError, check_pinned, client_context, untrusted
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,7 @@ class CentralConnection:
         from websockets.asyncio.client import connect
         from websockets.exceptions import InvalidHandshake, WebSocketException
 
-        from server.ws_deflate import PlainLargeClientFactory
+        from server.http.ws_deflate import PlainLargeClientFactory
 
         delay = self.backoff_s[0]
         while not stop.is_set():
@@ -114,7 +115,8 @@ class CentralConnection:
                     self.url,
                     additional_headers=self.headers,
                     max_size=None,
-                    # camera frames go uncompressed; telemetry stays deflated (server.ws_deflate)
+                    # camera frames go uncompressed; telemetry stays deflated
+                    # (server.http.ws_deflate)
                     compression=None,
                     extensions=[PlainLargeClientFactory()],
                     open_timeout=self.open_timeout_s,

@@ -14,7 +14,7 @@ Publishes (a fleet prefixes ``/NAME``, e.g. ``/uav2/mavros/state``), converted a
 - ``/mavros/home_position/home`` (mavros_msgs/HomePosition);
 - ``/mavros/statustext/recv`` (mavros_msgs/StatusText) for each STATUSTEXT;
 - the console's own ``/uav/pose`` (the map-frame position, as the AR.Drone's EKF estimate) and
-  ``/uav/task`` (through :class:`~server.vehicle_node.VehicleNode`).
+  ``/uav/task`` (through :class:`~server.nodes.vehicle_node.VehicleNode`).
 
 Notices of the vehicle (denials with reasons, failsafes, link loss) go to ``/console/reply``
 (level warn/alert), so the console shows and speaks them as it does ANS alarms.
@@ -31,7 +31,7 @@ from typing import Any
 from drone.mavlink.gcs.events import Telemetry
 from drone.mavlink.geo import yaw_ned_to_enu
 from server.msgs import header
-from server.vehicle_node import EMPTY, POSE, TASK, TWIST, VehicleNode
+from server.nodes.vehicle_node import EMPTY, POSE, TASK, TWIST, VehicleNode
 
 REPLY = "/console/reply"
 STATE_PERIOD_S = 1.0

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from drone.sim.server import in_use, sim_endpoint, sim_sockets
 from server.settings import Settings, SettingsError
 
-SIM_KINDS = ("sim", "sim-mavlink")  # server.mavlink_stack.SIM_MAVLINK
+SIM_KINDS = ("sim", "sim-mavlink")  # server.vehicles.mavlink_stack.SIM_MAVLINK
 
 
 @dataclass(frozen=True)

@@ -50,9 +50,9 @@ import cv2
 from drone.ardrone.navdata import GPS_SIZE, TAG_GPS, Gps, Navdata, ros_navdata_fields
 from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, ReportGate, label
 from drone.perception.markers import FrameResult
-from server import deadlines
 from server.graph import Graph
 from server.msgs import header
+from server.vehicles import deadlines
 
 log = logging.getLogger(__name__)
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qs
 
-from server.security import Role, Security, token_from
+from server.http.security import Role, Security, token_from
 from server.store import AuditError, AuditLog
 
 Scope = MutableMapping[str, Any]

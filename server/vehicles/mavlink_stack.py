@@ -1,6 +1,6 @@
 """Starting one MAVLink drone for the runtime: simulator (``--drone sim-mavlink``) or a vehicle
 at a connection string (``--drone tcp:10.0.0.5:5760``, ``udpin:0.0.0.0:14550`` …), its driver,
-:class:`~drone.mavlink.vehicle.MavlinkVehicle`, and :class:`~server.mavros_node.MavrosNode`;
+:class:`~drone.mavlink.vehicle.MavlinkVehicle`, and :class:`~server.nodes.mavros_node.MavrosNode`;
 and ``uav-console sim --protocol mavlink`` (:func:`sim_main`).
 
 ``--drone`` may also list one kind per drone of a fleet, comma-separated

@@ -62,7 +62,7 @@ from websockets.http11 import Request
 from websockets.server import ServerProtocol
 from websockets.streams import StreamReader
 
-from server.ws_deflate import plain_large
+from server.http.ws_deflate import plain_large
 
 EXTENSION = "uav-console.preauth_frame_cap"
 PREAUTH_MAX_BYTES = 4096  # an ``auth`` frame is ~100 bytes
@@ -282,7 +282,7 @@ def preauth_capped_ws(  # noqa: C901
             plain = self.conn
             self.conn = CappedServerProtocol(
                 max_bytes,
-                # camera frames go uncompressed (server.ws_deflate): deflate is for telemetry
+                # camera frames go uncompressed (server.http.ws_deflate): deflate is for telemetry
                 extensions=plain_large(plain.available_extensions or []),
                 max_size=config.ws_max_size,
                 logger=plain.logger,

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qs
 
-from server.security import TOKEN_COOKIE, Security, parse_host
+from server.http.security import TOKEN_COOKIE, Security, parse_host
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]

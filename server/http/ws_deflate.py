@@ -10,8 +10,8 @@ touched (§6.2). So messages over ``PLAIN_BYTES`` go out as they are; telemetry,
 service calls, small and repetitive, stay compressed.
 
 :class:`PlainLargeServerFactory` replaces websockets' server factory (uvicorn's, via
-``server.ws_guard``); :class:`PlainLargeClientFactory` its client factory (the vehicle link,
-``server.central_connection``).
+``server.http.ws_guard``); :class:`PlainLargeClientFactory` its client factory (the vehicle link,
+``server.vehicles.central_connection``).
 """
 
 from __future__ import annotations

@@ -1,0 +1,1 @@
+"""The HTTP and WebSocket edge: the guards in front of uvicorn, TLS, tokens and roles, the audit."""
