@@ -72,6 +72,7 @@ async def test_an_inline_drones_supervisor_publishes_and_its_dialog_speaks(
             break
         await asyncio.sleep(0.05)
     assert [(a["monitor"], a["severity"]) for a in alarms] == [("link", "alert"), ("link", "info")]
-    assert alarms[0]["text"] == "I lost the link to the drone. It will hover on its own."
+    # the drone is on the ground: nothing to hover (in flight: "It will hover on its own.")
+    assert alarms[0]["text"] == "I lost the link to the drone. It was on the ground."
     spoken = [m for m in replies if m.get("alarm") == "link"]
     assert [m["text"] for m in spoken] == [a["text"] for a in alarms]
