@@ -42,6 +42,11 @@ from server.fleet.planner import FlightModel, reserve_pct
 
 log = logging.getLogger(__name__)
 
+HOME_CEILING_CLEARANCE_M = 0.5
+"""How far under the world's ceiling the flight home cruises: at the ceiling itself the
+controller's overshoot trips the supervisor's altitude monitor (drone/supervisor/altitude.py),
+whose hover would end the flight home above the station instead of on it."""
+
 ALTITUDE_MAX_MM = 20000  # control:altitude_max for outdoor flight (firmware default 3000 mm)
 # general:navdata_options: demo (tag 0) + raw pressure (tag 21, the barometer the console shows)
 # + GPS (tag 27, firmware 2.4 flight recorder); drone.ardrone.vehicle.navdata_options asks the same
@@ -297,7 +302,7 @@ class LocalTaskManager:
         z = max(cruise_z, 1.0)
         limits = getattr(self.vehicle, "limits", None)
         if limits is not None:  # the world's ceiling (drone/limits.py), e.g. a room's 2.7 m
-            z = min(z, limits.ceiling_m)
+            z = min(z, limits.ceiling_m - HOME_CEILING_CLEARANCE_M)
         return [
             Waypoints(
                 # climb (or descend) in place to the transit layer, then over the station
