@@ -24,6 +24,10 @@ from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
 from tests.isolation.conftest import serve as serve_quick
 from tests.support.loopback import for_worker, free_port
 
+# serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
+# is refused), which a second test run on the same 2 cores made them miss
+pytestmark = pytest.mark.serial
+
 NAME = "uav7"
 
 

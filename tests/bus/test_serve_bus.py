@@ -12,9 +12,15 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from server.cli import main as cli_main
 from tests.isolation.conftest import HOST, ROOT, serve, wait_for
 from tests.support.loopback import for_worker, free_port
+
+# serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
+# is refused), which a second test run on the same 2 cores made them miss
+pytestmark = pytest.mark.serial
 
 SCRIPT = textwrap.dedent(
     """

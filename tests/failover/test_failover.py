@@ -30,7 +30,9 @@ from server.fleet.geo import Enu
 from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
 from tests.support.loopback import for_worker, free_port
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+# serial: real consoles and vehicles on wall-clock deadlines, which a second test run on the
+# same 2 cores made them miss
+pytestmark = [pytest.mark.slow, pytest.mark.serial, pytest.mark.timeout(600)]
 
 TAKEOVER_BOUND_S = 3.0  # the bound for the standby to hold the central role
 # A waypoint's wait across the takeover against the median revisit before it: the patrolling

@@ -29,7 +29,9 @@ from tests.failover.test_failover import central_of, serve, vehicle
 from tests.isolation.conftest import wait_for
 from tests.support.loopback import free_port
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+# serial: real consoles and vehicles on wall-clock deadlines, which a second test run on the
+# same 2 cores made them miss
+pytestmark = [pytest.mark.slow, pytest.mark.serial, pytest.mark.timeout(600)]
 
 GRACE_S = 8.0  # UAVC_CENTRAL_GRACE_S for the vehicle (60 s by default)
 STATION = Enu(1.0, 3.0, 0.0)  # worlds/indoor.yaml: home1, uav1's pad

@@ -22,6 +22,10 @@ from server.vehicles.keys import new_key
 from tests.e2e.served import ROOT, serve
 from tests.support.loopback import for_worker
 
+# serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
+# is refused), which a second test run on the same 2 cores made them miss
+pytestmark = pytest.mark.serial
+
 BASE = for_worker("127.0.0.190")
 NEXT = BASE.rsplit(".", 1)[0] + "." + str(int(BASE.rsplit(".", 1)[1]) + 1)
 FREE = BASE.rsplit(".", 1)[0] + "." + str(int(BASE.rsplit(".", 1)[1]) + 2)
