@@ -29,6 +29,7 @@ from server.captioner.service import load_captioner, unavailable_text
 from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehicleAdapter
 from server.dialog.addressing import parse_address
 from server.dialog.manager import UTTERANCE, DialogManager
+from server.fleet.planner import FlightModel
 from server.fleet.service import FleetService
 from server.graph import Graph
 from server.http.audit_trail import AuditTrail
@@ -76,7 +77,9 @@ class Runtime:
         self.security.lease.on_change = self._lease_changed
         self.security.actions_of = self.actions_of  # lease judged by what an utterance asks
         self._routers: list[APIRouter] = [make_router(self.bridge)]
-        self.fleet = FleetService(self.graph, self.world)
+        self.fleet = FleetService(
+            self.graph, self.world, model=FlightModel.for_flight_time(s.flight_time_s)
+        )
         self._tasks: list[asyncio.Task[Any]] = []
         self._captioner: Captioner | CaptionerUnavailable = load_captioner(s.model_dir)
         self.started_at = time.time()

@@ -17,6 +17,7 @@ from pydantic_settings import BaseSettings, EnvSettingsSource, NoDecode, Setting
 
 from drone.deadline import DEFAULT_DEADLINE_S, check_deadline_s
 from drone.share import SOURCE_ROOT, share_dir
+from drone.sim.battery import FLIGHT_TIME_S
 from server.http.map_tiles import DEFAULT_TILE_URL, check_tile_url
 
 ROOT = SOURCE_ROOT  # the repository in a checkout (bench/, docs/)
@@ -86,6 +87,13 @@ class Settings(BaseSettings):
     sim_speed: float = Field(
         1.0,
         description="Real-time factor of a socket-served simulator; autonomy is tuned for 1.",
+    )
+    flight_time_s: float = Field(
+        FLIGHT_TIME_S,
+        gt=0.0,
+        le=86400.0,
+        description="A full battery's hover time, 100 % to 0 % (the AR.Drone 2.0's 12 minutes): "
+        "the simulated AR.Drone flies it and the fleet's planner plans every drone with it.",
     )
     clock_speed: float = Field(
         1.0,

@@ -41,7 +41,7 @@ from drone.ardrone.navdata import (
     PressureRaw,
     encode_navdata,
 )
-from drone.sim.battery import MAX_LEAK_PCT_S, Battery
+from drone.sim.battery import FLIGHT_TIME_S, MAX_LEAK_PCT_S, Battery
 from drone.sim.errors import FaultError, SimConfigError
 from drone.sim.people import PersonPose, people_at
 from drone.sim.physics import Body, FlightParams, Physics, as_box
@@ -83,6 +83,8 @@ class SimConfig:
     gps_rate_hz: float = 5.0
     gps_noise_m: float = 0.0
     gps_satellites: int = 9
+    # a full battery's hover time, 100 % → 0 % (drone/sim/battery.py: the AR.Drone 2.0's 720 s)
+    flight_time_s: float = FLIGHT_TIME_S
 
 
 @dataclass(frozen=True)
@@ -163,7 +165,7 @@ class SimDrone:
         self.physics = Physics(
             bounds=box,
             params=params or FlightParams(),
-            battery=Battery(pct=battery_pct),
+            battery=Battery(pct=battery_pct, flight_time_s=self.config.flight_time_s),
             body=Body(x=x, y=y, z=box[4], yaw_rad=yaw),
         )
         self.thermal = Thermal()

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from drone.sim.drone import SimDrone, Truth
+from drone.sim.drone import SimConfig, SimDrone, Truth
 from drone.sim.errors import AddressInUse, SimConfigError
 
 log = logging.getLogger(__name__)
@@ -140,6 +140,7 @@ class SimServer:
         speed: float = 1.0,
         sim: SimDrone | None = None,
         seed: int = 1,
+        config: SimConfig | None = None,
         video_fps: float = 15.0,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -152,7 +153,7 @@ class SimServer:
         self.addr = addr
         self.ports = ports or SimPorts()
         self.speed = speed
-        self.sim = sim if sim is not None else SimDrone(world, seed=seed)
+        self.sim = sim if sim is not None else SimDrone(world, seed=seed, config=config)
         self.video_fps = video_fps
         self.clock = clock
         self.client: tuple[str, int] | None = None  # where navdata goes

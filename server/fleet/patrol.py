@@ -338,10 +338,7 @@ class PatrolExperiment:
         flight = cfg.flight_time_s or FLIGHT_TIME_S
         for sim in self.rig.sims:
             sim.physics.battery.flight_time_s = flight
-        # the least shift worth a take-off scales with the battery (60 s of a 12-minute one)
-        self.model = FlightModel(
-            drain_pct_s=100.0 / flight, min_shift_s=60.0 * flight / FLIGHT_TIME_S
-        )
+        self.model = FlightModel.for_flight_time(flight)
         self.station_model = StationModel(swap_s=cfg.swap_s, charge_pct_s=cfg.charge_pct_s)
         self.origin = origin_of(self.world)
         self.ctm = CentralTaskManager(

@@ -47,6 +47,17 @@ class FlightModel:
     margin_s: float = 15.0
     min_shift_s: float = 60.0
 
+    @classmethod
+    def for_flight_time(cls, flight_time_s: float) -> FlightModel:
+        """The model of drones whose full battery hovers ``flight_time_s`` (100 % → 0 %): the
+        drain follows, and the least shift worth a take-off scales with the battery (60 s of
+        the AR.Drone's 12 minutes)."""
+        if not (math.isfinite(flight_time_s) and flight_time_s > 0):
+            raise PlanError(f"flight_time_s must be > 0, got {flight_time_s!r}")
+        return cls(
+            drain_pct_s=100.0 / flight_time_s, min_shift_s=60.0 * flight_time_s / FLIGHT_TIME_S
+        )
+
     def __post_init__(self) -> None:
         for name in ("speed_m_s", "climb_m_s", "drain_pct_s"):
             v = getattr(self, name)

@@ -87,7 +87,9 @@ class FleetService:
     def add_local(self, name: str, vehicle: Vehicle, tasks: Any) -> LocalTaskManager:
         """An in-process drone joins the fleet (its station: the world's n-th station)."""
         pad = station_positions(self.world, len(self.ltm_nodes) + 1)[-1]
-        ltm = LocalTaskManager(name, vehicle, tasks, pad, origin=origin_of(self.world))
+        ltm = LocalTaskManager(
+            name, vehicle, tasks, pad, origin=origin_of(self.world), model=self.ctm.model
+        )
         self.ltm_nodes.append(LtmNode(self.graph, ltm, clock=self.clock))
         return ltm
 

@@ -80,6 +80,7 @@ CHILD_SETTINGS = (
     "sim_base_addr",
     "sim_speed",
     "clock_speed",
+    "flight_time_s",
     "camera",
     "mavlink_sim_port",
     "mavlink_key",

@@ -47,6 +47,7 @@ from drone.bus.vehicle import VehicleBus
 from drone.deadline import BadIssued, ClockOffset, parse_issued
 from drone.sim.errors import AddressInUse
 from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
+from server.fleet.planner import FlightModel
 from server.http.tls import TLSError, server_context
 from server.settings import Settings
 from server.timewarp import guard_s
@@ -326,6 +327,7 @@ class VehicleHost:
             pad,
             origin=origin_of(self.world),
             ctm_timeout_s=s.central_grace_s,  # a drone on a plan flies on while no central
+            model=FlightModel.for_flight_time(s.flight_time_s),
         )
         self.ltm = BusLtmNode(self.graph, ltm, clock=time.monotonic)
         self.graph.advertise_service(

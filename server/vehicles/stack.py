@@ -19,6 +19,7 @@ from drone.ardrone.protocol import DriverConfig
 from drone.ardrone.vehicle import ARDroneVehicle
 from drone.camera import CameraModel
 from drone.commands import DirectAction
+from drone.sim.drone import SimConfig
 from drone.sim.server import SimServer, sim_endpoint
 from drone.sim.world import World
 from drone.supervisor import Supervisor, keep_away_of, supervise
@@ -153,7 +154,14 @@ async def build_drone_stack(
         sim = None
         if kind == "sim":
             addr, ports = sim_endpoint(index, s.sim_base_addr)
-            sim = SimServer(addr, world, ports=ports, speed=s.sim_speed, seed=s.seed + index)
+            sim = SimServer(
+                addr,
+                world,
+                ports=ports,
+                speed=s.sim_speed,
+                seed=s.seed + index,
+                config=SimConfig(flight_time_s=s.flight_time_s),
+            )
             await sim.start()
             driver = ARDroneDriver(
                 addr,

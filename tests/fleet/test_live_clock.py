@@ -26,7 +26,10 @@ from tests.e2e.served import ROOT, serve
 from tests.support.loopback import for_worker
 from tests.support.polling import wait_for
 
-SPEED = 4.0  # ten simulated minutes (the first handoff at ~8) in about 150 s of wall time
+SPEED = 3.0
+# A four-minute battery (the AR.Drone's is 12, drone/sim/battery.py): the first handoff comes
+# ~146 s into the mission, so with the minute after it the run takes about a minute of wall time.
+FLIGHT_TIME_S = 240.0
 COVERAGE_PP = 1.0
 GAP_S = 5.0
 TOKEN = "live-clock-pilot-token"
@@ -102,14 +105,10 @@ def _route(srv: Any) -> dict[str, Any]:
 @pytest.mark.slow
 @pytest.mark.serial
 @pytest.mark.timeout(900)
-@pytest.mark.skipif(
-    os.environ.get("UAVC_LIVE_PATROL") != "1",
-    reason="UAVC_LIVE_PATROL=1: N times the console's work per wall second, on cores of its own",
-)
 def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path: Path) -> None:
     args = ["--fleet", "2", "--world", "outdoor", "--seed", "1", "--no-camera"]
     args += ["--clock-speed", f"{SPEED:g}", "--sim-addr", for_worker("127.0.78.10")]
-    env = {"UAVC_VEHICLES": "process"}
+    env = {"UAVC_VEHICLES": "process", "UAVC_FLIGHT_TIME_S": f"{FLIGHT_TIME_S:g}"}
     with serve(args, tmp_path, token=TOKEN, env=env, drones=("uav1", "uav2"), timeout_s=120) as srv:
         assert "each in its own process" in srv.log()
         # both drones have joined the fleet (as the page waits for them before Start)
@@ -126,7 +125,7 @@ def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path:
         first = wait_for(
             lambda: _route(srv),
             lambda s: bool(s.get("mission")) and s["mission"]["handoffs"] >= 1,
-            900.0 / SPEED + 240.0,
+            3.0 * FLIGHT_TIME_S / SPEED + 240.0,
             "a handoff",
         )
         t_handoff = first["mission"]["coverage"]["route"]["window_s"]
@@ -146,7 +145,9 @@ def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path:
     assert status["state"] == "running", status
     length = route["first_on_route_s"] + route["window_s"]
     rep = PatrolExperiment(
-        PatrolConfig(drones=2, duration_s=length, seed=1, charge_pct_s=1.0)
+        PatrolConfig(
+            drones=2, duration_s=length, seed=1, charge_pct_s=1.0, flight_time_s=FLIGHT_TIME_S
+        )
     ).run()
     why = (route, rep.gaps, f"{silences} central-silence hovers")
     assert abs(route["coverage_pct"] - 100.0 * rep.coverage) <= COVERAGE_PP, why

@@ -153,6 +153,18 @@ def test_planner_timing() -> None:
         StationModel(charge_pct_s=-1)
 
 
+def test_a_flight_model_follows_the_battery_it_is_given() -> None:
+    """``flight_time_s`` (the setting ``serve`` and the vehicles share) sets the drain and scales
+    the least shift worth a take-off; the AR.Drone's 720 s gives the defaults."""
+    assert FlightModel.for_flight_time(720.0) == FlightModel()
+    short = FlightModel.for_flight_time(240.0)
+    assert short.drain_pct_s == pytest.approx(100.0 / 240.0)
+    assert short.min_shift_s == pytest.approx(20.0)
+    for bad in (0.0, -1.0, math.inf, math.nan):
+        with pytest.raises(PlanError):
+            FlightModel.for_flight_time(bad)
+
+
 def test_coverage_bound() -> None:
     m = FlightModel()
     b = coverage_bound(Enu(0, 0, 0), SQUARE[0], 0.30, m, StationModel())

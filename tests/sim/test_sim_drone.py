@@ -227,6 +227,19 @@ def test_battery_drain_fault_leaks_until_cleared() -> None:
     assert before - sim.truth.battery_pct == pytest.approx(10 * 0.005, abs=0.001)  # idle only
 
 
+def test_the_battery_drains_over_the_configured_flight_time() -> None:
+    """``SimConfig.flight_time_s`` (``UAVC_FLIGHT_TIME_S`` for ``serve``'s simulators): a
+    hovering drone with a 240 s battery drains 100 / 240 % a second, three times the AR.Drone's."""
+    drains = []
+    for flight in (720.0, 240.0):
+        sim = SimDrone(config=SimConfig(flight_time_s=flight))
+        assert sim.physics.battery.flight_time_s == flight
+        sim.physics.battery.step(10.0, motors_on=True)
+        drains.append(100.0 - sim.truth.battery_pct)
+    assert drains[0] == pytest.approx(1000.0 / 720.0)
+    assert drains[1] == pytest.approx(3.0 * drains[0])
+
+
 def test_lost_markers_fault_hides_every_marker_from_the_camera_for_its_duration() -> None:
     import cv2
 
