@@ -1,4 +1,4 @@
-"""The import graph of ``server`` and ``drone``: no cycles, no upward imports.
+"""The import graph of ``server``, ``drone`` and ``experiments``: no cycles, no upward imports.
 
 Every import counts, at module level or inside a function, except those under
 ``if TYPE_CHECKING:`` (never run). A cycle makes the order of initialisation decide what works;
@@ -12,7 +12,8 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("server", "drone")
+PACKAGES = ("server", "drone", "experiments")
+PRODUCT = ("server", "drone")  # what the wheel ships
 
 
 def module_name(path: Path) -> str:
@@ -157,11 +158,24 @@ def test_product_never_imports_the_report_extra() -> None:
     assert any(d.startswith("matplotlib") for d in report["optional-dependencies"]["report"])
     users = sorted(
         module_name(p)
-        for pkg in PACKAGES
+        for pkg in PRODUCT
         for p in (ROOT / pkg).rglob("*.py")
         if "matplotlib" in top_level_imports(p)
     )
     assert users == []
+
+
+def test_product_imports_the_experiments_only_for_their_command() -> None:
+    """``uav-console patrol`` runs the experiment; nothing else of the product depends on it."""
+    graph = import_graph()
+    users = sorted(
+        f"{m} -> {d}"
+        for m, deps in graph.items()
+        if m.split(".")[0] in PRODUCT
+        for d in deps
+        if d.split(".")[0] == "experiments"
+    )
+    assert users == ["server.cli -> experiments.patrol.cli"]
 
 
 def test_the_walker_sees_imports_inside_functions(tmp_path: Path) -> None:
