@@ -63,8 +63,8 @@ bench: $(VENV)/.installed-test
 	$(VENV)/bin/uav-console bench $(ARGS)
 
 lint: $(VENV)/.installed-test
-	$(VENV)/bin/ruff check server drone tests bench tools
-	$(VENV)/bin/ruff format --check server drone tests bench tools
+	$(VENV)/bin/ruff check server drone experiments tests bench tools
+	$(VENV)/bin/ruff format --check server drone experiments tests bench tools
 	$(VENV)/bin/mypy
 
 clean:

@@ -38,10 +38,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
+from experiments.patrol import PatrolConfig, PatrolExperiment
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import Enu
 from server.fleet.messages import LtmStatus
-from server.fleet.patrol import PatrolConfig, PatrolExperiment, station_positions
+from server.fleet.stations import station_positions
 
 
 def bare_rig_rtf(n: int, seconds: float, dt: float) -> float:

@@ -240,7 +240,7 @@ def live_figures(head: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, 
 def lockstep_figures(
     seconds: float, seed: int, drones: int, charge: float, handoff: str
 ) -> dict[str, Any]:
-    from server.fleet.patrol import PatrolConfig, PatrolExperiment
+    from experiments.patrol import PatrolConfig, PatrolExperiment
 
     cfg = PatrolConfig(
         drones=drones, duration_s=seconds, seed=seed, charge_pct_s=charge, handoff=handoff

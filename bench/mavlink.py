@@ -43,7 +43,7 @@ from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.sim.autopilot import SimAutopilot
 from drone.mavlink.vehicle import MavlinkVehicle
 from drone.sim.world import load_world
-from server.fleet.patrol import PatrolConfig, PatrolExperiment
+from experiments.patrol import PatrolConfig, PatrolExperiment
 
 ROOT = Path(__file__).resolve().parents[1]
 ADDR = "127.0.16.40"

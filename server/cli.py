@@ -193,9 +193,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         timewarp.install_from(args_list, os.environ)
     # `patrol` owns its flags (and --help); hand them over untouched.
     if args_list[:1] == ["patrol"]:
-        from server.fleet.patrol import patrol_main
-
-        return patrol_main(args_list[1:])
+        return _patrol(args_list[1:])
     args = _parser().parse_args(args_list)
     try:
         if args.command == "serve":
@@ -338,6 +336,26 @@ def _serve(args: argparse.Namespace) -> int:
     with contextlib.suppress(KeyboardInterrupt):
         uvicorn.Server(config).run()
     return 0
+
+
+def _patrol(argv: list[str]) -> int:
+    """``uav-console patrol``: the experiment is the source checkout's ``experiments/patrol``, no
+    part of the installed package; without it, say so (exit status 2)."""
+    try:
+        from experiments.patrol.cli import patrol_main
+    except ModuleNotFoundError as exc:
+        if exc.name is None or exc.name.split(".")[0] != "experiments":
+            raise
+        if not (ROOT / "experiments" / "patrol" / "__init__.py").is_file():
+            print(
+                "uav-console patrol: the patrol experiment is not installed; it runs from a "
+                "source checkout (experiments/patrol, with pip install -e '.[report]')",
+                file=sys.stderr,
+            )
+            return 2
+        sys.path.append(str(ROOT))  # an installed `uav-console` run on a checkout
+        from experiments.patrol.cli import patrol_main
+    return patrol_main(argv)
 
 
 def _bench(names: list[str], quick: bool) -> int:

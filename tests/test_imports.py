@@ -1,4 +1,4 @@
-"""The import graph of ``server`` and ``drone``: no cycles, no upward imports.
+"""The import graph of ``server``, ``drone`` and ``experiments``: no cycles, no upward imports.
 
 Every import counts, at module level or inside a function, except those under
 ``if TYPE_CHECKING:`` (never run). A cycle makes the order of initialisation decide what works;
@@ -8,10 +8,12 @@ Every import counts, at module level or inside a function, except those under
 from __future__ import annotations
 
 import ast
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("server", "drone")
+PACKAGES = ("server", "drone", "experiments")
+PRODUCT = ("server", "drone")  # what the wheel ships
 
 
 def module_name(path: Path) -> str:
@@ -125,6 +127,55 @@ def test_drone_never_imports_server() -> None:
         if d.startswith("server")
     )
     assert upward == []
+
+
+def top_level_imports(path: Path) -> set[str]:
+    """The top-level names of the absolute imports ``path`` makes when it runs."""
+    found: set[str] = set()
+
+    def visit(node: ast.AST) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and _is_type_checking(child):
+                for sub in child.orelse:
+                    visit(sub)
+                continue
+            if isinstance(child, ast.Import):
+                found.update(alias.name.split(".")[0] for alias in child.names)
+            elif isinstance(child, ast.ImportFrom) and child.level == 0 and child.module:
+                found.add(child.module.split(".")[0])
+            visit(child)
+
+    visit(ast.parse(path.read_text(), str(path)))
+    return found
+
+
+def test_product_never_imports_the_report_extra() -> None:
+    """matplotlib is the ``report`` extra's, for the experiments (``experiments/``): a console
+    or a vehicle is installed without it."""
+    report = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    core = [d.split(">")[0].split("=")[0].split("[")[0].strip() for d in report["dependencies"]]
+    assert "matplotlib" not in core
+    assert any(d.startswith("matplotlib") for d in report["optional-dependencies"]["report"])
+    users = sorted(
+        module_name(p)
+        for pkg in PRODUCT
+        for p in (ROOT / pkg).rglob("*.py")
+        if "matplotlib" in top_level_imports(p)
+    )
+    assert users == []
+
+
+def test_product_imports_the_experiments_only_for_their_command() -> None:
+    """``uav-console patrol`` runs the experiment; nothing else of the product depends on it."""
+    graph = import_graph()
+    users = sorted(
+        f"{m} -> {d}"
+        for m, deps in graph.items()
+        if m.split(".")[0] in PRODUCT
+        for d in deps
+        if d.split(".")[0] == "experiments"
+    )
+    assert users == ["server.cli -> experiments.patrol.cli"]
 
 
 def test_the_walker_sees_imports_inside_functions(tmp_path: Path) -> None:

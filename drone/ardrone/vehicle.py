@@ -93,7 +93,7 @@ class ARDroneVehicle:
     """
 
     # The AR.Drone's own hover holds attitude over optical flow and drifts; the position
-    # controller holds a hover at the estimate instead (server.tasks.types.HoverTask).
+    # controller holds a hover at the estimate instead (server.tasks.flight.HoverTask).
     holds_position = False
 
     def __init__(

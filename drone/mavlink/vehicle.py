@@ -84,7 +84,7 @@ class MavlinkVehicle:
 
     # The autopilot holds position by itself (PX4 AUTO.LOITER, ArduCopter LOITER), so a hover
     # is its hold mode rather than a stream of position targets: it keeps holding if this
-    # process stops, with no offboard-loss failsafe in between (server.tasks.types.HoverTask).
+    # process stops, with no offboard-loss failsafe in between (server.tasks.flight.HoverTask).
     holds_position = True
 
     def __init__(

@@ -10,7 +10,7 @@ from drone.supervisor.phase import FLYING, Phase
 from drone.vehicle import VehicleSnapshot
 
 # Beyond this the EKF's 1-sigma position error is larger than a marker's standoff distance
-# (1 m, server/tasks/types.py GotoMarkerTask.standoff_m): a goto could end at the wrong marker.
+# (1 m, server/tasks/goto.py GotoMarkerTask.standoff_m): a goto could end at the wrong marker.
 MAX_SIGMA_M = 1.0
 LOST_AFTER_S = 5.0  # a take-off and the first turn towards a marker fit comfortably in 5 s
 

@@ -24,7 +24,7 @@ Two jobs, both pure functions of the LTM statuses the CTM already receives:
   simulator's truth, here from the drones' reported positions.
 
 A waypoint is *visited* when a drone of the mission passes within ``visit_radius_m``
-(horizontally, the same 2 m ``server.fleet.patrol`` measures coverage with) at route height.
+(horizontally, the same 2 m the patrol experiment measures coverage with) at route height.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from typing import Any
 
 from server.fleet.geo import Enu
 
-VISIT_RADIUS_M = 2.0  # as server.fleet.patrol.VISIT_RADIUS_M: the experiment's visit rule
+VISIT_RADIUS_M = 2.0  # horizontally; experiments/patrol counts its visits with it
 MIN_VISIT_RADIUS_M = 1.0  # the fleet plan's arrival tolerance (FlightPlan.tolerance_m)
 VISIT_HEIGHT_M = 1.5  # at route height ± this (the CTM's on-route rule)
 MAX_VISITS = 512  # per waypoint: hours of patrol at a minute a lap

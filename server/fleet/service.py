@@ -32,9 +32,9 @@ from server.fleet.geo import origin_of
 from server.fleet.ltm import LocalTaskManager
 from server.fleet.messages import PATROL_SERVICE, PATROL_SERVICE_TYPE, Handoff
 from server.fleet.node import CtmNode, LtmNode
-from server.fleet.patrol import station_positions
 from server.fleet.planner import FlightModel, StationModel
 from server.fleet.router import CentralRoleInfo, make_fleet_router
+from server.fleet.stations import station_positions
 from server.graph import Graph
 from server.timewarp import guard_s
 

@@ -19,23 +19,17 @@ from drone.commands import (
     Waypoints,
     parse_command,
 )
+from server.tasks.base import Task
+from server.tasks.describe import DescribeTask
 from server.tasks.errors import CommandError
+from server.tasks.flight import EmergencyTask, HoverTask, LandTask, TakeoffTask
+from server.tasks.goto import GotoMarkerTask
+from server.tasks.home import ReturnHomeTask
+from server.tasks.motion import MoveTask, TurnTask
 from server.tasks.objects import FaceObjectTask, GotoObjectTask
-from server.tasks.types import (
-    DescribeTask,
-    EmergencyTask,
-    GotoMarkerTask,
-    HoverTask,
-    LandTask,
-    MoveTask,
-    PatrolTask,
-    ReturnHomeTask,
-    SearchTask,
-    TakeoffTask,
-    Task,
-    TurnTask,
-    WaypointsTask,
-)
+from server.tasks.patrol import PatrolTask
+from server.tasks.search import SearchTask
+from server.tasks.waypoints import WaypointsTask
 
 
 def build_task(command: object) -> Task:

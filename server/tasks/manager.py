@@ -62,19 +62,12 @@ from drone.control.pid import Setpoint
 from drone.limits import limits_of
 from drone.supervisor.people import KeepAway
 from drone.vehicle import Vehicle, VehicleSnapshot
+from server.tasks.base import ArrivalRule, Context, Outcome, PlanState, Task
 from server.tasks.build import build_task
 from server.tasks.errors import CommandError, IllegalTransition, RefusedError
+from server.tasks.legs import LegsTask
+from server.tasks.search import SEARCH_MAX_TURNS, SEARCH_RATE_RAD_S
 from server.tasks.states import TaskEvent, TaskState, transition
-from server.tasks.types import (
-    SEARCH_MAX_TURNS,
-    SEARCH_RATE_RAD_S,
-    ArrivalRule,
-    Context,
-    LegsTask,
-    Outcome,
-    PlanState,
-    Task,
-)
 
 log = logging.getLogger(__name__)
 

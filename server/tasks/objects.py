@@ -29,15 +29,9 @@ from typing import Any
 from drone.commands import Goto, Turn
 from drone.control.pid import Setpoint, wrap_angle
 from drone.vehicle import VehicleSnapshot
+from server.tasks.base import MIN_Z_M, Context, PlanState, check_inside, need_flying
 from server.tasks.errors import CommandError, RefusedError
-from server.tasks.types import (
-    MIN_Z_M,
-    Context,
-    LegsTask,
-    PlanState,
-    _inside,
-    _need_flying,
-)
+from server.tasks.legs import LegsTask
 
 KNOWN_KINDS = frozenset(
     {"chair", "table", "door", "window", "person", "plant", "box", "sofa", "shelf", "lamp"}
@@ -217,9 +211,9 @@ class GotoObjectTask(LegsTask):
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
         self.obj = resolve(ctx.world, self.cmd, p.x, p.y)
         self.what = label(self.obj, ctx.world)
-        _need_flying(p, f"fly to {self.what}")
+        need_flying(p, f"fly to {self.what}")
         sp = standoff(self.obj, ctx, p.x, p.y)
-        _inside(ctx, sp.x, sp.y, sp.z, f"fly to {self.what}")
+        check_inside(ctx, sp.x, sp.y, sp.z, f"fly to {self.what}")
         self._sp = sp
         self.needs_localisation = _needs_localisation(ctx.world)
         return replace(p, x=sp.x, y=sp.y, z=sp.z, yaw_rad=sp.yaw_rad)
@@ -258,7 +252,7 @@ class FaceObjectTask(LegsTask):
     def plan(self, p: PlanState, ctx: Context) -> PlanState:
         self.obj = resolve(ctx.world, self.cmd, p.x, p.y)
         self.what = label(self.obj, ctx.world)
-        _need_flying(p, f"face {self.what}")
+        need_flying(p, f"face {self.what}")
         return replace(p, yaw_rad=self._yaw(self.obj, p.x, p.y))
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:

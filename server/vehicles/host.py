@@ -249,7 +249,7 @@ class VehicleHost:
         from server.fleet.bus_ltm import BusLtmNode
         from server.fleet.geo import origin_of
         from server.fleet.ltm import LocalTaskManager
-        from server.fleet.patrol import station_positions
+        from server.fleet.stations import station_positions
         from server.graph import Graph
         from server.language.nlu import default_nlu
         from server.store import AuditLog

@@ -17,7 +17,7 @@ import pytest
 from server.dialog.states import State
 from server.fleet.geo import origin_of
 from server.fleet.ltm import LocalTaskManager
-from server.fleet.patrol import station_positions
+from server.fleet.stations import station_positions
 from tests.dialog.lockstep_dialog import DialogRig, dialog_rig
 
 WP3 = (15.0, 15.0, 2.5)  # worlds/outdoor.yaml wp3

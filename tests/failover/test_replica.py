@@ -11,11 +11,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from experiments.patrol import LockstepLink, PatrolConfig, PatrolExperiment, PatrolReport
 from server.fleet.ctm import CentralTaskManager, DroneRecord
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
 from server.fleet.messages import FlightPlan, PlanKind
-from server.fleet.patrol import LockstepLink, PatrolConfig, PatrolExperiment, PatrolReport
 from server.fleet.replica import PLAN_ID_MARGIN, restore, snapshot
 
 FAST = {"flight_time_s": 150.0, "swap_s": 20.0}

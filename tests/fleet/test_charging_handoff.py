@@ -1,6 +1,6 @@
 """Stations that charge, stalled missions and the paper's handoff rule (issue 28), in lockstep:
 the real simulator (charging on the world's pads), wire protocol, EKF, PID, task managers,
-LTMs and the CTM (``server.fleet.patrol.PatrolExperiment``)."""
+LTMs and the CTM (``experiments.patrol.PatrolExperiment``)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import json
 import pytest
 
 from drone.sim.world import load_world
+from experiments.patrol import PatrolConfig, PatrolExperiment, patrol_main
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.messages import Role
 from server.fleet.node import REPLY_TOPIC, CtmNode
-from server.fleet.patrol import PatrolConfig, PatrolExperiment, patrol_main
 from server.fleet.planner import StationModel
 from server.fleet.service import station_model
 from server.graph import Graph

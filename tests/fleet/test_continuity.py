@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+from experiments.patrol import PatrolConfig, PatrolExperiment
 from server.fleet.continuity import (
     CoverageTracker,
     arc_ahead_m,
@@ -18,7 +19,6 @@ from server.fleet.continuity import (
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
 from server.fleet.messages import FlightPlan, PlanKind
-from server.fleet.patrol import PatrolConfig, PatrolExperiment
 
 SQUARE = (Enu(0, 0, 5), Enu(10, 0, 5), Enu(10, 10, 5), Enu(0, 10, 5))
 

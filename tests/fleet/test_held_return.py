@@ -4,7 +4,7 @@ managers, LTMs and CTM."""
 
 from __future__ import annotations
 
-from server.fleet.patrol import PatrolConfig, PatrolExperiment
+from experiments.patrol import PatrolConfig, PatrolExperiment
 
 FAST = {"flight_time_s": 150.0, "charge_pct_s": 1.0}
 

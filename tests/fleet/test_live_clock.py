@@ -20,8 +20,8 @@ from typing import Any
 import httpx
 import pytest
 
+from experiments.patrol import PatrolConfig, PatrolExperiment
 from server import timewarp
-from server.fleet.patrol import PatrolConfig, PatrolExperiment
 from tests.e2e.served import ROOT, serve
 from tests.support.loopback import for_worker
 from tests.support.polling import wait_for

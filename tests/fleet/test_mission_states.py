@@ -4,7 +4,7 @@ drones' roles (not ``running`` with the drone ``patrolling``), the CTM sends not
 operator resumes or ends it, and a resumed mission flies again.
 
 Lockstep: the real simulator behind the AR.Drone protocol in memory, EKF, PID, task managers,
-LTMs and the CTM (``server.fleet.patrol.PatrolExperiment``), with the operator's doors as they
+LTMs and the CTM (``experiments.patrol.PatrolExperiment``), with the operator's doors as they
 reach the drone: the dialog (typed or spoken "land", "stop"), the task manager's preempt (the
 page's and REST's Land and Emergency, ``/ardrone/land``, the safety door all call it), the
 Hover button's cancel, and ``Vehicle.jog`` (``/cmd_vel``)."""
@@ -18,13 +18,13 @@ from typing import Any
 import pytest
 
 from drone.supervisor import supervise
+from experiments.patrol import PatrolConfig, PatrolExperiment
 from server.dialog.adapters import TaskManagerPort, VehicleAdapter
 from server.dialog.manager import DialogManager
 from server.fleet.central import CentralPatrol
 from server.fleet.errors import IllegalTransition, MessageError
 from server.fleet.ltm import interruption, operator_action
 from server.fleet.messages import LtmStatus, Role
-from server.fleet.patrol import PatrolConfig, PatrolExperiment
 from server.fleet.states import MissionEvent, MissionState, transition
 from server.graph import Graph
 from server.settings import Settings

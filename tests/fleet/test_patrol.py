@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import json
 import math
+import sys
+from pathlib import Path
 
 import pytest
 
+from experiments.patrol import PatrolConfig, PatrolExperiment, patrol_main
+from server import cli
 from server.fleet.messages import Role
-from server.fleet.patrol import PatrolConfig, PatrolExperiment, patrol_main
 
 FAST = {"flight_time_s": 150.0, "swap_s": 20.0}
 # Stated bound on any coverage gap at a handoff: none may exceed one tick of the rig, since the
@@ -141,3 +144,31 @@ def test_cli_json_and_png(tmp_path, capsys) -> None:
 def test_cli_bad_arguments(argv: list[str], msg: str, capsys) -> None:
     assert patrol_main(argv) == 2
     assert msg in capsys.readouterr().err
+
+
+def test_patrol_command_without_the_experiment_says_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An install without the checkout's ``experiments/`` (the wheel): a clear error, status 2."""
+    for name in [m for m in sys.modules if m.split(".")[0] == "experiments"]:
+        monkeypatch.setitem(sys.modules, name, None)  # the import fails as if absent
+    monkeypatch.setattr(cli, "ROOT", tmp_path)  # no checkout beside the package
+    assert cli.main(["patrol", "--drones", "1", "--duration", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "the patrol experiment is not installed" in err and "source checkout" in err
+
+
+def test_patrol_command_finds_the_experiment_in_the_checkout(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An installed ``uav-console`` (editable: only ``server`` and ``drone`` on its path) runs
+    the experiment from the checkout it was installed from."""
+    root = Path(cli.ROOT).resolve()
+    for name in [m for m in sys.modules if m.split(".")[0] == "experiments"]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setattr(
+        sys, "path", [p for p in sys.path if p not in ("", ".") and Path(p).resolve() != root]
+    )
+    assert cli.main(["patrol", "--drones", "1", "--duration", "5", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["duration_s"] == 5
+    assert str(root) in sys.path

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
+from experiments.patrol import PatrolConfig, PatrolExperiment
 from server.fleet.continuity import RouteCoverage
-from server.fleet.patrol import PatrolConfig, PatrolExperiment
 
 FAST = {"flight_time_s": 150.0, "charge_pct_s": 1.0}
 COVERAGE_PP = 1.0  # the tolerance against the lockstep experiment

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from server.fleet.patrol import PatrolConfig, PatrolExperiment
+from experiments.patrol import PatrolConfig, PatrolExperiment
 
 
 def test_mavlink_fleet_patrol_hands_off_without_gap() -> None:
@@ -56,7 +56,7 @@ def test_link_lost_mid_mission_autopilot_returns_and_is_replaced() -> None:
 def test_patrol_cli_with_mavlink_drones(capsys: object) -> None:
     import json
 
-    from server.fleet.patrol import patrol_main
+    from experiments.patrol import patrol_main
 
     assert (
         patrol_main(["--drones", "1", "--duration", "30", "--protocol", "mavlink", "--json"]) == 0
