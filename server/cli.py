@@ -12,7 +12,7 @@ import os
 import re
 import subprocess
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -252,8 +252,9 @@ def _value_parser(name: str, shape: Shape) -> Callable[[str], Any]:
     return parse
 
 
-def settings_from(args: argparse.Namespace) -> Settings:
-    """The one :class:`Settings` of this process: ``UAVC_*`` variables, then the flags given.
+def settings_from(args: argparse.Namespace, env: Mapping[str, str] | None = None) -> Settings:
+    """The one :class:`Settings` of this process: ``UAVC_*`` variables (the process's, or
+    ``env``), then the flags given.
 
     Raises:
         SettingsError: a value cannot be used; the message names the flags that gave one.
@@ -266,10 +267,16 @@ def settings_from(args: argparse.Namespace) -> Settings:
         if value is not None:
             given[name] = value
     try:
-        return Settings.from_env(**given)
+        return Settings.from_env(env, **given)
     except SettingsError as exc:
-        named = [flags_of(n)[0] for n in given if re.search(rf"\b{n}\b", str(exc), re.I)]
-        raise SettingsError(f"{exc} (given as {', '.join(named)})" if named else str(exc)) from None
+        named = [
+            flags_of(n)[0]
+            for n in given
+            if n in exc.names or re.search(rf"\b{n}\b", str(exc), re.IGNORECASE)
+        ]
+        raise SettingsError(
+            f"{exc} (given as {', '.join(named)})" if named else str(exc), exc.names
+        ) from None
 
 
 def _serve(args: argparse.Namespace, settings: Settings) -> int:

@@ -72,7 +72,20 @@ def flags_of(name: str) -> list[str]:
 
 
 class SettingsError(ValueError):
-    """A setting has a value that cannot be used; the message names it."""
+    """A setting has a value that cannot be used; the message names it.
+
+    ``names``: the settings a check refused (a check across settings names them in its message
+    only)."""
+
+    def __init__(self, message: str, names: tuple[str, ...] = ()) -> None:
+        super().__init__(message)
+        self.names = names
+
+    @classmethod
+    def of(cls, exc: ValidationError) -> SettingsError:
+        """The error for what pydantic refused: :func:`describe`'s message, the fields named."""
+        names = tuple(str(e["loc"][0]) for e in exc.errors() if e["loc"])
+        return cls(describe(exc), names)
 
 
 class Settings(BaseSettings):
@@ -418,7 +431,7 @@ class Settings(BaseSettings):
         try:
             super().__init__(**values)
         except ValidationError as exc:
-            raise SettingsError(describe(exc)) from None
+            raise SettingsError.of(exc) from None
 
     @field_validator(
         "data_dir", "grammar_dir", "model_dir", "asr_model", "cert", "key", "recordings_dir"
@@ -469,7 +482,7 @@ class Settings(BaseSettings):
         try:
             return type(self).model_validate({**self.model_dump(), **changes})
         except ValidationError as exc:
-            raise SettingsError(describe(exc)) from None
+            raise SettingsError.of(exc) from None
 
     @classmethod
     def from_env(cls, env: Mapping[str, str] | None = None, **overrides: Any) -> Settings:
@@ -483,7 +496,7 @@ class Settings(BaseSettings):
         try:
             return cls.model_validate({**source(), **given})
         except ValidationError as exc:
-            raise SettingsError(describe(exc)) from None
+            raise SettingsError.of(exc) from None
 
 
 def describe(exc: ValidationError) -> str:
