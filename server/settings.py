@@ -1,8 +1,10 @@
 """One typed Settings model, read once from flags and ``UAVC_*`` environment variables, passed down.
 
-Built on pydantic-settings: every field is also the variable ``UAVC_<FIELD>`` (``UAVC_PORT=9000``),
-cast and validated once at start; a value that cannot be used raises :class:`SettingsError`
-naming the variable. ``docs/configuration.md`` is generated from this model
+Built on pydantic-settings: every field is also the variable ``UAVC_<FIELD>`` (``UAVC_PORT=9000``)
+and the flag ``--<field>`` of ``serve`` and ``vehicle`` (generated in ``server/cli.py`` from the
+field's annotation, description and topic, :func:`flags_of`), cast and validated once at start;
+a value that cannot be used raises :class:`SettingsError` naming it. Each setting's one default
+is the field's. ``docs/configuration.md`` is generated from this model
 (``python -m server.settings``; a test fails when it is stale).
 """
 
