@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import functools
 import os
 import re
 import subprocess
@@ -196,10 +197,17 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
     type and bounds as it is parsed, so a bad value is an argparse error naming the flag.
     """
     groups: dict[str, argparse._ArgumentGroup] = {}
-    for name, field in Settings.model_fields.items():
-        topic = group_of(name)
+    for topic, flags, options in _setting_flags():
         if topic not in groups:
             groups[topic] = parser.add_argument_group(f"settings: {topic}")
+        groups[topic].add_argument(*flags, **options)
+
+
+@functools.cache
+def _setting_flags() -> tuple[tuple[str, list[str], dict[str, Any]], ...]:
+    """(topic, flags, ``add_argument`` options) of each setting, worked out once a process."""
+    out = []
+    for name, field in Settings.model_fields.items():
         shape = shape_of(name)
         text = f"{field.description} [{ENV_PREFIX}{name.upper()}; default: {_default(name)}]"
         options: dict[str, Any] = {"dest": name, "default": None, "help": text.replace("%", "%%")}
@@ -214,7 +222,8 @@ def add_setting_flags(parser: argparse.ArgumentParser) -> None:
             if shape.many:
                 options.update(nargs="+", action="extend")
         flags = [f for f in flags_of(name) if not f.startswith("--no-")]
-        groups[topic].add_argument(*flags, **options)
+        out.append((group_of(name), flags, options))
+    return tuple(out)
 
 
 _METAVARS: dict[type, str] = {int: "N", float: "X", Path: "PATH", str: "TEXT"}
