@@ -43,7 +43,7 @@ def _parser() -> argparse.ArgumentParser:
         "--addr", default=None, help="default 127.0.0.2 (AR.Drone), 127.0.0.9 (MAVLink)"
     )
     sim.add_argument("--world", default=Settings.model_fields["world"].default)
-    sim.add_argument("--speed", type=float, default=1.0)
+    sim.add_argument("--speed", type=float, default=Settings.model_fields["sim_speed"].default)
     sim.add_argument(
         "--protocol",
         choices=("ardrone", "mavlink"),
@@ -142,7 +142,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "sim":
             from drone.sim.server import run_sim
 
-            asyncio.run(run_sim(args.addr or "127.0.0.2", args.world, args.speed))
+            addr = args.addr or Settings.model_fields["sim_base_addr"].default
+            asyncio.run(run_sim(addr, args.world, args.speed))
             return 0
         if args.command == "vehicle":
             settings = settings_from(args)
