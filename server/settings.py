@@ -114,7 +114,8 @@ class Settings(BaseSettings):
     drone: str = Field(
         "sim",
         description="'sim', 'sim-mavlink', 'none', an AR.Drone's IP or a MAVLink connection "
-        "string; a fleet may list one per drone, comma-separated.",
+        "string (tcp:HOST:PORT, udpin:0.0.0.0:14550, …); a fleet may list one per drone, "
+        "comma-separated.",
         json_schema_extra=_topic(CONSOLE),
     )
     world: str = Field(
@@ -130,12 +131,14 @@ class Settings(BaseSettings):
     )
     sim_base_addr: str = Field(
         "127.0.0.2",
-        description="Loopback address of the first simulated drone.",
+        description="Loopback address of the first simulated drone; `serve` takes the next free "
+        "one when another console has it, unless given as a flag.",
         json_schema_extra=_topic(CONSOLE, "--sim-addr"),
     )
     token: str | None = Field(
         None,
-        description="Pilot token; generated and stored in data_dir on first start.",
+        description="Pilot token; generated and stored in data_dir on first start. A vehicle "
+        "process: the token its safety door takes (and a rosbridge central's).",
         json_schema_extra=_topic(CONSOLE),
     )
     observer_token: str | None = Field(
@@ -185,7 +188,8 @@ class Settings(BaseSettings):
         gt=0.0,
         le=100.0,
         description="The whole console (web process, vehicle processes, simulators) runs this "
-        "many times faster than the wall clock; for tests and benchmarks (server/timewarp.py).",
+        "many times faster than the wall clock; for tests and benchmarks, with the camera off "
+        "(server/timewarp.py).",
         json_schema_extra=_topic(CONSOLE),
     )
     camera: bool = Field(
