@@ -41,7 +41,10 @@ async def until(pred: object, timeout_s: float = 5.0) -> float:
 
 async def run(n: int) -> dict[str, list[float]]:
     with tempfile.TemporaryDirectory() as tmp:
-        rt = Runtime(Settings(data_dir=Path(tmp), token="b", sim_base_addr=ADDR))
+        settings = Settings(
+            data_dir=Path(tmp), token="b", sim_base_addr=ADDR, vehicles="inline", asr_preload=False
+        )
+        rt = Runtime(settings)  # the drone in this process: the calls are measured in it
         await rt.start()
         try:
             stack = rt.drones["uav1"]

@@ -8,13 +8,27 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import functools
 import os
+import re
 import subprocess
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Annotated, Any
 
-from server.settings import ROOT, Settings, SettingsError
+from pydantic import TypeAdapter, ValidationError
+
+from server.settings import (
+    ENV_PREFIX,
+    ROOT,
+    Settings,
+    SettingsError,
+    Shape,
+    flags_of,
+    group_of,
+    shape_of,
+)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -22,78 +36,14 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("serve", help="run the console (default: on the simulator)")
-    s.add_argument("--host", default=None)
-    s.add_argument("--port", type=int, default=None)
-    s.add_argument(
-        "--drone",
-        default=None,
-        help="'sim' (default), 'sim-mavlink', 'none', an AR.Drone's IP, or a MAVLink connection "
-        "(tcp:HOST:PORT, udpin:0.0.0.0:14550, …); a fleet may list one per drone, comma-separated",
-    )
-    s.add_argument("--world", default=None, help="indoor | outdoor | path to a world file")
-    s.add_argument("--fleet", type=int, default=None, help="number of simulated drones")
-    s.add_argument("--token", default=None, help="pilot token (default: generated and stored)")
-    s.add_argument("--observer-token", default=None)
-    s.add_argument("--allow-origin", action="append", default=None, help="extra allowed Origin")
-    s.add_argument("--rosbridge-port", type=int, default=None, help="also serve rosbridge here")
-    s.add_argument("--data-dir", type=Path, default=None)
-    s.add_argument("--seed", type=int, default=None)
-    s.add_argument("--asr-model", type=Path, default=None, help="CTranslate2 Whisper directory")
-    s.add_argument("--recognizer", choices=("server", "browser", "auto"), default=None)
-    s.add_argument("--cert", type=Path, default=None, help="TLS certificate (PEM) for HTTPS")
-    s.add_argument("--key", type=Path, default=None, help="its private key (PEM)")
-    s.add_argument("--no-tls", action="store_true", help="plain HTTP even on a non-loopback --host")
-    s.add_argument(
-        "--sim-addr",
-        default=None,
-        help="the first simulated drone's loopback address (default 127.0.0.2, or the next "
-        "free one when another console has it; env UAVC_SIM_BASE_ADDR)",
-    )
-    s.add_argument(
-        "--vehicles",
-        choices=("inline", "process"),
-        default=None,
-        help="each drone's flight stack, AR.Drone or MAVLink, in its own supervised process "
-        "(process, the default) or in the web process (inline); env UAVC_VEHICLES",
-    )
-
-    s.add_argument(
-        "--bus-listen",
-        action="append",
-        default=None,
-        help="endpoint the bus router listens on (repeatable; default tcp/127.0.0.1:7447 or the "
-        "next free port)",
-    )
-    s.add_argument(
-        "--bus-connect", action="append", default=None, help="another bus router (repeatable)"
-    )
-    s.add_argument(
-        "--bus-tls",
-        choices=("auto", "on", "off"),
-        default=None,
-        help="TLS on the bus router's endpoints with the console's CA (auto: off loopback)",
-    )
-    s.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
-    s.add_argument(
-        "--console-name", default=None, help="this console's name on the bus (HOST-PORT)"
-    )
-    s.add_argument(
-        "--clock-speed",
-        type=float,
-        default=None,
-        help="run the console, its vehicles and simulators N times faster than the wall clock "
-        "(tests, benchmarks; with --no-camera); env UAVC_CLOCK_SPEED",
-    )
-    s.add_argument(
-        "--no-camera", action="store_true", help="read no video from the drones (env UAVC_CAMERA)"
-    )
+    add_setting_flags(s)
 
     sim = sub.add_parser("sim", help="the simulator alone, behind the AR.Drone protocol")
     sim.add_argument(
         "--addr", default=None, help="default 127.0.0.2 (AR.Drone), 127.0.0.9 (MAVLink)"
     )
-    sim.add_argument("--world", default="indoor")
-    sim.add_argument("--speed", type=float, default=1.0)
+    sim.add_argument("--world", default=Settings.model_fields["world"].default)
+    sim.add_argument("--speed", type=float, default=Settings.model_fields["sim_speed"].default)
     sim.add_argument(
         "--protocol",
         choices=("ardrone", "mavlink"),
@@ -112,7 +62,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     sim.add_argument("--data-dir", type=Path, default=None, help="mavlink: where the key lives")
 
-    v = sub.add_parser("vehicle", help="one drone's stack joining a central server")
+    v = sub.add_parser(
+        "vehicle",
+        help="one drone's stack joining a central server",
+        description="One drone's flight stack, joining a console's bus (--bus-connect) or a "
+        "central server (--central). Settings come from UAVC_* variables and the flags below.",
+    )
     v.add_argument(
         "--central",
         default=None,
@@ -120,12 +75,6 @@ def _parser() -> argparse.ArgumentParser:
         "bus (--bus-connect)",
     )
     v.add_argument("--name", required=True)
-    v.add_argument("--drone", default="sim")
-    v.add_argument(
-        "--token",
-        default=None,
-        help="rosbridge central: the pilot token; /vehicle-link: only what the safety port checks",
-    )
     v.add_argument(
         "--key-file",
         type=Path,
@@ -133,21 +82,6 @@ def _parser() -> argparse.ArgumentParser:
         help="/vehicle-link: this vehicle's own key (uav-console vehicle-key NAME on the console; "
         "else UAVC_VEHICLE_KEY)",
     )
-    v.add_argument("--world", default=None, help="indoor | outdoor | a world file (UAVC_WORLD)")
-    v.add_argument(
-        "--bus-connect",
-        action="append",
-        default=None,
-        help="the fleet's bus router to join as vehicle-NAME with this vehicle's key (repeatable)",
-    )
-    v.add_argument(
-        "--bus-ca",
-        type=Path,
-        default=None,
-        help="CA file a tls/ bus router is verified with (the console's DATA/tls/ca.pem; "
-        "default: this data directory's)",
-    )
-    v.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
     v.add_argument("--ca", type=Path, default=None, help="CA file for a wss:// central")
     v.add_argument("--fingerprint", default=None, help="pinned SHA-256 of the central's cert")
     v.add_argument("--prefix", default=None, help="topic prefix (default /NAME; '' for one drone)")
@@ -157,6 +91,7 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--safety-cert", type=Path, default=None, help="wss: safety door: its cert")
     v.add_argument("--safety-key", type=Path, default=None, help="wss: safety door: its key")
     v.add_argument("--parent-pid", type=int, default=None, help=argparse.SUPPRESS)
+    add_setting_flags(v)
 
     from server.vehicles.key_cli import add_parser as add_vehicle_key
 
@@ -197,7 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(args_list)
     try:
         if args.command == "serve":
-            return _serve(args)
+            return _serve(args, settings_from(args))
         if args.command == "sim" and args.protocol == "mavlink":
             from server.vehicles.mavlink_stack import sim_main
 
@@ -205,16 +140,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "sim":
             from drone.sim.server import run_sim
 
-            asyncio.run(run_sim(args.addr or "127.0.0.2", args.world, args.speed))
+            addr = args.addr or Settings.model_fields["sim_base_addr"].default
+            asyncio.run(run_sim(addr, args.world, args.speed))
             return 0
         if args.command == "vehicle":
+            settings = settings_from(args)
             if args.central is None or args.central.rstrip("/").endswith("/vehicle-link"):
                 from server.vehicles.main import whole_vehicle_main
 
-                return whole_vehicle_main(args)
+                return whole_vehicle_main(args, settings)
             from server.fleet.client import vehicle_main
 
-            return vehicle_main(args)
+            return vehicle_main(args, settings)
         if args.command == "vehicle-key":
             from server.vehicles.key_cli import vehicle_key_main
 
@@ -242,59 +179,120 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return replay_main(args)
     except SettingsError as exc:
-        print(f"uav-console: {exc}", file=sys.stderr)
+        print(f"uav-console {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
     return 2
 
 
-def serve_vehicles(flag: str | None, env: Mapping[str, str]) -> str:
-    """Where ``serve`` runs each drone's flight stack: ``--vehicles``, else ``UAVC_VEHICLES``,
-    else ``process`` (issue 14: its own supervised process, for AR.Drones and MAVLink drones
-    alike). ``inline`` keeps it in the web process. ``Settings`` itself defaults to ``inline``:
-    an app built in-process (tests, embedding) spawns nothing unless asked."""
-    return flag or env.get("UAVC_VEHICLES") or "process"
+def add_setting_flags(parser: argparse.ArgumentParser) -> None:
+    """Every :class:`Settings` field as a flag of ``parser``, grouped by topic in ``--help``.
+
+    ``--kebab-case`` of the field's name (and its aliases); a bool is ``--x/--no-x``, a list
+    takes one or more values (the flag may repeat), a Literal its choices; the help is the
+    field's description. Each flag defaults to None (given no value: the environment's, else
+    the model's default, which is stated once, in the model) and is checked against the field's
+    type and bounds as it is parsed, so a bad value is an argparse error naming the flag.
+    """
+    groups: dict[str, argparse._ArgumentGroup] = {}
+    for topic, flags, options in _setting_flags():
+        if topic not in groups:
+            groups[topic] = parser.add_argument_group(f"settings: {topic}")
+        groups[topic].add_argument(*flags, **options)
 
 
-def _serve(args: argparse.Namespace) -> int:
+@functools.cache
+def _setting_flags() -> tuple[tuple[str, list[str], dict[str, Any]], ...]:
+    """(topic, flags, ``add_argument`` options) of each setting, worked out once a process."""
+    out = []
+    for name, field in Settings.model_fields.items():
+        shape = shape_of(name)
+        text = f"{field.description} [{ENV_PREFIX}{name.upper()}; default: {_default(name)}]"
+        options: dict[str, Any] = {"dest": name, "default": None, "help": text.replace("%", "%%")}
+        if shape.kind is bool:
+            options["action"] = argparse.BooleanOptionalAction
+        else:
+            options["type"] = _value_parser(name, shape)
+            options["metavar"] = _METAVARS.get(shape.kind, "TEXT")
+            if shape.choices:
+                options["choices"] = shape.choices
+                options["metavar"] = "{" + ",".join(shape.choices) + "}"
+            if shape.many:
+                options.update(nargs="+", action="extend")
+        flags = [f for f in flags_of(name) if not f.startswith("--no-")]
+        out.append((group_of(name), flags, options))
+    return tuple(out)
+
+
+_METAVARS: dict[type, str] = {int: "N", float: "X", Path: "PATH", str: "TEXT"}
+
+
+def _default(name: str) -> str:
+    field = Settings.model_fields[name]
+    if field.default_factory is not None:
+        return str(field.get_default(call_default_factory=True)).replace(str(Path.home()), "~")
+    if field.default is None or field.default == ():
+        return "unset"
+    if isinstance(field.default, bool):
+        return "on" if field.default else "off"
+    if isinstance(field.default, tuple):
+        return ",".join(str(v) for v in field.default)
+    return str(field.default)
+
+
+def _value_parser(name: str, shape: Shape) -> Callable[[str], Any]:
+    """Parse one value of setting ``name`` as its type and bounds (``ge``, ``pattern`` …) say;
+    a value they refuse is an :class:`argparse.ArgumentTypeError` (argparse names the flag)."""
+    bounds = [] if shape.many else Settings.model_fields[name].metadata
+    adapters: list[TypeAdapter[Any]] = []  # built on first use: `interpret` starts quickly
+
+    def parse(text: str) -> Any:
+        if not adapters:
+            form: Any = Annotated[(shape.kind, *bounds)] if bounds else shape.kind
+            adapters.append(TypeAdapter(form))
+        try:
+            return adapters[0].validate_python(text)
+        except ValidationError as exc:
+            raise argparse.ArgumentTypeError(f"{text!r}: {exc.errors()[0]['msg']}") from None
+
+    parse.__name__ = shape.kind.__name__  # argparse's "invalid <name> value"
+    return parse
+
+
+def settings_from(args: argparse.Namespace, env: Mapping[str, str] | None = None) -> Settings:
+    """The one :class:`Settings` of this process: ``UAVC_*`` variables (the process's, or
+    ``env``), then the flags given.
+
+    Raises:
+        SettingsError: a value cannot be used; the message names the flags that gave one.
+    """
+    given: dict[str, Any] = {}
+    for name in Settings.model_fields:
+        value = getattr(args, name, None)
+        if isinstance(value, list):  # a list flag: its values, each maybe comma-separated
+            value = tuple(p.strip() for v in value for p in str(v).split(",") if p.strip())
+        if value is not None:
+            given[name] = value
+    try:
+        return Settings.from_env(env, **given)
+    except SettingsError as exc:
+        named = [
+            flags_of(n)[0]
+            for n in given
+            if n in exc.names or re.search(rf"\b{n}\b", str(exc), re.IGNORECASE)
+        ]
+        raise SettingsError(
+            f"{exc} (given as {', '.join(named)})" if named else str(exc), exc.names
+        ) from None
+
+
+def _serve(args: argparse.Namespace, settings: Settings) -> int:
     import uvicorn
 
     from server.app import create_app
     from server.http.conn_guard import KEEP_ALIVE_S, ConnectionLimits, guarded_h11
     from server.http.ws_guard import preauth_capped_ws
-
-    settings = Settings.from_env(
-        host=args.host,
-        port=args.port,
-        drone=args.drone,
-        world=args.world,
-        fleet=args.fleet,
-        token=args.token,
-        observer_token=args.observer_token,
-        allow_origins=tuple(args.allow_origin) if args.allow_origin else None,
-        rosbridge_port=args.rosbridge_port,
-        data_dir=args.data_dir,
-        seed=args.seed,
-        asr_model=args.asr_model,
-        recognizer=args.recognizer,
-        cert=args.cert,
-        key=args.key,
-        tls=False if args.no_tls else None,
-        asr_preload=True,
-        vehicles=serve_vehicles(args.vehicles, os.environ),
-        bus_listen=tuple(args.bus_listen) if args.bus_listen else None,
-        bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
-        bus_tls=args.bus_tls,
-        fleet_name=args.fleet_name,
-        console_name=args.console_name,
-        sim_base_addr=args.sim_addr,
-        camera=False if args.no_camera else None,
-    )
-    if settings.recognizer not in ("server", "browser", "auto"):
-        raise SettingsError(
-            f"recognizer must be server, browser or auto, not {settings.recognizer!r}"
-        )
     from server.vehicles.mavlink_stack import drone_kind, is_mavlink
 
     kinds = [drone_kind(settings.drone, i) for i in range(max(1, settings.fleet))]
@@ -303,7 +301,7 @@ def _serve(args: argparse.Namespace) -> int:
     if settings.drone != "none":  # simulators on addresses nobody else holds (module simaddr)
         from server.vehicles.simaddr import choose_sim_base
 
-        choice = choose_sim_base(settings, kinds, fixed=args.sim_addr is not None)
+        choice = choose_sim_base(settings, kinds, fixed=args.sim_base_addr is not None)
         if choice.note:
             print(f"uav-console: {choice.note}", flush=True)
             settings = settings.with_(sim_base_addr=choice.base)

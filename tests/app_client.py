@@ -14,12 +14,23 @@ from server.app import create_app
 from server.settings import Settings
 from tests.support.loopback import for_worker
 
+EMBEDDED: dict[str, Any] = {"vehicles": "inline", "asr_preload": False}
+"""An app built in the test process: its flight stacks inline, the speech model loaded on first
+use (the defaults of :class:`Settings` are ``serve``'s: vehicle processes, the model at start)."""
+
+
+def embedded(settings: Settings) -> Settings:
+    """``settings`` with :data:`EMBEDDED` where it does not say otherwise."""
+    return settings.with_(
+        **{k: v for k, v in EMBEDDED.items() if k not in settings.model_fields_set}
+    )
+
 
 @contextlib.asynccontextmanager
 async def app_client(settings: Settings) -> AsyncIterator[httpx.AsyncClient]:
-    """``create_app(settings)`` started, with a client holding the pilot token; the app is
-    at ``client.app`` for tests that look at the runtime."""
-    app = create_app(settings)
+    """``create_app(settings)`` (made :func:`embedded`) started, with a client holding the pilot
+    token; the app is at ``client.app`` for tests that look at the runtime."""
+    app = create_app(embedded(settings))
     async with app.router.lifespan_context(app):
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(

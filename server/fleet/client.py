@@ -18,7 +18,6 @@ import asyncio
 import contextlib
 import json
 import logging
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -36,6 +35,7 @@ from server.fleet.messages import (
     LtmStatus,
 )
 from server.http.tls import TLSError
+from server.settings import Settings
 from server.vehicles.central_connection import CentralConnection, CentralServer
 
 log = logging.getLogger(__name__)
@@ -182,16 +182,13 @@ class VehicleClient:
         await self.conn.drop(hold_s)
 
 
-def vehicle_main(args: argparse.Namespace) -> int:
-    """``uav-console vehicle --central URL --name NAME [--drone sim|IP] [--world W]``."""
+def vehicle_main(args: argparse.Namespace, settings: Settings) -> int:
+    """``uav-console vehicle --central URL --name NAME [--drone sim|IP] [--world W]``;
+    ``settings`` read once by the command (the pilot token is ``settings.token``)."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    token = args.token or os.environ.get("UAVC_TOKEN")
     try:
         tls = (getattr(args, "ca", None), getattr(args, "fingerprint", None))
-        from server.settings import Settings
-
-        world = args.world or Settings.from_env().world
-        asyncio.run(_vehicle(args.central, args.name, args.drone, world, token, tls))
+        asyncio.run(_vehicle(args.central, args.name, settings, tls))
     except (FleetError, TLSError) as exc:
         print(f"uav-console vehicle: {exc}", file=__import__("sys").stderr)
         return 2
@@ -203,9 +200,7 @@ def vehicle_main(args: argparse.Namespace) -> int:
 async def _vehicle(
     central: str,
     name: str,
-    drone: str,
-    world_name: str,
-    token: str | None,
+    settings: Settings,
     tls: tuple[Path | None, str | None] = (None, None),
 ) -> None:
     from drone.ardrone.driver import ARDroneDriver
@@ -216,7 +211,8 @@ async def _vehicle(
     from server.fleet.geo import Enu, origin_of
     from server.tasks.manager import TaskManager
 
-    world = load_world(world_name)
+    drone, token = settings.drone, settings.token
+    world = load_world(settings.world)
     digits = "".join(c for c in name if c.isdigit())
     index = max(0, int(digits) - 1) if digits else 0
     stations = world.stations or ()
@@ -228,13 +224,11 @@ async def _vehicle(
     from server.vehicles.mavlink_stack import is_mavlink
 
     if is_mavlink(drone):  # a PX4/ArduPilot drone: tcp:…, udpin:…, sim-mavlink
-        await _mavlink_vehicle(central, name, drone, index, world, station, token)
+        await _mavlink_vehicle(central, name, index, world, station, settings)
         return
     sim = None
     if drone == "sim":
-        from server.settings import Settings
-
-        addr, ports = sim_endpoint(0, Settings.from_env().sim_base_addr)
+        addr, ports = sim_endpoint(0, settings.sim_base_addr)
         sim = SimServer(addr, world, ports=ports, seed=index + 1)
         await sim.start()
         driver = ARDroneDriver(
@@ -268,15 +262,15 @@ async def _vehicle(
 
 
 async def _mavlink_vehicle(
-    central: str, name: str, drone: str, index: int, world: Any, station: Any, token: str | None
+    central: str, name: str, index: int, world: Any, station: Any, settings: Settings
 ) -> None:
     """``vehicle --drone tcp:…``: a MAVLink drone's stack joining the central server."""
     from server.fleet.geo import origin_of
-    from server.settings import Settings
     from server.tasks.manager import TaskManager
     from server.vehicles.mavlink_stack import start_mavlink
 
-    parts = await start_mavlink(name, drone, index, world, Settings.from_env())
+    token = settings.token
+    parts = await start_mavlink(name, settings.drone, index, world, settings)
     vehicle = parts.vehicle
     tm = TaskManager(vehicle, world, vehicle.clock)
     ltm = LocalTaskManager(name, vehicle, tm, station, origin=origin_of(world))

@@ -83,7 +83,10 @@ def create_replay_app(
 
     base = settings or Settings.from_env()
     world = recording.metadata.get("flight", {}).get("world") or base.world
-    settings = base.with_(drone="none", recorder=False, world=world)
+    # a replay flies nothing and hears no one: no vehicle processes, no speech model at start
+    settings = base.with_(
+        drone="none", recorder=False, world=world, vehicles="inline", asr_preload=False
+    )
     app = create_app(settings)
     runtime = app.state.runtime
     timeline = Timeline(played, speed, start_ns=flight_start_ns(recording))

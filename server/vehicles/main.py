@@ -26,9 +26,10 @@ from server.vehicles.names import EXIT_CANNOT_START
 log = logging.getLogger("uav_console.vehicle")
 
 
-def whole_vehicle_main(args: argparse.Namespace) -> int:
+def whole_vehicle_main(args: argparse.Namespace, settings: Settings) -> int:
+    """Run the vehicle: ``args`` its own flags, ``settings`` read once by the command."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    if args.central is None and not (args.bus_connect or os.environ.get("UAVC_BUS_CONNECT")):
+    if args.central is None and not settings.bus_connect:
         print(
             "uav-console vehicle: --bus-connect ENDPOINT (or --central URL) is needed",
             file=sys.stderr,
@@ -42,20 +43,13 @@ def whole_vehicle_main(args: argparse.Namespace) -> int:
         return 2
     if args.key_file is not None and loosely_readable(args.key_file):
         log.warning("%s: others may read the vehicle key file (chmod 600 it)", args.key_file)
-    safety_token = args.token or os.environ.get("UAVC_TOKEN")
+    safety_token = settings.token
     if not safety_token:
         log.warning(
             "no pilot token (--token or UAVC_TOKEN): the safety door takes console tickets only"
         )
     digits = "".join(c for c in args.name if c.isdigit())
     index = args.index if args.index is not None else max(0, int(digits or 1) - 1)
-    settings = Settings.from_env(
-        drone=args.drone,
-        world=args.world,
-        bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
-        bus_ca=args.bus_ca,
-        fleet_name=args.fleet_name,
-    )
     secret_hex = os.environ.get("UAVC_DOOR_SECRET", "")
     try:
         door_secret = bytes.fromhex(secret_hex) if secret_hex else None

@@ -184,6 +184,7 @@ async def test_describe_captions_the_camera_and_says_why_not(api: httpx.AsyncCli
 async def test_describe_without_a_model_degrades_clearly(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from server.app import create_app
     from server.settings import Settings
+    from tests.app_client import embedded
     from tests.core.conftest import PILOT
 
     (tmp_path / "model").mkdir()
@@ -194,7 +195,7 @@ async def test_describe_without_a_model_degrades_clearly(tmp_path) -> None:  # t
         drone="none",
         model_dir=tmp_path / "model",
     )
-    app = create_app(settings)
+    app = create_app(embedded(settings))
     async with app.router.lifespan_context(app):
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(transport=transport, base_url="http://t") as client:

@@ -90,17 +90,17 @@ def test_serve_keeps_the_same_tokens_across_restarts(tmp_path: Path) -> None:
 
 
 def test_serve_runs_flight_stacks_in_their_own_processes_unless_told_inline() -> None:
-    """Issue 14: ``serve`` defaults to ``--vehicles process``; the flag beats the environment;
-    an app built in-process (``Settings``: tests, embedding) stays inline."""
-    from server.cli import _parser, serve_vehicles
-    from server.settings import Settings
+    """``serve``'s default is the model's one default (``process``); the environment beats it
+    and the flag beats both."""
+    from server.cli import _parser, settings_from
 
-    assert _parser().parse_args(["serve"]).vehicles is None
-    assert serve_vehicles(None, {}) == "process"
-    assert serve_vehicles(None, {"UAVC_VEHICLES": "inline"}) == "inline"
-    assert serve_vehicles("inline", {"UAVC_VEHICLES": "process"}) == "inline"
-    assert serve_vehicles("process", {"UAVC_VEHICLES": "inline"}) == "process"
-    assert Settings().vehicles == "inline"
+    def vehicles(flags: list[str], env: dict[str, str]) -> str:
+        return settings_from(_parser().parse_args(["serve", *flags]), env).vehicles
+
+    assert vehicles([], {}) == "process"
+    assert vehicles([], {"UAVC_VEHICLES": "inline"}) == "inline"
+    assert vehicles(["--vehicles", "inline"], {"UAVC_VEHICLES": "process"}) == "inline"
+    assert vehicles(["--vehicles", "process"], {"UAVC_VEHICLES": "inline"}) == "process"
 
 
 def test_bad_environment_setting_is_a_clear_error(tmp_path: Path) -> None:

@@ -12,7 +12,7 @@ import pytest
 
 from server.app import create_app
 from server.settings import Settings
-from tests.app_client import app_fixture
+from tests.app_client import app_fixture, embedded
 from tests.core.conftest import OBSERVER, PILOT
 from tests.core.test_api import wait_for
 from tests.support.polling import until_async
@@ -96,7 +96,7 @@ async def fleet_api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
         sim_speed=4.0,
         fleet=2,
     )
-    app = create_app(settings)
+    app = create_app(embedded(settings))
     async with app.router.lifespan_context(app):
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from server.settings import ROOT, Settings, SettingsError, markdown
+from server.settings import ROOT, Settings, SettingsError, flags_of, markdown
 
 
 def test_configuration_page_is_generated_from_the_model() -> None:
@@ -63,3 +63,37 @@ def test_settings_are_frozen_and_copies_are_checked() -> None:
     assert s.with_(port=1).port == 1
     with pytest.raises(SettingsError, match="confirm_floor must be 0 to 1"):
         s.with_(confirm_floor=2.0)
+
+
+def test_the_page_names_every_setting_with_its_flags() -> None:
+    page = (ROOT / "docs" / "configuration.md").read_text()
+    for name in Settings.model_fields:
+        flags = " ".join(f"`{f}`" for f in flags_of(name))
+        assert f"| `UAVC_{name.upper()}` | {flags} |" in page, name
+
+
+# Where the process environment may be used outside the model: python -m server installs the
+# clock speed before anything reads the clock (and writes it for the processes it starts);
+# serve hands its vehicle processes their environment (settings, the vehicle key, the door
+# secret); a vehicle reads those two hand-offs.
+ENVIRON_READERS = {
+    "server/__main__.py": 1,
+    "server/cli.py": 1,
+    "server/timewarp.py": 1,
+    "server/vehicles/central.py": 1,
+    "server/vehicles/main.py": 2,
+    "drone/mavlink/simserver.py": 1,  # a line of help text printed for pymavlink users
+}
+
+
+def test_the_environment_is_read_once_by_the_model() -> None:
+    """Settings are validated once at start and passed down: no ``os.environ`` or ``getenv``
+    reading ``UAVC_*`` mid-function anywhere else in ``server/`` and ``drone/``."""
+    found: dict[str, int] = {}
+    for package in ("server", "drone"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            text = path.read_text()
+            count = text.count("os.environ") + text.count("getenv(")
+            if count:
+                found[str(path.relative_to(ROOT))] = count
+    assert found == ENVIRON_READERS

@@ -11,6 +11,7 @@ from server.recorder.recorder import Recorder, RecorderConfig
 from server.recorder.replay import load
 from server.recorder.replay_app import create_replay_app
 from server.settings import Settings
+from tests.app_client import embedded
 
 from .conftest import NAVDATA, Clock, navdata
 
@@ -75,7 +76,7 @@ async def test_recorder_off_records_nothing_and_still_lists(tmp_path: Path) -> N
     (tmp_path / "flights").mkdir()
     fleet_recording(tmp_path / "flights")  # a recording from an earlier run
     settings = Settings(data_dir=tmp_path, drone="none", recorder=False, token=TOKEN)
-    app = create_app(settings)
+    app = create_app(embedded(settings))
     async with app.router.lifespan_context(app):
         runtime = app.state.runtime
         assert runtime.recorder is None and runtime.audit.recording is None

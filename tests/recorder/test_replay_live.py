@@ -13,6 +13,7 @@ import httpx
 
 from server.app import create_app
 from server.settings import Settings
+from tests.app_client import embedded
 from tests.recorder.synthetic import write_flight
 
 PILOT = "replay-live-pilot"
@@ -25,7 +26,7 @@ async def test_a_recorded_flight_replays_read_only_beside_the_live_graph(tmp_pat
     settings = Settings(
         data_dir=tmp_path, drone="none", recorder=False, token=PILOT, observer_token=OBSERVER
     )
-    app = create_app(settings)
+    app = create_app(embedded(settings))
     async with app.router.lifespan_context(app):
         live = app.state.runtime.graph
         seen_live: list[str] = []

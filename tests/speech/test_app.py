@@ -8,6 +8,7 @@ import httpx
 
 from server.app import create_app
 from server.settings import Settings
+from tests.app_client import embedded
 from tests.speech.conftest import Synth
 
 PILOT = "speech-app-pilot"
@@ -16,7 +17,7 @@ PILOT = "speech-app-pilot"
 async def test_model_loads_on_first_use_and_no_drone_is_a_clear_404(
     tmp_path: Path, synth: Synth
 ) -> None:
-    app = create_app(Settings(data_dir=tmp_path, token=PILOT, drone="none"))
+    app = create_app(embedded(Settings(data_dir=tmp_path, token=PILOT, drone="none")))
     async with (
         app.router.lifespan_context(app),
         httpx.AsyncClient(

@@ -20,6 +20,7 @@ from server.app import create_app
 from server.settings import Settings
 from server.speech.audio import read_wav
 from server.speech.recognizer import Recognizer
+from tests.app_client import embedded
 from tests.speech.conftest import HAVE_TTS
 
 PILOT = "tts-pilot"
@@ -34,7 +35,7 @@ def wav_rate(data: bytes) -> tuple[int, float]:
 
 @pytest.fixture
 async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
-    app = create_app(Settings(data_dir=tmp_path, token=PILOT, drone="none"))
+    app = create_app(embedded(Settings(data_dir=tmp_path, token=PILOT, drone="none")))
     async with (
         app.router.lifespan_context(app),
         httpx.AsyncClient(
@@ -104,7 +105,10 @@ from server.app import create_app
 from server.settings import Settings
 
 async def main():
-    app = create_app(Settings(data_dir=sys.argv[1], token="p", drone="none"))
+    settings = Settings(
+        data_dir=sys.argv[1], token="p", drone="none", vehicles="inline", asr_preload=False
+    )
+    app = create_app(settings)
     async with app.router.lifespan_context(app):
         async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app),
                 base_url="http://127.0.0.1:8000", headers={"Authorization": "Bearer p"}) as c:
