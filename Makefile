@@ -42,13 +42,15 @@ run: $(VENV)/.installed-run
 # The whole suite is two pytest runs: every file but the browser tests and the tests marked
 # `serial` in two worker processes, one test file per worker at a time (pytest-xdist; fixtures
 # that several files share take loopback addresses of their worker's own, tests/support/loopback.py),
-# then those alone: they are CPU-bound or real-time, and failed when a second run shared the
-# 2 cores with them. Both run even if the first fails. With ARGS, one serial pytest run.
+# handed out longest file first by the last run's seconds (tests/conftest.py; xdist's own reorder,
+# by test count, is off), then those alone: they are CPU-bound or real-time, and failed when a
+# second run shared the 2 cores with them. Both run even if the first fails. With ARGS, one
+# serial pytest run.
 test: $(VENV)/.installed-test node-deps
 ifeq ($(strip $(ARGS)),)
 	@status=0; \
-	echo "$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/browser -m 'not serial'"; \
-	$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/browser -m 'not serial' || status=$$?; \
+	echo "$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial'"; \
+	$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial' || status=$$?; \
 	echo "$(PY) -m pytest -m 'serial or browser'"; \
 	$(PY) -m pytest -m 'serial or browser' || status=$$?; \
 	exit $$status

@@ -11,6 +11,8 @@ import ast
 import tomllib
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("server", "drone", "experiments")
 PRODUCT = ("server", "drone")  # what the wheel ships
@@ -107,8 +109,15 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
-def test_no_import_cycles() -> None:
-    graph = import_graph()
+@pytest.fixture(scope="module")
+def project_graph() -> dict[str, set[str]]:
+    """The import graph of ``server`` and ``drone``, walked once for this file's tests (the walk
+    parses every file of both packages)."""
+    return import_graph()
+
+
+def test_no_import_cycles(project_graph: dict[str, set[str]]) -> None:
+    graph = project_graph
     # A package's __init__ importing its own modules is not a cycle of the design.
     graph = {
         m: {d for d in deps if not (m == d.rpartition(".")[0] and graph.get(m) is not None)}
@@ -117,8 +126,8 @@ def test_no_import_cycles() -> None:
     assert cycles(graph) == []
 
 
-def test_drone_never_imports_server() -> None:
-    graph = import_graph()
+def test_drone_never_imports_server(project_graph: dict[str, set[str]]) -> None:
+    graph = project_graph
     upward = sorted(
         f"{m} -> {d}"
         for m, deps in graph.items()

@@ -28,10 +28,15 @@ from tests.support.loopback import free_port
 from tests.support.polling import wait_for
 
 
-@pytest.fixture
-def console(tmp_path: Path) -> Iterator[ConsoleBus]:
+@pytest.fixture(scope="module")
+def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ConsoleBus]:
+    """One console router for the module: each test brings its own vehicle session, commanders
+    and lease, and closes them, so what one test declares is gone before the next."""
     bus = ConsoleBus(
-        tmp_path / "bus", "default", ["uav1", "uav2"], listen=[f"tcp/127.0.0.1:{free_port()}"]
+        tmp_path_factory.mktemp("commands-live") / "bus",
+        "default",
+        ["uav1", "uav2"],
+        listen=[f"tcp/127.0.0.1:{free_port()}"],
     )
     bus.start()
     yield bus
