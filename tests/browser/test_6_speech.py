@@ -31,9 +31,9 @@ from cryptography.hazmat.primitives import serialization
 from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS, OBSERVER, PILOT, ROOT
 from tests.browser.helpers import wait_until
 from tests.speech.conftest import HAVE_TTS, synthesise
-from tests.support.loopback import free_port
+from tests.support.loopback import free_port, fresh_address
 
-SIM_ADDR = "127.0.15.4"
+SIM_ADDR = fresh_address()
 pytestmark = pytest.mark.skipif(not HAVE_TTS, reason="espeak-ng and sox are needed")
 
 

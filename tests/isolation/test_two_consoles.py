@@ -20,13 +20,13 @@ import pytest
 from drone.sim.server import SimPorts, in_use, sim_sockets
 from server.vehicles.keys import new_key
 from tests.e2e.served import ROOT, serve
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 # serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
 # is refused), which a second test run on the same 2 cores made them miss
 pytestmark = pytest.mark.serial
 
-BASE = for_worker("127.0.0.190")
+BASE = fresh_address(3)  # BASE, NEXT and FREE
 NEXT = BASE.rsplit(".", 1)[0] + "." + str(int(BASE.rsplit(".", 1)[1]) + 1)
 FREE = BASE.rsplit(".", 1)[0] + "." + str(int(BASE.rsplit(".", 1)[1]) + 2)
 

@@ -1,15 +1,17 @@
-"""Loopback addresses of their own for each pytest-xdist worker.
+"""Loopback addresses and ports for tests, so that two pytest-xdist workers, two test runs
+and a ``make run`` on one machine never meet on a socket.
 
-``make test`` runs test files in two worker processes (``-n 2 --dist loadfile``): a file's
-tests stay in one worker, but a fixture shared by several files (a conftest's server, the
-browser suite's session server) is started once per worker, so its simulated drones need a
-different address in each. Worker ``gwN`` moves ``127.0.c.d`` to ``127.N.c.d`` (all of
-127.0.0.0/8 is loopback on Linux); without xdist, and in ``gw0``, the address is unchanged.
+* :func:`bound_socket`, :func:`free_port`: a port the OS picks (a server whose port is settable).
+* :func:`fresh_address`: a loopback address of its own, per test or per fixture (a simulator
+  whose ports are fixed, a fleet of them, a source address of its own).
+* :func:`for_worker`: worker ``gwN``'s ``127.N.c.d`` for a ``127.0.c.d`` (all of 127.0.0.0/8 is
+  loopback on Linux); ``make test`` runs files in two workers (``-n 2 --dist loadfile``).
+
+``tests/test_loopback_literals.py`` finds addresses and ports picked by hand in the tests.
 """
 
 from __future__ import annotations
 
-import itertools
 import os
 import socket
 
@@ -48,16 +50,62 @@ def free_port(host: str = "127.0.0.1") -> int:
 
 
 FRESH_FROM = 230
-"""Third octet from which ``fresh_address`` hands out addresses; hand-picked ones stay below."""
+"""Third octet from which ``fresh_address`` hands out addresses (``127.N.230.1`` on): far from
+the console's own simulators (``127.0.0.2`` on, ``UAVC_SIM_BASE_ADDR``'s default), so that a
+``make run`` beside the tests never meets them."""
 
-_fresh = itertools.count()
+_next = [FRESH_FROM, 1]  # (third octet, last octet) of the next address to hand out
 
 
-def fresh_address() -> str:
-    """A loopback address that no other caller in this test process has had, in this worker's
-    ``127.N.c.d`` (``c`` from ``FRESH_FROM``): for a simulator whose ports are fixed (the
-    AR.Drone's 5554-5556, PX4's 5760), so that each needs an address of its own."""
-    c, d = divmod(next(_fresh), 254)
-    if FRESH_FROM + c > 255:
-        raise RuntimeError("no fresh loopback address left in this test process")
-    return f"127.{worker_index()}.{FRESH_FROM + c}.{d + 1}"
+def _fixed_ports() -> list[tuple[str, int]]:
+    """The sockets a simulator binds at fixed ports on its address: the AR.Drone's navdata, AT
+    and video (``SimPorts``, Developer Guide §3) and the simulated PX4's TCP and UDP ports."""
+    from drone.mavlink.simserver import TCP_PORT, UDP_PORT  # here: slow imports
+    from drone.sim.server import SimPorts, sim_sockets
+
+    return [*sim_sockets(SimPorts()), ("tcp", TCP_PORT), ("udp", UDP_PORT)]
+
+
+def _in_use(addr: str) -> str | None:
+    """Which simulator's fixed port on ``addr`` is taken now, by another test run on this
+    machine ("UDP 5554 on 127.0.230.1"); None when all are free or ``addr`` cannot be probed."""
+    from drone.sim.server import in_use
+
+    try:
+        return in_use(addr, _fixed_ports())
+    except OSError:
+        return None
+
+
+SKIP_AT_MOST = 64
+"""Taken blocks ``fresh_address`` passes over before it gives up (a port held on every address,
+e.g. a listener on 0.0.0.0:5760, would take them all)."""
+
+
+def fresh_address(span: int = 1) -> str:
+    """The first of ``span`` consecutive loopback addresses that no other caller in this test
+    process has had, in this worker's ``127.N.c.d`` (``c`` from ``FRESH_FROM``): for a simulator
+    whose ports are fixed (the AR.Drone's 5554-5556, PX4's 5760), so that each needs an address
+    of its own, and for a fleet of ``span`` simulators (``sim_endpoint`` puts the ``i``-th at
+    the first address plus ``i``). Blocks where a simulator's port is already taken (by another
+    test run on this machine) are skipped.
+
+    Raises:
+        ValueError: ``span`` is not in 1..254.
+        RuntimeError: this process has used up its addresses, or ``SKIP_AT_MOST`` blocks in a
+            row were taken.
+    """
+    if not 1 <= span <= 254:
+        raise ValueError(f"span must be in 1..254, not {span}")
+    for _ in range(SKIP_AT_MOST + 1):
+        c, d = _next
+        if d + span - 1 > 254:
+            c, d = c + 1, 1
+        if c > 255:
+            raise RuntimeError("no fresh loopback address left in this test process")
+        _next[:] = [c, d + span]
+        block = [f"127.{worker_index()}.{c}.{d + i}" for i in range(span)]
+        why = next(filter(None, map(_in_use, block)), None)
+        if why is None:
+            return block[0]
+    raise RuntimeError(f"{SKIP_AT_MOST + 1} fresh loopback blocks in a row were taken ({why})")
