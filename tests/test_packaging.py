@@ -22,12 +22,12 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.support.loopback import free_port
+from tests.support.loopback import free_port, fresh_address
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ("grammars", "worlds", "web", "models/captioner")
 DOCKER_CONTEXT = ("pyproject.toml", "README.md", "server", "drone", *SHIPPED[:3], "models")
-SIM_ADDR = "127.0.0.140"
+SIM_ADDR = fresh_address()
 TOKEN = "packaging-test-token"
 PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
 

@@ -23,7 +23,7 @@ import pytest
 from server import timewarp
 from server.fleet.patrol import PatrolConfig, PatrolExperiment
 from tests.e2e.served import ROOT, serve
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
 SPEED = 4.0  # ten simulated minutes (the first handoff at ~8) in about 150 s of wall time
@@ -108,7 +108,7 @@ def _route(srv: Any) -> dict[str, Any]:
 )
 def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path: Path) -> None:
     args = ["--fleet", "2", "--world", "outdoor", "--seed", "1", "--no-camera"]
-    args += ["--clock-speed", f"{SPEED:g}", "--sim-addr", for_worker("127.0.78.10")]
+    args += ["--clock-speed", f"{SPEED:g}", "--sim-addr", fresh_address(2)]
     env = {"UAVC_VEHICLES": "process"}
     with serve(args, tmp_path, token=TOKEN, env=env, drones=("uav1", "uav2"), timeout_s=120) as srv:
         assert "each in its own process" in srv.log()

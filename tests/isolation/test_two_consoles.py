@@ -63,7 +63,8 @@ def test_two_consoles_fly_their_own_drones(tmp_path: Path) -> None:
             assert first.say("land")["accepted"]
             first.wait_truth(lambda t: not t["flying"], 30, "first landed")
 
-            # an address asked for that is taken: one line, before anything starts
+            # an address asked for that is taken: one line, before anything starts (port 1:
+            # never reached)
             asked = subprocess.run(
                 [sys.executable, "-m", "server", "serve", "--sim-addr", BASE, "--port", "1"],
                 cwd=ROOT,
