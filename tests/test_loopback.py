@@ -10,7 +10,7 @@ import pytest
 
 from drone.sim.server import SimPorts
 from tests.support import loopback
-from tests.support.loopback import fresh_address, worker_index
+from tests.support.loopback import bus_endpoint, fresh_address, worker_index
 
 
 def _octets(addr: str) -> tuple[int, int, int, int]:
@@ -56,3 +56,14 @@ def test_an_address_whose_simulator_port_is_held_is_passed_over() -> None:
         got = fresh_address()
     assert got != ahead
     assert loopback._in_use(ahead) is None  # released again
+
+
+def test_a_bus_endpoint_is_on_a_free_port_not_the_buss_default() -> None:
+    from drone.bus.session import DEFAULT_LISTEN
+
+    endpoint = bus_endpoint()
+    proto, _, rest = endpoint.partition("/")
+    host, _, port = rest.rpartition(":")
+    assert (proto, host) == ("tcp", "127.0.0.1") and endpoint != DEFAULT_LISTEN
+    with socket.socket() as s:
+        s.bind((host, int(port)))  # free

@@ -21,7 +21,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.support.loopback import free_port, fresh_address
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = Path(os.environ.get("UAVC_CHROMIUM", "/usr/bin/chromium"))
@@ -80,6 +80,7 @@ class ServerProcess:
         # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says
         # otherwise (serve defaults to process mode; tests/isolation covers it).
         env.setdefault("UAVC_VEHICLES", "inline")
+        env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode: not the default's
         # Off the network: no map tiles unless a test serves its own (test_8_map.py).
         env.setdefault("UAVC_TILE_URL", "")
         self.log_path = self.data_dir / f"server-{self.port}.log"

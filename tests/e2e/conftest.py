@@ -22,7 +22,7 @@ import httpx
 import pytest
 import roslibpy
 
-from tests.support.loopback import free_port, fresh_address
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 from tests.support.polling import until, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -87,6 +87,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says otherwise
     # (serve defaults to process mode; tests/isolation covers it).
     env.setdefault("UAVC_VEHICLES", "inline")
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode
     log_path = data / "server.log"
     cmd = [
         sys.executable,

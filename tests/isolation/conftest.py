@@ -19,7 +19,7 @@ import httpx
 from websockets.sync.client import connect as ws_connect
 
 from server.vehicles.door_protocol import Ack, Auth, Hello, Stop, encode, parse_door
-from tests.support.loopback import free_port, fresh_address
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 from tests.support.polling import until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -102,7 +102,8 @@ def serve(
 ) -> Iterator[Served]:
     port = port or free_port(host)
     log_path = tmp / f"serve-{port}.log"
-    full_env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), **(env or {})}
+    full_env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "UAVC_BUS_LISTEN": bus_endpoint()}
+    full_env.update(env or {})
     argv = [sys.executable, "-m", "server", "serve", "--host", host, "--port", str(port)]
     argv += ["--drone", drone, "--token", PILOT, *extra]
     with open(log_path, "wb") as log:

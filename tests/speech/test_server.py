@@ -32,7 +32,7 @@ from websockets.exceptions import ConnectionClosed
 from server.http.tls import fingerprint
 from server.speech.audio import read_wav, to_wav
 from tests.speech.conftest import HAVE_TTS, synthesise
-from tests.support.loopback import free_port, fresh_address
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "speech-pilot-token"
@@ -91,6 +91,7 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_SIM_SPEED="1")
     env.setdefault("UAVC_VEHICLES", "inline")  # speech, not isolation (tests/isolation)
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode
     log_path = data / "server.log"
     cmd = [
         sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),

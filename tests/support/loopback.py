@@ -1,7 +1,8 @@
 """Loopback addresses and ports for tests, so that two pytest-xdist workers, two test runs
 and a ``make run`` on one machine never meet on a socket.
 
-* :func:`bound_socket`, :func:`free_port`: a port the OS picks (a server whose port is settable).
+* :func:`bound_socket`, :func:`free_port`: a port the OS picks (a server whose port is settable);
+  :func:`bus_endpoint`: one for a test console's bus router.
 * :func:`fresh_address`: a loopback address of its own, per test or per fixture (a simulator
   whose ports are fixed, a fleet of them, a source address of its own).
 * :func:`for_worker`: worker ``gwN``'s ``127.N.c.d`` for a ``127.0.c.d`` (all of 127.0.0.0/8 is
@@ -47,6 +48,13 @@ def free_port(host: str = "127.0.0.1") -> int:
     pick; another process may take it before use)."""
     with bound_socket(host) as sock:
         return int(sock.getsockname()[1])
+
+
+def bus_endpoint(host: str = "127.0.0.1") -> str:
+    """A bus router endpoint on a port free now (``tcp/HOST:PORT``), for a test console's
+    ``UAVC_BUS_LISTEN``: left unset, a console's router takes the bus's default port 7447 (or the
+    next free one), which a ``make run`` beside the tests wants."""
+    return f"tcp/{host}:{free_port(host)}"
 
 
 FRESH_FROM = 230
