@@ -144,7 +144,7 @@ def installed_server(venv: Path, tmp_path: Path) -> Iterator[str]:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "UAVC_MODEL_DIR")}
     env.update(UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_DATA_DIR=str(tmp_path))
     env.setdefault("UAVC_VEHICLES", "inline")  # packaging, not isolation (tests/isolation)
-    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     log = (tmp_path / "server.log").open("wb")
     cmd = [str(venv / "bin" / "uav-console"), "serve", "--port", str(port), "--token", TOKEN]
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=log, stderr=subprocess.STDOUT)

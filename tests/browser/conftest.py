@@ -80,7 +80,7 @@ class ServerProcess:
         # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says
         # otherwise (serve defaults to process mode; tests/isolation covers it).
         env.setdefault("UAVC_VEHICLES", "inline")
-        env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode: not the default's
+        env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
         # Off the network: no map tiles unless a test serves its own (test_8_map.py).
         env.setdefault("UAVC_TILE_URL", "")
         self.log_path = self.data_dir / f"server-{self.port}.log"

@@ -73,7 +73,7 @@ def tls_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TlsServer]:
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, PYTHONUNBUFFERED="1")
     env.setdefault("UAVC_VEHICLES", "inline")  # speech, not isolation (tests/isolation)
-    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     cmd = [
         sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),
         "--token", PILOT, "--observer-token", OBSERVER, "--data-dir", str(data), "--seed", "1",

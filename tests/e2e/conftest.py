@@ -87,7 +87,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says otherwise
     # (serve defaults to process mode; tests/isolation covers it).
     env.setdefault("UAVC_VEHICLES", "inline")
-    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     log_path = data / "server.log"
     cmd = [
         sys.executable,

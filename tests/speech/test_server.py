@@ -91,7 +91,7 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_SIM_SPEED="1")
     env.setdefault("UAVC_VEHICLES", "inline")  # speech, not isolation (tests/isolation)
-    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # in process mode
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     log_path = data / "server.log"
     cmd = [
         sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),
