@@ -4,7 +4,8 @@ and a ``make run`` on one machine never meet on a socket.
 * :func:`bound_socket`, :func:`free_port`: a port the OS picks (a server whose port is settable);
   :func:`bus_endpoint`: one for a test console's bus router.
 * :func:`fresh_address`: a loopback address of its own, per test or per fixture (a simulator
-  whose ports are fixed, a fleet of them, a source address of its own).
+  whose ports are fixed, a fleet of them, a source address of its own), in a ``127.B`` block
+  that the test process holds while it runs.
 * :func:`for_worker`: worker ``gwN``'s ``127.N.c.d`` for a ``127.0.c.d`` (all of 127.0.0.0/8 is
   loopback on Linux); ``make test`` runs files in two workers (``-n 2 --dist loadfile``).
 
@@ -13,6 +14,7 @@ and a ``make run`` on one machine never meet on a socket.
 
 from __future__ import annotations
 
+import errno
 import os
 import socket
 
@@ -57,12 +59,50 @@ def bus_endpoint(host: str = "127.0.0.1") -> str:
     return f"tcp/{host}:{free_port(host)}"
 
 
-FRESH_FROM = 230
-"""Third octet from which ``fresh_address`` hands out addresses (``127.N.230.1`` on): far from
-the console's own simulators (``127.0.0.2`` on, ``UAVC_SIM_BASE_ADDR``'s default), so that a
-``make run`` beside the tests never meets them."""
+FRESH_OCTETS = range(128, 256)
+"""Second octets ``fresh_address`` hands out from, one per test process (``127.B.c.d``): above
+the worker blocks of ``for_worker`` (``127.N``) and the console's own simulators (``127.0.0.2``
+on, ``UAVC_SIM_BASE_ADDR``'s default), so that a ``make run`` beside the tests never meets
+them."""
 
-_next = [FRESH_FROM, 1]  # (third octet, last octet) of the next address to hand out
+CLAIM_PORT = 65535
+"""The port of the socket by which a test process holds its second octet (on ``127.B.255.254``,
+an address ``fresh_address`` never hands out): bound without ``SO_REUSEADDR``, so a second
+process cannot bind it while the first lives, and the kernel lets go when the process ends."""
+
+_claim: list[tuple[int, socket.socket | None]] = []  # (second octet, the socket holding it)
+_next = [0, 1]  # (third octet, last octet) of the next address to hand out
+
+
+def claim_octet(start: int) -> tuple[int, socket.socket | None]:
+    """The first second octet from ``start`` (cycling through ``FRESH_OCTETS``) that no other
+    live process holds, and the socket that holds it for this one; ``start`` and None where
+    only 127.0.0.1 is local (macOS: the simulators fall back to it with shifted ports).
+
+    Raises:
+        RuntimeError: every octet is held.
+    """
+    count = len(FRESH_OCTETS)
+    for i in range(count):
+        octet = FRESH_OCTETS[(start - FRESH_OCTETS.start + i) % count]
+        sock = socket.socket()
+        try:
+            sock.bind((f"127.{octet}.255.254", CLAIM_PORT))
+        except OSError as exc:
+            sock.close()
+            if exc.errno == errno.EADDRNOTAVAIL:
+                return start, None
+            continue
+        return octet, sock
+    raise RuntimeError(f"every loopback block 127.{FRESH_OCTETS.start}-255.x.x is held")
+
+
+def fresh_octet() -> int:
+    """This test process's second octet for fresh addresses, claimed on first use (the search
+    starts from the process id, so that concurrent runs rarely even try the same one)."""
+    if not _claim:
+        _claim.append(claim_octet(FRESH_OCTETS.start + os.getpid() % len(FRESH_OCTETS)))
+    return _claim[0][0]
 
 
 def _fixed_ports() -> list[tuple[str, int]]:
@@ -75,8 +115,8 @@ def _fixed_ports() -> list[tuple[str, int]]:
 
 
 def _in_use(addr: str) -> str | None:
-    """Which simulator's fixed port on ``addr`` is taken now, by another test run on this
-    machine ("UDP 5554 on 127.0.230.1"); None when all are free or ``addr`` cannot be probed."""
+    """Which simulator's fixed port on ``addr`` is taken now ("UDP 5554 on 127.128.0.1"); None
+    when all are free or ``addr`` cannot be probed."""
     from drone.sim.server import in_use
 
     try:
@@ -91,12 +131,13 @@ e.g. a listener on 0.0.0.0:5760, would take them all)."""
 
 
 def fresh_address(span: int = 1) -> str:
-    """The first of ``span`` consecutive loopback addresses that no other caller in this test
-    process has had, in this worker's ``127.N.c.d`` (``c`` from ``FRESH_FROM``): for a simulator
-    whose ports are fixed (the AR.Drone's 5554-5556, PX4's 5760), so that each needs an address
-    of its own, and for a fleet of ``span`` simulators (``sim_endpoint`` puts the ``i``-th at
-    the first address plus ``i``). Blocks where a simulator's port is already taken (by another
-    test run on this machine) are skipped.
+    """The first of ``span`` consecutive loopback addresses that no other caller has had: in
+    ``127.B.c.d``, ``B`` this test process's own (:func:`fresh_octet`; an xdist worker is a
+    process of its own, and so is a second test run on the machine), for a simulator whose
+    ports are fixed (the AR.Drone's 5554-5556, PX4's 5760), so that each needs an address of
+    its own, and for a fleet of ``span`` simulators (``sim_endpoint`` puts the ``i``-th at the
+    first address plus ``i``). A block where a simulator's port is taken anyway (by a process
+    that picked its address by hand) is passed over.
 
     Raises:
         ValueError: ``span`` is not in 1..254.
@@ -105,14 +146,15 @@ def fresh_address(span: int = 1) -> str:
     """
     if not 1 <= span <= 254:
         raise ValueError(f"span must be in 1..254, not {span}")
+    octet = fresh_octet()
     for _ in range(SKIP_AT_MOST + 1):
         c, d = _next
         if d + span - 1 > 254:
             c, d = c + 1, 1
-        if c > 255:
+        if c > 254:  # 127.B.255.x: the claim's
             raise RuntimeError("no fresh loopback address left in this test process")
         _next[:] = [c, d + span]
-        block = [f"127.{worker_index()}.{c}.{d + i}" for i in range(span)]
+        block = [f"127.{octet}.{c}.{d + i}" for i in range(span)]
         why = next(filter(None, map(_in_use, block)), None)
         if why is None:
             return block[0]
