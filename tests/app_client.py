@@ -12,7 +12,7 @@ import pytest
 
 from server.app import create_app
 from server.settings import Settings
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 EMBEDDED: dict[str, Any] = {"vehicles": "inline", "asr_preload": False}
 """An app built in the test process: its flight stacks inline, the speech model loaded on first
@@ -35,6 +35,8 @@ async def app_client(settings: Settings) -> AsyncIterator[httpx.AsyncClient]:
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(
             transport=transport,
+            # No socket: the Host an ASGI transport sends, the console's default address
+            # (Settings.host 127.0.0.1, Settings.port 8000).
             base_url="http://127.0.0.1:8000",
             headers={"Authorization": f"Bearer {settings.token}"},
         ) as client:
@@ -43,11 +45,12 @@ async def app_client(settings: Settings) -> AsyncIterator[httpx.AsyncClient]:
 
 
 def app_fixture(
-    sim_base_addr: str, token: str, observer_token: str, **settings: Any
+    token: str, observer_token: str, **settings: Any
 ) -> Callable[[Path], AsyncIterator[httpx.AsyncClient]]:
-    """A pytest fixture ``api``: :func:`app_client` on its own simulator at ``sim_base_addr``
-    (each test file has its own loopback address, so files never share a drone), data in the
-    test's tmp_path, ``settings`` passed on to :class:`Settings`. Use: ``api = app_fixture(...)``.
+    """A pytest fixture ``api``: :func:`app_client` on simulators of its own (each test gets
+    fresh loopback addresses, one per drone of ``fleet``, so tests never share a drone), data
+    in the test's tmp_path, ``settings`` passed on to :class:`Settings`. Use:
+    ``api = app_fixture(PILOT, OBSERVER, fleet=2)``.
     """
 
     @pytest.fixture
@@ -56,7 +59,7 @@ def app_fixture(
             data_dir=tmp_path / "data",
             token=token,
             observer_token=observer_token,
-            sim_base_addr=for_worker(sim_base_addr),
+            sim_base_addr=fresh_address(max(1, settings.get("fleet", 1))),
             **settings,
         )
         async with app_client(config) as client:

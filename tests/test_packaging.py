@@ -22,12 +22,12 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.support.loopback import free_port
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ("grammars", "worlds", "web", "models/captioner")
 DOCKER_CONTEXT = ("pyproject.toml", "README.md", "server", "drone", *SHIPPED[:3], "models")
-SIM_ADDR = "127.0.0.140"
+SIM_ADDR = fresh_address()
 TOKEN = "packaging-test-token"
 PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
 
@@ -144,6 +144,7 @@ def installed_server(venv: Path, tmp_path: Path) -> Iterator[str]:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "UAVC_MODEL_DIR")}
     env.update(UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_DATA_DIR=str(tmp_path))
     env.setdefault("UAVC_VEHICLES", "inline")  # packaging, not isolation (tests/isolation)
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     log = (tmp_path / "server.log").open("wb")
     cmd = [str(venv / "bin" / "uav-console"), "serve", "--port", str(port), "--token", TOKEN]
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=log, stderr=subprocess.STDOUT)

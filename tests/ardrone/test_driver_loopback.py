@@ -1,4 +1,4 @@
-"""ARDroneDriver ↔ SimServer over real UDP/TCP sockets on loopback (127.0.0.50–59).
+"""ARDroneDriver ↔ SimServer over real UDP/TCP sockets on loopback addresses of their own.
 
 The simulator runs at ``SPEED``× real time so these flights take about a second each; waits are
 generous because the test machine is shared.
@@ -16,7 +16,7 @@ from drone.ardrone.driver import DECODE_S_DECAY, DECODE_S_INITIAL, ARDroneDriver
 from drone.ardrone.errors import DriverNotStartedError
 from drone.ardrone.navdata import CtrlState, DroneState, Navdata, encode_navdata
 from drone.ardrone.protocol import DriverEvent, LinkLost, LinkRestored
-from drone.sim.server import SimServer
+from drone.sim.server import SimPorts, SimServer
 from tests.support.loopback import fresh_address
 
 SPEED = 4.0
@@ -149,7 +149,7 @@ async def test_navdata_from_a_stranger_is_ignored() -> None:
         port = drv._nav.get_extra_info("sockname")[1]  # type: ignore[union-attr]
         forged = encode_navdata(Navdata(DroneState.EMERGENCY, 10**9))
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            s.bind((other, 5554))  # right port, wrong host
+            s.bind((other, SimPorts().navdata))  # right port, wrong host
             s.sendto(forged, ("127.0.0.1", port))
         await asyncio.sleep(0.2)  # deliberate: the forged packet has time to (not) take effect
         assert drv.latest_navdata is not None
@@ -212,12 +212,12 @@ async def test_run_sim_serves_until_cancelled_and_frees_its_ports() -> None:
 
 
 def test_sim_endpoints_for_a_fleet() -> None:
-    from drone.sim.server import SimPorts, loopback_usable, sim_endpoint
+    from drone.sim.server import loopback_usable, sim_endpoint
 
     assert SimPorts() == SimPorts(navdata=5554, video=5555, at=5556)
     shifted = {SimPorts.shifted(i) for i in range(4)}
     assert len({p for s in shifted for p in (s.navdata, s.video, s.at)}) == 12  # no overlaps
-    addr, ports = sim_endpoint(2)
+    addr, ports = sim_endpoint(2)  # from UAVC_SIM_BASE_ADDR's default, 127.0.0.2: nothing bound
     if loopback_usable("127.0.0.4"):  # Linux: every 127/8 address is local
         assert (addr, ports) == ("127.0.0.4", SimPorts())
     else:  # macOS: only 127.0.0.1, with shifted ports

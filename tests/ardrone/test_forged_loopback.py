@@ -23,7 +23,7 @@ from drone.ardrone.driver import ARDroneDriver
 from drone.ardrone.navdata import CtrlState, Demo, DroneState, Navdata, encode_navdata
 from drone.ardrone.protocol import DriverEvent, NavdataDoubt
 from drone.sim.server import SimServer
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 SPEED = 4.0
 WAIT = 10.0
@@ -53,7 +53,7 @@ def battery(drv: ARDroneDriver) -> int:
 async def test_forged_restart_from_the_drones_address_is_dropped_and_the_drone_is_still_heard(
     claims_restart: bool,
 ) -> None:
-    addr = for_worker("127.0.0.64" if claims_restart else "127.0.0.65")
+    addr = fresh_address()
     srv = SimServer(addr, speed=SPEED)
     srv.sim.navdata_sequence = UP_FOR
     events: list[DriverEvent] = []
@@ -67,7 +67,7 @@ async def test_forged_restart_from_the_drones_address_is_dropped_and_the_drone_i
         real_battery = battery(drv)
         assert real_battery > 90
         assert srv.client is not None and srv._nav is not None
-        spoofer = srv._nav.transport  # the drone's own (address, 5554)
+        spoofer = srv._nav.transport  # the drone's own navdata socket (its address, port 5554)
         assert spoofer is not None
 
         lowest, seqs = 100, []

@@ -1,6 +1,6 @@
-"""A short real-time flight over real sockets: SimServer on 127.0.0.70 (UDP navdata/AT, H.264
-video over TCP), the asyncio driver, the perception worker thread, the EKF and the vehicle's
-100 Hz control thread, driven by the task manager — no lockstep here."""
+"""A short real-time flight over real sockets: SimServer on a loopback address of its own (UDP
+navdata/AT, H.264 video over TCP), the asyncio driver, the perception worker thread, the EKF and
+the vehicle's 100 Hz control thread, driven by the task manager — no lockstep here."""
 
 from __future__ import annotations
 
@@ -17,13 +17,14 @@ from drone.camera import CameraModel
 from drone.sim.server import SimServer
 from drone.sim.world import load_world
 from server.tasks import TaskManager, TaskNotice
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
 # It asserts the control thread never stalled: a second test run sharing the 2 cores starved it
 # (0.57 s without the CPU, in a two-worker run), so it runs in make test's serial run.
 pytestmark = pytest.mark.serial
 
-ADDR = "127.0.0.70"
+ADDR = fresh_address()
 WAIT = 20.0
 
 

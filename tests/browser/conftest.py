@@ -21,7 +21,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = Path(os.environ.get("UAVC_CHROMIUM", "/usr/bin/chromium"))
@@ -80,6 +80,7 @@ class ServerProcess:
         # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says
         # otherwise (serve defaults to process mode; tests/isolation covers it).
         env.setdefault("UAVC_VEHICLES", "inline")
+        env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
         # Off the network: no map tiles unless a test serves its own (test_8_map.py).
         env.setdefault("UAVC_TILE_URL", "")
         self.log_path = self.data_dir / f"server-{self.port}.log"
@@ -163,7 +164,7 @@ def _server(
 ) -> Iterator[ServerProcess]:
     if os.environ.get("UAVC_SKIP_BROWSER") == "1":
         pytest.skip("UAVC_SKIP_BROWSER=1")
-    server = ServerProcess(tmp_path_factory.mktemp(name), for_worker(addr), tuple(extra))
+    server = ServerProcess(tmp_path_factory.mktemp(name), addr, tuple(extra))
     server.start()
     try:
         yield server
@@ -174,19 +175,19 @@ def _server(
 @pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
     """The shared server (its drone starts landed; flying tests run in file order)."""
-    yield from _server(tmp_path_factory, "uavc-browser", "127.0.0.93")
+    yield from _server(tmp_path_factory, "uavc-browser", fresh_address())
 
 
 @pytest.fixture
 def own_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
     """A server of the test's own (for restarts)."""
-    yield from _server(tmp_path_factory, "uavc-browser-own", "127.0.0.94")
+    yield from _server(tmp_path_factory, "uavc-browser-own", fresh_address())
 
 
 @pytest.fixture
 def fleet_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    """Two simulated drones (127.0.0.96 and .97): topics prefixed /uav1, /uav2."""
-    yield from _server(tmp_path_factory, "uavc-browser-fleet", "127.0.0.96", "--fleet", "2")
+    """Two simulated drones: topics prefixed /uav1, /uav2."""
+    yield from _server(tmp_path_factory, "uavc-browser-fleet", fresh_address(2), "--fleet", "2")
 
 
 @pytest.fixture(scope="session")

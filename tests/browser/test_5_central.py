@@ -11,14 +11,15 @@ from typing import Any
 import pytest
 
 from tests.browser.conftest import OBSERVER, ServerProcess, _server, open_console
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.browser
 
 
 @pytest.fixture
 def central_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    """Two simulated drones of this test's own (127.0.12.10 and .11)."""
-    yield from _server(tmp_path_factory, "uavc-browser-central", "127.0.12.10", "--fleet", "2")
+    """Two simulated drones of this test's own."""
+    yield from _server(tmp_path_factory, "uavc-browser-central", fresh_address(2), "--fleet", "2")
 
 
 def _type(page: Any, text: str) -> None:
@@ -108,8 +109,8 @@ def test_central_button_and_voice(browser: Any, central_server: ServerProcess) -
 
 @pytest.fixture
 def paused_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    """Two simulated drones of this test's own (127.0.26.10 and .11)."""
-    yield from _server(tmp_path_factory, "uavc-browser-paused", "127.0.26.10", "--fleet", "2")
+    """Two simulated drones of this test's own."""
+    yield from _server(tmp_path_factory, "uavc-browser-paused", fresh_address(2), "--fleet", "2")
 
 
 def test_land_pauses_the_patrol_and_the_panel_resumes_and_ends_it(

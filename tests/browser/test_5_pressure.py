@@ -1,7 +1,7 @@
 """The console under pressure (issue 18), in Chromium against the real server and simulator.
 
 Ground truth comes from the simulator (``GET /api/v1/sim/uav1/truth``) and the audit log file.
-The server of this file runs its simulated drone on 127.0.18.20 (this file's loopback address).
+The server of this file runs its simulated drone on a loopback address of its own.
 Tests run in file order on that one server and leave the drone landed and out of emergency.
 """
 
@@ -25,6 +25,7 @@ from tests.browser.conftest import (
     open_console,
 )
 from tests.browser.helpers import is_flying, position, type_command, wait_until
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.browser
 
@@ -40,7 +41,7 @@ SIZES = {
 
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    yield from _server(tmp_path_factory, "uavc-pressure", "127.0.18.20")
+    yield from _server(tmp_path_factory, "uavc-pressure", fresh_address())
 
 
 @pytest.fixture

@@ -31,9 +31,9 @@ from cryptography.hazmat.primitives import serialization
 from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS, OBSERVER, PILOT, ROOT
 from tests.browser.helpers import wait_until
 from tests.speech.conftest import HAVE_TTS, synthesise
-from tests.support.loopback import free_port
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 
-SIM_ADDR = "127.0.15.4"
+SIM_ADDR = fresh_address()
 pytestmark = pytest.mark.skipif(not HAVE_TTS, reason="espeak-ng and sox are needed")
 
 
@@ -73,6 +73,7 @@ def tls_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TlsServer]:
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, PYTHONUNBUFFERED="1")
     env.setdefault("UAVC_VEHICLES", "inline")  # speech, not isolation (tests/isolation)
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     cmd = [
         sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),
         "--token", PILOT, "--observer-token", OBSERVER, "--data-dir", str(data), "--seed", "1",

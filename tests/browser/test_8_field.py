@@ -10,7 +10,7 @@
   link; the drone picker's contrast in dark mode; the dialog log takes focus on a phone held
   landscape.
 
-The server of this file runs its simulated drone on 127.0.29.20 (this file's loopback address).
+The server of this file runs its simulated drone on a loopback address of its own.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from tests.browser.conftest import (
     open_console,
 )
 from tests.browser.helpers import is_flying, position, type_command, wait_until
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.browser
 
@@ -84,7 +85,7 @@ MEASURE = """async () => {
 
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    yield from _server(tmp_path_factory, "uavc-field", "127.0.29.20")
+    yield from _server(tmp_path_factory, "uavc-field", fresh_address())
 
 
 @pytest.fixture

@@ -27,14 +27,14 @@ import pytest
 from drone.sim.probe import ProbeSim, SimThread
 from tests.browser.conftest import ServerProcess, open_console
 from tests.isolation.conftest import HOST, PILOT, Served, serve, wait_for
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 pytestmark = [
     pytest.mark.browser,
     pytest.mark.timeout(400),
     pytest.mark.skipif(os.environ.get("UAVC_SKIP_BROWSER") == "1", reason="UAVC_SKIP_BROWSER=1"),
 ]
-SIM_ADDR = for_worker("127.0.29.31")
+SIM_ADDR = fresh_address()
 
 # What the page shows of its sources' ages, in one read.
 VIEW = """() => {

@@ -21,7 +21,7 @@ import pytest
 from drone.sim.world import load_world
 from tests.browser.conftest import ServerProcess, open_console
 from tests.browser.test_5_csp import poll
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import free_port, fresh_address
 
 pytestmark = pytest.mark.browser
 PHONE = {"width": 390, "height": 844}
@@ -77,7 +77,7 @@ def outdoor_fleet(
     monkeypatch.setenv("UAVC_TILE_URL", f"http://127.0.0.1:{free_port()}/{{z}}/{{x}}/{{y}}.png")
     server = ServerProcess(
         tmp_path_factory.mktemp("uavc-map-fleet"),
-        for_worker("127.0.0.181"),
+        fresh_address(2),
         ("--world", "outdoor", "--fleet", "2"),
     )
     server.start()
@@ -211,7 +211,7 @@ def test_tiles_from_the_operators_server_under_the_csp(
     monkeypatch.setenv("UAVC_TILE_URL", f"{tile_server}/{{z}}/{{x}}/{{y}}.png")
     server = ServerProcess(
         tmp_path_factory.mktemp("uavc-map-tiles"),
-        for_worker("127.0.0.185"),
+        fresh_address(),
         ("--world", "outdoor"),
     )
     server.start()

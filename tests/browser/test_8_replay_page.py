@@ -19,7 +19,7 @@ import pytest
 from server.recorder.mcapfile import read_recording
 from tests.browser.conftest import ServerProcess, open_console
 from tests.browser.helpers import is_flying, position, type_command, wait_until
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.browser
 
@@ -30,7 +30,7 @@ def recording_server(
 ) -> Any:
     """A server of its own whose flight sessions end 2 s after landing (default 30 s)."""
     monkeypatch.setenv("UAVC_RECORDER_IDLE_S", "2")
-    server = ServerProcess(tmp_path_factory.mktemp("uavc-replay-page"), for_worker("127.0.0.95"))
+    server = ServerProcess(tmp_path_factory.mktemp("uavc-replay-page"), fresh_address())
     server.start()
     try:
         yield server

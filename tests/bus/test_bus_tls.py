@@ -31,7 +31,7 @@ from server.vehicles.central import bus_tls
 from server.vehicles.host import join_bus
 from tests.isolation.conftest import HOST, ROOT, serve
 from tests.isolation.conftest import wait_for as poll
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import free_port, fresh_address
 from tests.support.polling import wait_for
 
 SCRIPT = textwrap.dedent(
@@ -168,6 +168,7 @@ def test_a_vehicle_process_joins_with_the_data_dirs_ca_or_says_what_is_missing(
 
 
 def test_auto_is_tls_off_loopback_only() -> None:
+    # Endpoints are classified, never bound: 7447 is the bus's default port (DEFAULT_LISTEN).
     assert not wants_tls("auto", ["tcp/127.0.0.1:7447", "tcp/[::1]:7447", "tcp/localhost:7447"])
     assert wants_tls("auto", ["tcp/0.0.0.0:7447"])
     assert wants_tls("auto", ["tcp/192.168.1.5:7447"])
@@ -199,7 +200,7 @@ def test_serve_with_bus_tls_on_its_vehicles_and_a_script_and_an_outside_vehicle_
     assert cli_main(["vehicle-key", "uav7", "--data-dir", str(tmp_path / "data")]) == 0
     port = free_port()
     extra = ("--vehicles", "process", "--bus-listen", f"tcp/127.0.0.1:{port}", "--bus-tls", "on")
-    env = {"UAVC_SIM_BASE_ADDR": for_worker("127.0.41.40")}
+    env = {"UAVC_SIM_BASE_ADDR": fresh_address()}
     with serve(tmp_path, "sim", extra=extra, env=env) as srv:
         srv.wait_vehicle()
         health = poll(
@@ -215,7 +216,7 @@ def test_serve_with_bus_tls_on_its_vehicles_and_a_script_and_an_outside_vehicle_
         )
         assert out.returncode == 0, out.stderr
         assert json.loads(out.stdout)[0]["drone"] == "uav1"
-        child = {**os.environ, "UAVC_SIM_BASE_ADDR": for_worker("127.0.41.50")}
+        child = {**os.environ, "UAVC_SIM_BASE_ADDR": fresh_address()}
         child.pop("UAVC_VEHICLE_KEY", None)
         child["UAVC_DATA_DIR"] = str(tmp_path / "vehicle-data")  # no CA of its own there
         argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav7", "--drone", "sim"]

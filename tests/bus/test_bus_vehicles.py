@@ -22,7 +22,7 @@ from websockets.sync.client import connect as ws_connect
 
 from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
 from tests.isolation.conftest import serve as serve_quick
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import free_port, fresh_address
 
 # serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
 # is refused), which a second test run on the same 2 cores made them miss
@@ -97,7 +97,7 @@ def bus_vehicle(
         **os.environ,
         "UAVC_VEHICLE_KEY": key,
         "UAVC_DATA_DIR": str(tmp / "drone-computer"),
-        "UAVC_SIM_BASE_ADDR": for_worker("127.0.44.2"),
+        "UAVC_SIM_BASE_ADDR": fresh_address(),
         **(extra_env or {}),
     }
     env.pop("UAVC_TOKEN", None)

@@ -14,6 +14,7 @@ from drone.bus import keys
 from drone.bus.config import access_control, client_config, vehicle_user
 from drone.bus.errors import KeySegmentError, PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry, encode
+from drone.bus.session import DEFAULT_LISTEN
 
 
 def test_documented_keys() -> None:
@@ -107,6 +108,6 @@ def test_acl_gives_each_vehicle_its_own_keys_only() -> None:
 
 
 def test_client_configuration_never_scouts() -> None:
-    cfg = client_config(connect=["tcp/127.0.0.1:7447"], user="observer", password="p")
+    cfg = client_config(connect=[DEFAULT_LISTEN], user="observer", password="p")
     assert cfg["scouting"]["multicast"]["enabled"] is False
     assert cfg["mode"] == "client"

@@ -16,7 +16,7 @@ import pytest
 
 from server.cli import main as cli_main
 from tests.isolation.conftest import HOST, ROOT, serve, wait_for
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import free_port, fresh_address
 
 # serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
 # is refused), which a second test run on the same 2 cores made them miss
@@ -42,7 +42,7 @@ SCRIPT = textwrap.dedent(
 
 def test_a_third_party_script_watches_a_served_drone(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    env = {"UAVC_SIM_BASE_ADDR": for_worker("127.0.41.2")}
+    env = {"UAVC_SIM_BASE_ADDR": fresh_address()}
     extra = ("--vehicles", "process", "--bus-listen", endpoint)
     with serve(tmp_path, "sim", extra=extra, env=env) as srv:
         srv.wait_vehicle()
@@ -84,7 +84,7 @@ def test_a_vehicle_from_elsewhere_joins_the_bus_with_its_key(tmp_path: Path) -> 
     extra = ("--vehicles", "process", "--fleet", "0", "--bus-listen", endpoint)
     with serve(tmp_path, "sim", extra=extra) as srv:
         assert srv.http.get("/api/v1/drones").json() == []  # --fleet 0: none of its own
-        env = {**os.environ, "UAVC_SIM_BASE_ADDR": for_worker("127.0.41.20")}
+        env = {**os.environ, "UAVC_SIM_BASE_ADDR": fresh_address()}
         env.pop("UAVC_VEHICLE_KEY", None)
         env["UAVC_DATA_DIR"] = str(tmp_path / "vehicle-data")
         argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav7", "--drone", "sim"]

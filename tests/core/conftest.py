@@ -9,4 +9,4 @@ OBSERVER = "observer-token-for-tests"
 
 
 # The app on its own simulator, shared by the REST tests of this directory.
-api = app_fixture("127.0.0.31", PILOT, OBSERVER, sim_speed=4.0)
+api = app_fixture(PILOT, OBSERVER, sim_speed=4.0)

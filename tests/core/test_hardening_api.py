@@ -1,4 +1,4 @@
-"""Issue 14's findings at the HTTP door, each reproduced first (simulator on 127.0.14.10).
+"""Issue 14's findings at the HTTP door, each reproduced first (a simulator of its own).
 
 | finding                                         | answer now                                   |
 |-------------------------------------------------|----------------------------------------------|
@@ -33,7 +33,7 @@ PILOT = "pilot-token-for-hardening"
 OBSERVER = "observer-token-for-hardening"
 
 
-api = app_fixture("127.0.14.10", PILOT, OBSERVER, sim_speed=4.0)
+api = app_fixture(PILOT, OBSERVER, sim_speed=4.0)
 
 
 async def test_body_limits_come_before_the_token(api: httpx.AsyncClient) -> None:
@@ -56,6 +56,7 @@ async def test_body_limits_come_before_the_token(api: httpx.AsyncClient) -> None
     assert (await api.post("/api/v1/command", json={"text": "hello"})).status_code == 200
 
 
+# Host headers are parsed, never bound: 8000 is Settings.port's default.
 @pytest.mark.parametrize(
     ("host", "status"),
     [("127.0.0.1:abc", 400), ("evil.example:8000", 421), ("127.0.0.1:8000.evil", 400)],

@@ -15,10 +15,11 @@ from server.settings import Settings
 from tests.app_client import app_fixture, embedded
 from tests.core.conftest import OBSERVER, PILOT
 from tests.core.test_api import wait_for
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
-# The app on its own simulator (127.0.18.2: this test file's loopback address).
-api = app_fixture("127.0.18.2", PILOT, OBSERVER, sim_speed=4.0)
+# The app on a simulator of its own (a fresh loopback address per test).
+api = app_fixture(PILOT, OBSERVER, sim_speed=4.0)
 
 
 async def test_takeoff_in_emergency_and_at_low_battery_is_refused_with_the_way_out(
@@ -87,12 +88,12 @@ async def test_server_speaks_replies_as_wav_or_says_why_not(api: httpx.AsyncClie
 
 @pytest.fixture
 async def fleet_api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
-    """Two simulated drones on 127.0.18.40 and .41 (this file's loopback addresses)."""
+    """Two simulated drones on fresh loopback addresses."""
     settings = Settings(
         data_dir=tmp_path,
         token=PILOT,
         observer_token=OBSERVER,
-        sim_base_addr="127.0.18.40",
+        sim_base_addr=fresh_address(2),
         sim_speed=4.0,
         fleet=2,
     )
@@ -101,7 +102,7 @@ async def fleet_api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(
             transport=transport,
-            base_url="http://127.0.0.1:8000",
+            base_url="http://127.0.0.1:8000",  # no socket: Settings' default host and port
             headers={"Authorization": f"Bearer {PILOT}"},
         ) as client:
             yield client

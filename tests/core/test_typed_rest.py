@@ -19,7 +19,7 @@ from server.vehicles.stack import DroneStack
 from tests.app_client import app_fixture
 from tests.core.conftest import OBSERVER, PILOT
 
-api = app_fixture("127.0.33.4", PILOT, OBSERVER, sim_speed=4.0)
+api = app_fixture(PILOT, OBSERVER, sim_speed=4.0)
 
 NOT_ACTIONS = ("snapshot", "set_setpoint", "__class__", "__init__", "takeoff2", "LAND", "video")
 

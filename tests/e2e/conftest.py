@@ -1,7 +1,7 @@
 """The whole server as a third party sees it: ``python -m server serve`` in a subprocess.
 
 One server for the directory (start-up costs a few seconds): the real simulated AR.Drone on
-127.0.0.120 (UAVC_SIM_BASE_ADDR; 127.N.0.120 in xdist worker N) in real time (UAVC_SIM_SPEED
+a loopback address of its own (UAVC_SIM_BASE_ADDR) in real time (UAVC_SIM_SPEED
 1: the EKF and the 100 Hz PID run on the wall clock, so a faster simulator would be a drone that
 reacts faster than the controller was tuned for), the real driver, vehicle, task manager, dialog
 manager and rosbridge. Clients are real: roslibpy (PyPI), the ``websockets`` library, and httpx
@@ -22,13 +22,13 @@ import httpx
 import pytest
 import roslibpy
 
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 from tests.support.polling import until, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "e2e-pilot-token"
 OBSERVER = "e2e-observer-token"
-SIM_ADDR = for_worker("127.0.0.120")
+SIM_ADDR = fresh_address()
 SIM_SPEED = "1"
 TIMEOUT = 10.0
 
@@ -87,6 +87,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says otherwise
     # (serve defaults to process mode; tests/isolation covers it).
     env.setdefault("UAVC_VEHICLES", "inline")
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     log_path = data / "server.log"
     cmd = [
         sys.executable,

@@ -64,16 +64,15 @@ def serve(
     timeout_s: float = 60.0,
 ) -> Iterator[Served]:
     """``serve --port P --token T --data-dir DATA *args`` until its drones are all up."""
-    from tests.support.loopback import free_port
+    from tests.support.loopback import bus_endpoint, free_port
 
     port = free_port()
     log_path = data / f"serve-{port}.log"
     cmd = [sys.executable, "-m", "server", "serve", "--port", str(port), "--token", token]
     cmd += ["--data-dir", str(data), *args]
+    full_env = {**os.environ, "UAVC_BUS_LISTEN": bus_endpoint(), **(env or {})}
     with open(log_path, "wb") as log:
-        proc = subprocess.Popen(
-            cmd, cwd=ROOT, env={**os.environ, **(env or {})}, stdout=log, stderr=subprocess.STDOUT
-        )
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=full_env, stdout=log, stderr=subprocess.STDOUT)
     http = httpx.Client(
         base_url=f"http://127.0.0.1:{port}",
         headers={"Authorization": f"Bearer {token}"},

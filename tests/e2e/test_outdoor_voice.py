@@ -23,7 +23,7 @@ import roslibpy
 from drone.sim.world import load_world
 from tests.e2e.served import serve
 from tests.recorder.test_foxglove import NODE_DIR, node_exe
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
 TOKEN = "outdoor-voice-pilot"
@@ -37,7 +37,7 @@ def near(truth: dict[str, Any], point: tuple[float, float, float], tol_m: float)
 @pytest.mark.timeout(300)
 def test_drone_2_fly_to_waypoint_3_reaches_it_and_says_so(tmp_path: Path) -> None:
     node = node_exe()
-    env = {"UAVC_SIM_BASE_ADDR": for_worker("127.0.0.200"), "UAVC_VEHICLES": "process"}
+    env = {"UAVC_SIM_BASE_ADDR": fresh_address(), "UAVC_VEHICLES": "process"}
     args = ["--world", "outdoor", "--fleet", "2"]
     with serve(args, tmp_path, token=TOKEN, env=env, drones=("uav1", "uav2")) as srv:
         ros = roslibpy.Ros(srv.ws)

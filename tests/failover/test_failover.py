@@ -28,7 +28,7 @@ from server.cli import main as cli_main
 from server.fleet.continuity import CoverageTracker
 from server.fleet.geo import Enu
 from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import free_port, fresh_address
 
 # serial: real consoles and vehicles on wall-clock deadlines, which a second test run on the
 # same 2 cores made them miss
@@ -86,7 +86,7 @@ def vehicle(
 ) -> Iterator[Any]:
     """``uav-console vehicle`` on the routers ``bus`` (in order), with the key made for it."""
     key_file = tmp / "data" / "vehicle-keys" / f"{name}.key"
-    env = {**os.environ, "UAVC_SIM_BASE_ADDR": for_worker("127.0.44.2"), **(extra_env or {})}
+    env = {**os.environ, "UAVC_SIM_BASE_ADDR": fresh_address(index + 1), **(extra_env or {})}
     env.pop("UAVC_VEHICLE_KEY", None)
     env["UAVC_DATA_DIR"] = str(tmp / f"{name}-data")
     argv = [sys.executable, "-m", "server", "vehicle", "--name", name, "--drone", "sim"]

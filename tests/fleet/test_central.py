@@ -1,5 +1,5 @@
 """The Central patrol (issue 13 item 9) through the whole server: two simulated drones behind
-the AR.Drone protocol on loopback (127.0.12.2, .3), REST ``/api/v1/patrol`` and spoken
+the AR.Drone protocol on loopback addresses of their own, REST ``/api/v1/patrol`` and spoken
 commands through the dialog, in real time (the clock the fleet runs on)."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ PILOT = "pilot-token-central"
 OBSERVER = "observer-token-central"
 
 
-api = app_fixture("127.0.12.2", PILOT, OBSERVER, fleet=2)
+api = app_fixture(PILOT, OBSERVER, fleet=2)
 
 
 async def _until(api: httpx.AsyncClient, pred: Any, timeout_s: float) -> dict[str, Any]:

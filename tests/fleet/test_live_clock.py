@@ -23,7 +23,7 @@ import pytest
 from experiments.patrol import PatrolConfig, PatrolExperiment
 from server import timewarp
 from tests.e2e.served import ROOT, serve
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
 SPEED = 3.0
@@ -107,7 +107,7 @@ def _route(srv: Any) -> dict[str, Any]:
 @pytest.mark.timeout(900)
 def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path: Path) -> None:
     args = ["--fleet", "2", "--world", "outdoor", "--seed", "1", "--no-camera"]
-    args += ["--clock-speed", f"{SPEED:g}", "--sim-addr", for_worker("127.0.78.10")]
+    args += ["--clock-speed", f"{SPEED:g}", "--sim-addr", fresh_address(2)]
     env = {"UAVC_VEHICLES": "process", "UAVC_FLIGHT_TIME_S": f"{FLIGHT_TIME_S:g}"}
     with serve(args, tmp_path, token=TOKEN, env=env, drones=("uav1", "uav2"), timeout_s=120) as srv:
         assert "each in its own process" in srv.log()

@@ -1,5 +1,5 @@
 """Mission state through the whole server (issue 26 finding 7): two simulated drones behind the
-AR.Drone protocol on loopback (127.0.26.7, .8), the Central patrol started by REST, the
+AR.Drone protocol on loopback addresses of their own, the Central patrol started by REST, the
 patrolling drone landed by the page's Land (``POST /drones/{id}/land``), the mission read back,
 resumed by voice (``POST /command`` "resume the patrol") and ended by voice, in real time."""
 
@@ -18,7 +18,7 @@ from tests.app_client import app_fixture
 PILOT = "pilot-token-missions"
 OBSERVER = "observer-token-missions"
 
-api = app_fixture("127.0.26.7", PILOT, OBSERVER, fleet=2)
+api = app_fixture(PILOT, OBSERVER, fleet=2)
 
 
 async def wait_for_async(

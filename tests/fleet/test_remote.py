@@ -40,7 +40,7 @@ from server.http.security import Security, TokenStore
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
 from server.settings import ROOT, Settings
-from tests.support.loopback import free_port
+from tests.support.loopback import free_port, fresh_address
 
 pytestmark = pytest.mark.timeout(60)
 WORLD = load_world("outdoor")
@@ -182,7 +182,7 @@ async def test_remote_ltm_joins_gets_plan_and_reconnects(tmp_path: Path) -> None
 async def test_vehicle_process_joins(tmp_path: Path) -> None:
     """``python -m server vehicle`` with its own simulator joins over the WebSocket."""
     with central_server(tmp_path) as c:
-        env = dict(os.environ, UAVC_SIM_BASE_ADDR="127.0.0.88", PYTHONPATH=str(ROOT))
+        env = dict(os.environ, UAVC_SIM_BASE_ADDR=fresh_address(), PYTHONPATH=str(ROOT))
         cmd = [
             sys.executable,
             "-m",

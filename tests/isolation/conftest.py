@@ -1,4 +1,4 @@
-"""A real ``uav-console serve --vehicles process`` on loopback (127.0.13.0/24), flying a
+"""A real ``uav-console serve --vehicles process`` on a loopback address of its own, flying a
 simulated AR.Drone that the test process runs itself (``drone.sim.probe.SimThread``), so the
 test sees the drone's wire and its ground truth without asking the server under test."""
 
@@ -19,12 +19,12 @@ import httpx
 from websockets.sync.client import connect as ws_connect
 
 from server.vehicles.door_protocol import Ack, Auth, Hello, Stop, encode, parse_door
-from tests.support.loopback import free_port
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 from tests.support.polling import until
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "isolation-pilot-token"
-HOST = "127.0.13.1"
+HOST = fresh_address()
 
 
 def wait_for(fn: Callable[[], Any], what: str, timeout: float = 20.0, period: float = 0.1) -> Any:
@@ -102,7 +102,8 @@ def serve(
 ) -> Iterator[Served]:
     port = port or free_port(host)
     log_path = tmp / f"serve-{port}.log"
-    full_env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), **(env or {})}
+    full_env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "UAVC_BUS_LISTEN": bus_endpoint()}
+    full_env.update(env or {})
     argv = [sys.executable, "-m", "server", "serve", "--host", host, "--port", str(port)]
     argv += ["--drone", drone, "--token", PILOT, *extra]
     with open(log_path, "wb") as log:

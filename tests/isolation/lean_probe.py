@@ -33,6 +33,8 @@ async def main(addr: str, data_dir: str) -> dict[str, object]:
 
     settings = Settings.from_env(drone="sim", world="indoor", data_dir=data_dir)
     settings = settings.with_(sim_base_addr=addr)
+    # Port 9 (the discard service's), where no console listens: bench/lean_vehicle.py runs this
+    # probe against other checkouts too, so it imports nothing from tests/.
     options = VehicleOptions(central="ws://127.0.0.1:9/vehicle-link", name="uav1", prefix="")
     host = VehicleHost(settings, options, "k" * 43, safety_token="probe-token")
     await host.start()

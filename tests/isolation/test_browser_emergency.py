@@ -29,13 +29,13 @@ from drone.sim.probe import SimThread
 from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS
 from tests.isolation.conftest import HOST, PILOT, Served, serve, wait_for
 from tests.isolation.test_processes import leave_emergency
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 pytestmark = [
     pytest.mark.timeout(300),
     pytest.mark.skipif(os.environ.get("UAVC_SKIP_BROWSER") == "1", reason="UAVC_SKIP_BROWSER=1"),
 ]
-SIM_ADDR = for_worker("127.0.26.13")
+SIM_ADDR = fresh_address()
 CSP_WATCH = (
     "document.addEventListener('securitypolicyviolation', e =>"
     " console.error('Content Security Policy violation: ' + e.violatedDirective"

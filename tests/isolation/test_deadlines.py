@@ -27,10 +27,10 @@ import pytest
 from drone.sim.probe import SimThread
 from tests.isolation.conftest import Served, reply_texts, serve, wait_for
 from tests.isolation.test_processes import Listener
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.timeout(240)
-SIM_ADDR = for_worker("127.0.13.30")
+SIM_ADDR = fresh_address()
 STALL_S = 3.0  # how long a process is stopped with a command on its way (deadline: 2 s)
 REPLY = {"/console/reply": "uav_console/Reply"}
 TWIST = "geometry_msgs/Twist"

@@ -45,7 +45,7 @@ from server.vehicles.door_protocol import (
 from server.vehicles.errors import DoorError, DoorProtocolError, TicketError
 from server.vehicles.stops import StopLedger
 from server.vehicles.tickets import DoorSecrets, mint, verify
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
 SECRET = b"k" * 32
@@ -258,7 +258,7 @@ def test_the_ledger_is_bounded() -> None:
 
 # ------------------------------------------------------------------------------ on loopback
 
-HOST = for_worker("127.0.26.2")
+HOST = fresh_address()
 
 
 class Vehicle:
@@ -449,6 +449,7 @@ async def test_a_foreign_page_is_refused_at_the_handshake() -> None:
         with pytest.raises(InvalidStatus) as info:
             await connect(door.url, origin="http://evil.example")  # type: ignore[arg-type]
         assert info.value.response.status_code == 403
+        # An Origin header, not a socket: the page at Settings' default address and port.
         ws = await opened(door, origin="http://127.0.0.1:8000")  # type: ignore[arg-type]
         await ws.close()
 
@@ -462,15 +463,17 @@ async def test_unauthenticated_connections_are_capped_per_address_and_in_all() -
     limits = DoorLimits(unauthenticated_per_address=4, unauthenticated=8, authenticated=2)
     async with running_door(limits) as (door, _):
         pilot = await opened(door)  # held before the flood
-        a = [await _tcp(HOST, door.port, for_worker("127.0.26.50")) for _ in range(5)]
+        one = fresh_address()
+        a = [await _tcp(HOST, door.port, one) for _ in range(5)]
         await until_async(
             lambda: door.counts.refused_at_accept == 1, 10.0, "the 5th from one address"
         )
         assert door.counts.unauthenticated_total == 4
-        b = [await _tcp(HOST, door.port, for_worker("127.0.26.51")) for _ in range(4)]
+        two = fresh_address()
+        b = [await _tcp(HOST, door.port, two) for _ in range(4)]
         await until_async(lambda: door.counts.unauthenticated_total == 8, 10.0, "a second address")
         # all unauthenticated places taken: a newcomer from a third address is refused ...
-        c = await _tcp(HOST, door.port, for_worker("127.0.26.52"))
+        c = await _tcp(HOST, door.port, fresh_address())
         await until_async(lambda: door.counts.refused_at_accept == 2, 10.0, "the overall cap")
         # ... while the held connection goes on: heartbeats, and a stop is run
         await recv_op(pilot, Heartbeat)
@@ -488,7 +491,7 @@ async def test_the_held_connection_keeps_working_through_a_no_token_flood() -> N
     heartbeats and its emergency is run."""
     async with running_door() as (door, vehicle):
         pilot = await opened(door)
-        sources = [HOST, for_worker("127.0.26.60"), for_worker("127.0.26.61")]
+        sources = [HOST, fresh_address(), fresh_address()]
         stop_flood = asyncio.Event()
 
         async def flood() -> None:
@@ -523,7 +526,7 @@ async def test_the_held_connection_keeps_working_through_a_no_token_flood() -> N
 
 
 async def test_the_door_over_tls_for_a_page_on_the_lan(tmp_path: Path) -> None:
-    host = for_worker("127.0.26.4")  # stands for a LAN address
+    host = fresh_address()  # stands for a LAN address
     files = ensure_server_cert(tmp_path / "tls", host)
     assert files.ca is not None
     async with running_door(tls=server_context(files.cert, files.key), host=host) as (door, v):

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -27,7 +27,7 @@ def probe(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         [
             sys.executable,
             str(ROOT / "tests/isolation/lean_probe.py"),
-            for_worker("127.0.0.61"),
+            fresh_address(),
             str(data),
         ],
         capture_output=True,

@@ -16,11 +16,14 @@ from pathlib import Path
 
 import pytest
 
+from drone.mavlink.simserver import TCP_PORT
+from drone.sim.server import sim_endpoint
 from tests.isolation.conftest import Served, serve
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.timeout(180)
-HOST = "127.0.79.1"
-PX4_PORT = 5760
+HOST = fresh_address()
+PX4_PORT = TCP_PORT  # UAVC_MAVLINK_SIM_PORT's default: PX4 SITL's TCP port
 
 
 def _cmdline(pid: int) -> list[str]:
@@ -64,11 +67,12 @@ def assert_own_process(srv: Served, name: str, kind: str, px4: str | None) -> in
 
 
 def test_a_mixed_fleet_flies_each_drone_in_its_own_process(tmp_path: Path) -> None:
-    env = {"UAVC_SIM_BASE_ADDR": "127.0.79.30"}
+    base = fresh_address(2)
+    env = {"UAVC_SIM_BASE_ADDR": base}
     extra = ("--vehicles", "process", "--world", "outdoor", "--fleet", "2")
     with serve(tmp_path, "sim,sim-mavlink", extra=extra, env=env, host=HOST) as srv:
         ardrone = assert_own_process(srv, "uav1", "sim", None)
-        px4 = assert_own_process(srv, "uav2", "sim-mavlink", "127.0.79.31")
+        px4 = assert_own_process(srv, "uav2", "sim-mavlink", sim_endpoint(1, base)[0])
         assert ardrone != px4
         assert "flight stacks: uav1, uav2 each in its own process" in srv.log_path.read_text()
         assert "protocol" not in srv.drone("uav1")["extra"]

@@ -5,8 +5,8 @@ restarted, with its PX4; a stopped web process makes the vehicle hold the PX4 wh
 position setpoint streamed in OFFBOARD, as the hover task does for any localised drone), then
 land it after the long-loss time.
 
-One ``serve --vehicles process --drone sim-mavlink`` for the module (127.0.82.0/24). The vehicle
-owns the simulated PX4 (on 127.0.82.20:5760); the test watches that PX4's own wire through a
+One ``serve --vehicles process --drone sim-mavlink`` for the module. The vehicle owns the
+simulated PX4 (on ``SIM_ADDR``, TCP ``PX4_PORT``); the test watches that PX4's own wire through a
 second, passive TCP link of its own (:class:`Px4Wire`: it only reads, so it is no ground station
 to the PX4), so what it checks while the web process is stopped comes from the autopilot, never
 through the server under test.
@@ -30,14 +30,16 @@ from websockets.sync.client import connect
 
 from drone.mavlink.codec import Codec, Message, mav
 from drone.mavlink.modes import mode_name
+from drone.mavlink.simserver import TCP_PORT
 from tests.isolation.conftest import PILOT, Served, door_stop, reply_texts, serve, wait_for
 from tests.isolation.test_mavlink_process import assert_own_process
 from tests.isolation.test_processes import Listener
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.timeout(180)
-HOST = "127.0.82.1"
-SIM_ADDR = "127.0.82.20"  # the vehicle's simulated PX4 (UAVC_SIM_BASE_ADDR)
-PX4_PORT = 5760
+HOST = fresh_address()
+SIM_ADDR = fresh_address()  # the vehicle's simulated PX4 (UAVC_SIM_BASE_ADDR)
+PX4_PORT = TCP_PORT  # UAVC_MAVLINK_SIM_PORT's default: PX4 SITL's TCP port
 LAND_AFTER_S = 6.0  # the long-loss landing, shortened for the test (20 s by default)
 
 

@@ -23,9 +23,10 @@ from websockets.sync.client import connect
 
 from drone.sim.probe import SimThread
 from tests.isolation.conftest import Served, door_stop, reply_texts, serve, wait_for
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.timeout(180)
-SIM_ADDR = "127.0.13.10"
+SIM_ADDR = fresh_address()
 LAND_AFTER_S = 6.0  # the long-loss landing, shortened for the test (20 s by default)
 
 
@@ -250,7 +251,7 @@ def test_web_process_crash_vehicle_keeps_flying_and_is_adopted_by_the_next_serve
 ) -> None:
     """kill -9 of ``serve``: its vehicle hovers on (no heartbeat), and a new ``serve`` on the same
     port adopts the same vehicle process instead of starting a second one."""
-    addr = "127.0.13.11"
+    addr = fresh_address()
     env = {"UAVC_CENTRAL_LOSS_LAND_S": "60"}
     with SimThread(addr) as sim:
         with serve(tmp_path, addr, extra=("--vehicles", "process"), env=env) as first:

@@ -280,7 +280,8 @@ async def test_rest_advertises_the_safety_door_at_the_host_the_caller_used(
         page = await client.get("https://192.168.1.7:8000/?token=units-pilot")
         csp = page.headers["content-security-policy"]
         assert "connect-src 'self' wss://192.168.1.7:47001;" in csp
-        stack.info = {"door_url": "ws://127.0.0.1:47002", "pid": 4242}  # loopback-bound
+        # A door URL as a vehicle reports it (data: nothing listens there), bound to loopback.
+        stack.info = {"door_url": "ws://127.0.0.1:47002", "pid": 4242}
         local = await client.get("/api/v1/drones/uav1")
         assert local.json()["vehicle"]["door_url"] == "ws://127.0.0.1:47002"
         page = await client.get("/?token=units-pilot")

@@ -17,6 +17,7 @@ import pytest
 
 from server.cli import main as cli_main
 from tests.isolation.conftest import HOST, PILOT, ROOT, Served, serve, wait_for
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -48,8 +49,8 @@ def vehicle(srv: Served, name: str, sim_addr: str, tmp: Path) -> Iterator[subpro
 def test_remote_vehicles_join_a_central_server_as_whole_drones(tmp_path: Path) -> None:
     with (
         serve(tmp_path, "none", extra=("--world", "outdoor")) as srv,
-        vehicle(srv, "uav1", "127.0.13.50", tmp_path),
-        vehicle(srv, "uav2", "127.0.13.51", tmp_path),
+        vehicle(srv, "uav1", fresh_address(), tmp_path),
+        vehicle(srv, "uav2", fresh_address(), tmp_path),
     ):
         for name in ("uav1", "uav2"):
             srv.wait_vehicle(name, timeout=60)

@@ -20,13 +20,13 @@ import pytest
 from drone.sim.server import SimPorts, in_use, sim_sockets
 from server.vehicles.keys import new_key
 from tests.e2e.served import ROOT, serve
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 # serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
 # is refused), which a second test run on the same 2 cores made them miss
 pytestmark = pytest.mark.serial
 
-BASE = for_worker("127.0.0.190")
+BASE = fresh_address(3)  # BASE, NEXT and FREE
 NEXT = BASE.rsplit(".", 1)[0] + "." + str(int(BASE.rsplit(".", 1)[1]) + 1)
 FREE = BASE.rsplit(".", 1)[0] + "." + str(int(BASE.rsplit(".", 1)[1]) + 2)
 
@@ -63,7 +63,8 @@ def test_two_consoles_fly_their_own_drones(tmp_path: Path) -> None:
             assert first.say("land")["accepted"]
             first.wait_truth(lambda t: not t["flying"], 30, "first landed")
 
-            # an address asked for that is taken: one line, before anything starts
+            # an address asked for that is taken: one line, before anything starts (port 1:
+            # never reached)
             asked = subprocess.run(
                 [sys.executable, "-m", "server", "serve", "--sim-addr", BASE, "--port", "1"],
                 cwd=ROOT,

@@ -46,7 +46,7 @@ def test_watch_rejects_inverted_times() -> None:
 
 
 def test_the_advertised_url_names_the_host_the_page_came_from() -> None:
-    # bound to loopback: as bound (the page is on this machine)
+    # bound to loopback: as bound (the page is on this machine); URLs are parsed, never bound
     assert advertised_url("ws://127.0.13.2:5001", "localhost:8000") == "ws://127.0.13.2:5001"
     # bound to every interface or a LAN address: the host the request named, the port's own
     # scheme (ws/wss) and port
@@ -199,7 +199,7 @@ def test_a_mavlink_vehicle_shares_mavros_topics_not_a_camera() -> None:
     assert not mavlink["/uav2/mavros/local_position/pose"].latch
     assert {"/uav2/uav/pose", "/uav2/uav/task", "/uav2/vehicle/telemetry"} <= set(mavlink)
     # the signing secret reaches a MAVLink vehicle process (as the token does: environment only)
-    env = child_env(Settings(mavlink_key="ab" * 32, mavlink_sim_port=5761), "secret")
+    env = child_env(Settings(mavlink_key="ab" * 32, mavlink_sim_port=5761), "secret")  # not bound
     assert env["UAVC_MAVLINK_KEY"] == "ab" * 32 and env["UAVC_MAVLINK_SIM_PORT"] == "5761"
 
 

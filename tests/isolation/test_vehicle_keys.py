@@ -30,10 +30,11 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
 from tests.isolation.conftest import PILOT, Served, serve, wait_for
+from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.timeout(240)
-HOST = "127.0.91.1"
-SIM_BASE = "127.0.91.30"
+HOST = fresh_address()
+SIM_BASE = fresh_address()
 OBSERVER = "vehicle-keys-observer-token"
 JOG = {"linear": {"x": 0.5, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
 ZERO = {"linear": {"x": 0.0, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}

@@ -1,5 +1,5 @@
 """The whole console on a mixed fleet: ``--drone sim,sim-mavlink --world outdoor --fleet 2``
-(uav1 the AR.Drone simulator on 127.0.16.20, uav2 a simulated PX4 on 127.0.16.21:5760, the real
+(uav1 the AR.Drone simulator and uav2 a simulated PX4 on loopback addresses of their own, the real
 drivers over UDP and TCP), REST and the graph:
 commands in words fly the autopilot, MAVROS topics carry its state, a denial reaches the
 operator with the vehicle's reason."""
@@ -15,6 +15,7 @@ import pytest
 
 from server.settings import Settings
 from tests.app_client import app_client
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
 PILOT = "pilot-token-mavlink"
@@ -29,7 +30,7 @@ async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
         drone="sim,sim-mavlink",
         world="outdoor",
         fleet=2,
-        sim_base_addr="127.0.16.20",
+        sim_base_addr=fresh_address(2),
         sim_speed=4.0,
     )
     async with app_client(settings) as client:

@@ -19,12 +19,14 @@ from drone.mavlink.errors import ConnectionStringError
 from drone.mavlink.gcs.events import CommandResult
 from drone.mavlink.gcs.protocol import GcsProtocol
 from drone.mavlink.sim.autopilot import SimAutopilot
-from drone.mavlink.simserver import MavlinkSimServer
+from drone.mavlink.simserver import TCP_PORT, UDP_PORT, MavlinkSimServer
 from drone.sim.world import load_world
+from tests.support.loopback import fresh_address
 from tests.support.polling import until, until_async
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = bytes(range(100, 132))
+GCS_PORT = 14550  # QGroundControl's port, where PX4 SITL pushes (on an address of its own)
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +36,9 @@ def world() -> Any:
 
 async def test_driver_over_tcp_arms_and_takes_off(world: Any) -> None:
     events: list[Any] = []
-    async with MavlinkSimServer("127.0.16.11", SimAutopilot(world), speed=4.0) as sim:
-        d = MavlinkDriver("tcp:127.0.16.11:5760", on_event=events.append)
+    addr = fresh_address()
+    async with MavlinkSimServer(addr, SimAutopilot(world), speed=4.0) as sim:
+        d = MavlinkDriver(f"tcp:{addr}:{TCP_PORT}", on_event=events.append)
         await d.start()
         try:
             await until_async(
@@ -63,16 +66,18 @@ async def test_driver_over_tcp_arms_and_takes_off(world: Any) -> None:
 
 
 async def test_driver_udpin_hears_a_vehicle_that_pushes(world: Any) -> None:
-    # PX4 SITL pushes to the ground station's 14550; here the driver listens on 127.0.16.12.
-    d = MavlinkDriver("udpin:127.0.16.12:14550")
+    # PX4 SITL pushes to the ground station's 14550 (QGroundControl's port); here the driver
+    # listens there on an address of its own.
+    gcs = fresh_address()
+    d = MavlinkDriver(f"udpin:{gcs}:{GCS_PORT}")
     await d.start()
     try:
         sim = MavlinkSimServer(
-            "127.0.16.13",
+            fresh_address(),
             SimAutopilot(world),
             tcp_port=None,
-            udp_port=14580,
-            udp_out=("127.0.16.12", 14550),
+            udp_port=UDP_PORT,
+            udp_out=(gcs, GCS_PORT),
             speed=4.0,
         )
         async with sim:
@@ -90,12 +95,13 @@ async def test_driver_udpin_hears_a_vehicle_that_pushes(world: Any) -> None:
 
 
 async def test_signed_link_and_a_wrong_key(world: Any) -> None:
+    addr = fresh_address()
     async with MavlinkSimServer(
-        "127.0.16.14", SimAutopilot(world, signing_key=KEY), udp_port=None, speed=4.0
+        addr, SimAutopilot(world, signing_key=KEY), udp_port=None, speed=4.0
     ) as sim:
-        good = MavlinkDriver("tcp:127.0.16.14:5760", GcsProtocol(signing_key=KEY))
-        bad = MavlinkDriver("tcp:127.0.16.14:5760", GcsProtocol(signing_key=bytes(32)))
-        plain = MavlinkDriver("tcp:127.0.16.14:5760")
+        good = MavlinkDriver(f"tcp:{addr}:{TCP_PORT}", GcsProtocol(signing_key=KEY))
+        bad = MavlinkDriver(f"tcp:{addr}:{TCP_PORT}", GcsProtocol(signing_key=bytes(32)))
+        plain = MavlinkDriver(f"tcp:{addr}:{TCP_PORT}")
         for d in (good, bad, plain):
             await d.start()
         try:
@@ -165,6 +171,7 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) 
     """The transports (signing: tests/mavlink/test_mavlink_signing.py)."""
     from pymavlink import mavutil
 
+    addr = fresh_address()
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -174,7 +181,7 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) 
             "--protocol",
             "mavlink",
             "--addr",
-            "127.0.16.15",
+            addr,
             "--world",
             "outdoor",
             "--insecure",
@@ -187,7 +194,7 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) 
     )
     try:
         tcp = until(
-            lambda: mavutil.mavlink_connection("tcp:127.0.16.15:5760", autoreconnect=False),
+            lambda: mavutil.mavlink_connection(f"tcp:{addr}:{TCP_PORT}", autoreconnect=False),
             30.0,
             "the simulator process listening",
             period=0.2,
@@ -196,7 +203,7 @@ def test_cli_sim_protocol_mavlink_with_mavutil_over_tcp_and_udp(tmp_path: Path) 
         hb = tcp.wait_heartbeat(timeout=10)
         assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4
         assert hb.type == mavutil.mavlink.MAV_TYPE_QUADROTOR
-        udp = mavutil.mavlink_connection("udpout:127.0.16.15:14580")
+        udp = mavutil.mavlink_connection(f"udpout:{addr}:{UDP_PORT}")
         udp.mav.heartbeat_send(6, 8, 0, 0, 0)  # a datagram makes us a peer
         assert udp.wait_heartbeat(timeout=10) is not None
         gps = udp.recv_match(type="GPS_RAW_INT", blocking=True, timeout=5)

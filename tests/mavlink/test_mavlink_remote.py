@@ -1,6 +1,6 @@
 """``uav-console vehicle --drone tcp:ADDR:5760``: a MAVLink drone's stack in its own process joins a
 central server over the rosbridge WebSocket, as an AR.Drone's does (tests/fleet/test_remote.py).
-The vehicle is the simulated PX4 on 127.0.16.50:5760, served from this test process."""
+The vehicle is the simulated PX4 on an address of its own, served from this test process."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import pytest
 from fastapi import FastAPI
 
 from drone.mavlink.sim.autopilot import SimAutopilot
-from drone.mavlink.simserver import MavlinkSimServer
+from drone.mavlink.simserver import TCP_PORT, MavlinkSimServer
 from drone.sim.world import load_world
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import Enu, origin_of
@@ -26,7 +26,7 @@ from server.http.security import Security, TokenStore
 from server.rosbridge.context import BridgeContext
 from server.rosbridge.endpoint import make_router
 from server.settings import ROOT, Settings
-from tests.support.loopback import bound_socket
+from tests.support.loopback import bound_socket, fresh_address
 from tests.support.polling import until_async
 from tests.support.servers import threaded_server
 
@@ -36,9 +36,10 @@ WORLD = load_world("outdoor")
 
 @contextlib.contextmanager
 def _central(tmp: Path) -> Iterator[tuple[str, CentralTaskManager, str]]:
-    sock = bound_socket("127.0.16.1")
+    host = fresh_address()
+    sock = bound_socket(host)
     port = int(sock.getsockname()[1])
-    settings = Settings(host="127.0.16.1", port=port, data_dir=tmp, world="outdoor")
+    settings = Settings(host=host, port=port, data_dir=tmp, world="outdoor")
     graph = Graph()
     tokens = TokenStore(tmp)
     ctx = BridgeContext(graph=graph, security=Security(settings, tokens), settings=settings)
@@ -60,7 +61,8 @@ def _central(tmp: Path) -> Iterator[tuple[str, CentralTaskManager, str]]:
 
 async def test_mavlink_vehicle_process_joins_the_central(tmp_path: Path) -> None:
     ap = SimAutopilot(WORLD, start=(1.5, 0.0, WORLD.start.yaw_rad))
-    async with MavlinkSimServer("127.0.16.50", ap, udp_port=None):
+    addr = fresh_address()
+    async with MavlinkSimServer(addr, ap, udp_port=None):
         with _central(tmp_path) as (ws, ctm, token):
             cmd = [
                 sys.executable,
@@ -72,7 +74,7 @@ async def test_mavlink_vehicle_process_joins_the_central(tmp_path: Path) -> None
                 "--name",
                 "uav2",
                 "--drone",
-                "tcp:127.0.16.50:5760",
+                f"tcp:{addr}:{TCP_PORT}",
                 "--world",
                 "outdoor",
                 f"--token={token}",

@@ -12,7 +12,7 @@
 * The admission rules and the passphrase file, alone.
 * ``serve --drone sim-mavlink``: the console's driver signs with the data directory's key.
 
-Addresses 127.0.16.60–69.
+Each simulator on a loopback address of its own (``fresh_address``).
 """
 
 from __future__ import annotations
@@ -37,8 +37,9 @@ from drone.mavlink import signing
 from drone.mavlink.admission import Admission
 from drone.mavlink.errors import InsecureLinkError, SigningKeyError
 from drone.mavlink.sim.autopilot import SimAutopilot
-from drone.mavlink.simserver import MavlinkSimServer
+from drone.mavlink.simserver import TCP_PORT, MavlinkSimServer
 from drone.sim.world import load_world
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -72,7 +73,7 @@ def connect(addr: str, *, key: bytes | None = None, hello: bool = True) -> Any:
     GCS heartbeat at once, as MAVSDK, QGroundControl and this console send on connecting."""
     from pymavlink import mavutil
 
-    m = mavutil.mavlink_connection(f"tcp:{addr}:5760", source_system=254, autoreconnect=False)
+    m = mavutil.mavlink_connection(f"tcp:{addr}:{TCP_PORT}", source_system=254, autoreconnect=False)
     if key is not None:
         m.setup_signing(key, sign_outgoing=True)
     if hello:
@@ -152,7 +153,7 @@ def cli_sim(addr: str, data_dir: Path, *extra: str) -> Iterator[list[str]]:
 
 
 def test_cli_signs_by_default_refuses_unsigned_and_flies_signed(tmp_path: Path) -> None:
-    addr = "127.0.16.60"
+    addr = fresh_address()
     with cli_sim(addr, tmp_path) as banner:
         path = signing.key_path(tmp_path)
         assert any(str(path) in line for line in banner), banner
@@ -178,7 +179,7 @@ def test_cli_signs_by_default_refuses_unsigned_and_flies_signed(tmp_path: Path) 
 
 
 def test_cli_insecure_on_loopback_obeys_unsigned(tmp_path: Path) -> None:
-    addr = "127.0.16.61"
+    addr = fresh_address()
     with cli_sim(addr, tmp_path, "--insecure") as banner:
         assert any("signing is OFF" in line for line in banner), banner
         m = connect(addr)
@@ -223,7 +224,7 @@ def test_cli_print_key_is_the_passphrase_hash(tmp_path: Path) -> None:
 async def test_forged_replayed_and_unsigned_disarms_do_nothing_in_flight(world: Any) -> None:
     from pymavlink.dialects.v20 import ardupilotmega as mav
 
-    addr = "127.0.16.62"
+    addr = fresh_address()
     ap = SimAutopilot(world, signing_key=KEY)
     patient = Admission(deadline_s=600.0)  # the thief is kept to try everything in turn
     async with MavlinkSimServer(addr, ap, udp_port=None, speed=4.0, admission=patient):
@@ -291,7 +292,7 @@ async def test_forged_replayed_and_unsigned_disarms_do_nothing_in_flight(world: 
 
 
 async def test_connection_flood_is_capped_and_a_signed_client_still_flies(world: Any) -> None:
-    addr = "127.0.16.63"
+    addr = fresh_address()
     ap = SimAutopilot(world, signing_key=KEY)
     server = MavlinkSimServer(addr, ap, udp_port=None, speed=4.0)
     rng = random.Random(26)
@@ -301,7 +302,7 @@ async def test_connection_flood_is_capped_and_a_signed_client_still_flies(world:
 
     async def open_one(garbage: bool) -> None:
         nonlocal closed_by_server
-        reader, writer = await asyncio.open_connection(addr, 5760)
+        reader, writer = await asyncio.open_connection(addr, TCP_PORT)
         held.append(writer)
         if garbage:  # MAVLink 2 magic and noise: parsed, never accepted
             writer.write(b"\xfd" + rng.randbytes(300))
@@ -373,7 +374,7 @@ async def test_udp_peers_are_capped_too_and_a_signed_peer_commands(world: Any) -
 
     from pymavlink import mavutil
 
-    addr = "127.0.16.67"
+    addr = fresh_address()
     ap = SimAutopilot(world, signing_key=KEY)
     async with MavlinkSimServer(addr, ap, tcp_port=None, udp_port=0, speed=4.0) as sim:
         port = sim.udp_port
@@ -404,13 +405,13 @@ async def test_udp_peers_are_capped_too_and_a_signed_peer_commands(world: Any) -
 
 
 async def test_garbage_senders_are_closed_after_the_deadline(world: Any) -> None:
-    addr = "127.0.16.64"
+    addr = fresh_address()
     ap = SimAutopilot(world, signing_key=KEY)
     admission = Admission(deadline_s=0.5)
     async with MavlinkSimServer(addr, ap, udp_port=None, speed=4.0, admission=admission):
-        reader, writer = await asyncio.open_connection(addr, 5760)
+        reader, writer = await asyncio.open_connection(addr, TCP_PORT)
         writer.write(b"\xfd\x09" + bytes(40))  # garbage, then nothing
-        silent_r, silent_w = await asyncio.open_connection(addr, 5760)
+        silent_r, silent_w = await asyncio.open_connection(addr, TCP_PORT)
         try:
             # closed by the simulator: the read ends (the telemetry it got until then drained)
             async def drained() -> None:
@@ -431,7 +432,7 @@ async def test_an_unsigned_simulator_listens_on_loopback_only(world: Any) -> Non
     with pytest.raises(InsecureLinkError, match="loopback only"):
         await server.start()
     signed = MavlinkSimServer(
-        "127.0.16.65", SimAutopilot(world, signing_key=KEY), tcp_port=0, udp_port=None
+        fresh_address(), SimAutopilot(world, signing_key=KEY), tcp_port=0, udp_port=None
     )
     async with signed:  # a signing one may listen anywhere (loopback here)
         assert signed.tcp_port
@@ -503,7 +504,7 @@ async def test_serve_sim_mavlink_signs_the_console_link_with_the_data_dir_key(
     from server.settings import Settings
     from server.vehicles.mavlink_stack import start_mavlink
 
-    settings = Settings(data_dir=tmp_path, sim_base_addr="127.0.16.66", world="outdoor")
+    settings = Settings(data_dir=tmp_path, sim_base_addr=fresh_address(), world="outdoor")
     parts = await start_mavlink("uav1", "sim-mavlink", 0, world, settings)
     try:
         key, _ = signing.load_or_create(tmp_path)

@@ -1,4 +1,4 @@
-"""Third-party judges fly the MAVLink simulator over real sockets (127.0.16.0/24):
+"""Third-party judges fly the MAVLink simulator over real sockets (addresses of their own):
 
 * **MAVSDK** (PyPI ``mavsdk``, the PX4 project's client library; its C++ core ships in the
   wheel) connects over ``tcpout://ADDR:5760``, sees health ok, sets the take-off altitude,
@@ -22,8 +22,9 @@ from typing import Any
 import pytest
 
 from drone.mavlink.sim.autopilot import SimAutopilot
-from drone.mavlink.simserver import MavlinkSimServer
+from drone.mavlink.simserver import TCP_PORT, MavlinkSimServer
 from drone.sim.world import load_world
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
 SPEED = 4.0
@@ -43,7 +44,7 @@ async def _mavsdk(addr: str) -> AsyncIterator[tuple[Any, Any]]:
 
     config = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
     async with mavsdk.Mavsdk(config) as m:
-        await m.add_any_connection(f"tcpout://{addr}:5760")
+        await m.add_any_connection(f"tcpout://{addr}:{TCP_PORT}")
         system = await m.first_autopilot(10.0)
         assert system is not None
         tel, act = TelemetryAsync(system), ActionAsync(system)
@@ -57,9 +58,10 @@ async def test_mavsdk_flight_to_a_set_altitude_judged_by_mavsdk(world: Any) -> N
     FlightMode = pytest.importorskip("mavsdk.plugins.telemetry").FlightMode
 
     ap = SimAutopilot(world)  # unsigned: the `--insecure` simulator, loopback only
+    addr = fresh_address()
     async with (
-        MavlinkSimServer("127.0.16.9", ap, speed=SPEED, udp_port=None),
-        _mavsdk("127.0.16.9") as (tel, act),
+        MavlinkSimServer(addr, ap, speed=SPEED, udp_port=None),
+        _mavsdk(addr) as (tel, act),
     ):
         await act.set_takeoff_altitude(5.0)
         assert await act.get_takeoff_altitude() == pytest.approx(5.0)
@@ -125,9 +127,10 @@ async def test_mavsdk_takeoff_above_the_room_is_refused_with_the_reason() -> Non
     ActionError = pytest.importorskip("mavsdk.plugins.action").ActionError
 
     ap = SimAutopilot(load_world("indoor"))
+    addr = fresh_address()
     async with (
-        MavlinkSimServer("127.0.16.8", ap, speed=SPEED, udp_port=None),
-        _mavsdk("127.0.16.8") as (tel, act),
+        MavlinkSimServer(addr, ap, speed=SPEED, udp_port=None),
+        _mavsdk(addr) as (tel, act),
     ):
         await act.set_takeoff_altitude(5.0)
         await act.arm()
@@ -157,8 +160,8 @@ def _mavutil_flight(addr: str, ap: SimAutopilot, world: Any) -> list[str]:
     from pymavlink import mavutil
 
     log: list[str] = []
-    m = mavutil.mavlink_connection(f"tcp:{addr}:5760", source_system=254)
-    watcher = mavutil.mavlink_connection(f"tcp:{addr}:5760", source_system=253)
+    m = mavutil.mavlink_connection(f"tcp:{addr}:{TCP_PORT}", source_system=254)
+    watcher = mavutil.mavlink_connection(f"tcp:{addr}:{TCP_PORT}", source_system=253)
     try:
         hb = m.wait_heartbeat(timeout=10)
         assert hb is not None and hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4
@@ -220,10 +223,9 @@ def _mavutil_flight(addr: str, ap: SimAutopilot, world: Any) -> list[str]:
 async def test_pymavlink_mavutil_flies_the_simulator() -> None:
     world = load_world("outdoor")
     ap = SimAutopilot(world)
-    async with MavlinkSimServer("127.0.16.10", ap, speed=SPEED, udp_port=None):
-        log = await asyncio.wait_for(
-            asyncio.to_thread(_mavutil_flight, "127.0.16.10", ap, world), 120
-        )
+    addr = fresh_address()
+    async with MavlinkSimServer(addr, ap, speed=SPEED, udp_port=None):
+        log = await asyncio.wait_for(asyncio.to_thread(_mavutil_flight, addr, ap, world), 120)
     assert log == ["400:0", "22:0", "20:0"]
     b = ap.physics.body
     assert math.hypot(b.x, b.y) < 0.6 and not ap.armed

@@ -1,13 +1,13 @@
 """The whole server recording a real (simulated) flight, judged by Foxglove's own libraries.
 
-``python -m server serve`` runs in a subprocess with the AR.Drone simulator on 127.0.17.2 and
-the recorder on (its default), a short idle time so the session ends soon after landing. The
-pilot takes off and lands by text over REST, as a user would. Meanwhile Foxglove's Rosbridge
+``python -m server serve`` runs in a subprocess with the AR.Drone simulator on a loopback address of
+its own and the recorder on (its default), a short idle time so the session ends soon after landing.
+The pilot takes off and lands by text over REST, as a user would. Meanwhile Foxglove's Rosbridge
 connection (tests/node/foxglove_client.mjs: @foxglove/roslibjs, @foxglove/rosmsg,
-@foxglove/rosmsg-serialization) lists the topics with their definitions, sees ROS 1 by
-``/rosout`` and decodes every topic from cbor-raw; afterwards Foxglove's MCAP reader
-(@mcap/core) decodes every message of the downloaded recording. The recording is then replayed
-with ``uav-console replay`` and watched through REST and rosbridge.
+@foxglove/rosmsg-serialization) lists the topics with their definitions, sees ROS 1 by ``/rosout``
+and decodes every topic from cbor-raw; afterwards Foxglove's MCAP reader (@mcap/core) decodes every
+message of the downloaded recording. The recording is then replayed with ``uav-console replay`` and
+watched through REST and rosbridge.
 """
 
 from __future__ import annotations
@@ -33,13 +33,13 @@ from server.cli import main as cli_main
 from server.recorder.mcapfile import read_recording
 from server.ros1 import codec_for
 from tests.rosbridge.wsclient import RawClient
-from tests.support.loopback import free_port
+from tests.support.loopback import free_port, fresh_address
 from tests.support.polling import until, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 NODE_DIR = ROOT / "tests" / "node"
 PILOT, OBSERVER = "fox-pilot", "fox-observer"
-SIM_ADDR = "127.0.17.2"
+SIM_ADDR = fresh_address()
 
 
 def node_exe() -> str:

@@ -22,7 +22,7 @@ from mcap.reader import make_reader
 from server.ros1 import codec_for
 from tests.e2e.served import serve
 from tests.speech.conftest import HAVE_TTS, synthesise
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
 TOKEN = "utterance-pilot"
@@ -42,7 +42,7 @@ def test_a_recording_holds_every_input_with_source_and_confidence(tmp_path: Path
         pytest.skip("espeak-ng and sox are needed (.ci/run installs them)")
     wav = synthesise(tmp_path / "battery.wav", "how much battery is left").read_bytes()
     env = {
-        "UAVC_SIM_BASE_ADDR": for_worker("127.0.0.160"),
+        "UAVC_SIM_BASE_ADDR": fresh_address(),
         "UAVC_RECORDER_IDLE_S": "2",
         "UAVC_RECORDER_CHUNK_S": "0.5",
         "UAVC_VEHICLES": "process",

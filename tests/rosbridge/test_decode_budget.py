@@ -1,5 +1,5 @@
-"""Inbound decoding budgets over real sockets (127.0.226.x): the 1-pixel-wide PNG that froze
-the server, sent by each role.
+"""Inbound decoding budgets over real sockets (addresses of their own): the 1-pixel-wide PNG
+that froze the server, sent by each role.
 
 | sent                                                  | answer                                 |
 |-------------------------------------------------------|----------------------------------------|
@@ -38,14 +38,14 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 
 from server.rosbridge.encode import PNG_SIGNATURE, png_encode
-from tests.support.loopback import for_worker, free_port
+from tests.support.loopback import free_port, fresh_address
 from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
 
-HOST = "127.0.226.1"
-SERVE_HOST = "127.0.226.2"
+HOST = fresh_address()
+SERVE_HOST = fresh_address()
 ROOT = Path(__file__).resolve().parents[2]
 INNER = {"op": "call_service", "id": "inner", "service": "/rosapi/topics"}
 
@@ -83,7 +83,7 @@ def png_op(png: bytes, id: str) -> str:
 
 @pytest.fixture
 def srv(tmp_path: Path) -> Iterator[RunningServer]:
-    with running_server(tmp_path, host=for_worker(HOST)) as s:
+    with running_server(tmp_path, host=HOST) as s:
         yield s
 
 
@@ -133,7 +133,7 @@ async def test_observer_frames_over_64_kb_are_refused_unread(srv: RunningServer)
 
 async def test_observer_frames_over_64_kb_under_a_plain_transport(tmp_path: Path) -> None:
     # without the transport's limit (uvicorn's own protocol) the endpoint answers it
-    with running_server(tmp_path, host=for_worker(HOST), ws="websockets-sansio") as srv:
+    with running_server(tmp_path, host=HOST, ws="websockets-sansio") as srv:
         async with await RawClient.open(srv.url("observer")) as c:
             await c.send({"op": "subscribe", "id": "huge", "topic": "/x", "pad": "y" * 100_000})
             s = await c.status("huge")
@@ -184,7 +184,7 @@ OBSERVER = "observer-token-decode-budget"
 @pytest.fixture
 def served(tmp_path: Path) -> Iterator[tuple[str, int]]:
     """``uav-console serve --drone none`` in its own process: the real /health and rosbridge."""
-    host = for_worker(SERVE_HOST)
+    host = SERVE_HOST
     port = free_port(host)
     cmd = [sys.executable, "-m", "server", "serve", "--host", host, "--port", str(port)]
     cmd += ["--drone", "none", "--data-dir", str(tmp_path), "--token", PILOT]

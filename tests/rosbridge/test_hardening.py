@@ -1,4 +1,4 @@
-"""Issue 14's findings at the WebSocket door, each reproduced over a real socket (127.0.14.x).
+"""Issue 14's findings at the WebSocket door, each reproduced over a real socket.
 
 | finding                                         | answer now                               |
 |-------------------------------------------------|------------------------------------------|
@@ -30,12 +30,13 @@ import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from server.rosbridge.encode import PNG_SIGNATURE, png_encode
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
 
-HOST = "127.0.14.1"
+HOST = fresh_address()
 
 
 @pytest.fixture
@@ -240,7 +241,7 @@ async def test_host_and_origin_tricks_are_refused(srv14: RunningServer) -> None:
 
 
 async def test_connections_per_ip_are_capped(tmp_path: Path) -> None:
-    with running_server(tmp_path, host="127.0.14.2", max_connections_per_ip=3) as srv:
+    with running_server(tmp_path, host=fresh_address(), max_connections_per_ip=3) as srv:
         clients = [await RawClient.open(srv.url(None)) for _ in range(3)]
         try:
             c = await RawClient.open(srv.url(None))
@@ -263,7 +264,7 @@ async def test_closed_connections_free_their_buffers(tmp_path: Path) -> None:
 
     from server.rosbridge.protocol import BridgeProtocol
 
-    with running_server(tmp_path, host="127.0.14.5") as srv:
+    with running_server(tmp_path, host=fresh_address()) as srv:
         for _ in range(3):
             clients = [await RawClient.open(srv.url()) for _ in range(4)]
             for c in clients:
@@ -318,7 +319,7 @@ async def test_drone_commands_over_rosbridge_are_audited(tmp_path: Path) -> None
     from server.store import AuditLog
 
     log = AuditLog(tmp_path / "audit.db")
-    with running_server(tmp_path, host="127.0.14.6", audit=AuditTrail(log)) as srv:
+    with running_server(tmp_path, host=fresh_address(), audit=AuditTrail(log)) as srv:
         rows_at_takeoff: list[list[str]] = []
 
         def on_takeoff(msg: object) -> None:  # what the log held when the command acted

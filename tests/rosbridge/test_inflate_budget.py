@@ -1,6 +1,6 @@
 """The transport's permessage-deflate budget (``server.http.ws_guard.InflateLimits``): sans-I/O
 against websockets' own client protocol with a virtual clock, then over real sockets
-(127.0.226.3)."""
+(an address of its own)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from websockets.frames import Frame
 from websockets.uri import parse_uri
 
 from server.http.ws_guard import CappedServerProtocol, InflateLimits
-from tests.support.loopback import for_worker
+from tests.support.loopback import fresh_address
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
@@ -143,7 +143,7 @@ def test_lift_never_raises_the_transport_limit() -> None:
 # -- over sockets -----------------------------------------------------------------------------
 @pytest.fixture
 def srv(tmp_path: Path) -> Iterator[RunningServer]:
-    with running_server(tmp_path, host=for_worker("127.0.226.3")) as s:
+    with running_server(tmp_path, host=fresh_address()) as s:
         yield s
 
 

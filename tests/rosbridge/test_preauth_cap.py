@@ -1,5 +1,5 @@
 """The transport's pre-auth frame cap (``server.http.ws_guard``, issue 14) over real sockets
-(127.0.78.x), with raw frames written under the ``websockets`` client:
+(addresses of its own), with raw frames written under the ``websockets`` client:
 
 | sent without a token                                  | answer                              |
 |-------------------------------------------------------|-------------------------------------|
@@ -25,12 +25,13 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import Frame, Opcode
 
+from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
 from .server_fixture import RunningServer, running_server
 from .wsclient import RawClient
 
-HOST = "127.0.78.1"
+HOST = fresh_address()
 BIG = 100 * 1024
 
 
@@ -140,7 +141,7 @@ async def test_a_token_at_the_handshake_lifts_the_cap_at_once(srv78: RunningServ
 
 
 async def test_without_the_transport_cap_the_endpoint_still_refuses(tmp_path: Path) -> None:
-    with running_server(tmp_path, host="127.0.78.2", ws="websockets-sansio") as srv:
+    with running_server(tmp_path, host=fresh_address(), ws="websockets-sansio") as srv:
         async with await RawClient.open(srv.url(None)) as c:
             await c.send(json.dumps({"op": "auth", "token": "x" * 8192}))
             assert "before auth" in (await c.status())["msg"]

@@ -79,6 +79,7 @@ def test_lease_takeover_is_explicit_and_told() -> None:
     assert lease.state.holder is None
 
 
+# Origin and Host headers, parsed, never bound: 8000 is Settings.port's default.
 @pytest.mark.parametrize(
     ("origin", "host", "ok"),
     [

@@ -1,9 +1,9 @@
 """Third-party check: the PyPI client ``pyardrone`` (which we did not write) flies the simulator.
 
-pyardrone accepts navdata only from exactly (host, 5554), requires the checksum option and dies on
-unknown option tags (see its ``navdata/__init__.py``) — so this also checks our wire format. Its
-video mixin (OpenCV reading a UDP relay) is left out: we compose its navdata/AT client and command
-helpers exactly as ``pyardrone.ARDrone`` does, minus ``VideoMixin``.
+pyardrone accepts navdata only from exactly the drone's host and port 5554, requires the checksum
+option and dies on unknown option tags (see its ``navdata/__init__.py``) — so this also checks our
+wire format. Its video mixin (OpenCV reading a UDP relay) is left out: we compose its navdata/AT
+client and command helpers exactly as ``pyardrone.ARDrone`` does, minus ``VideoMixin``.
 """
 
 from __future__ import annotations

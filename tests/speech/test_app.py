@@ -22,7 +22,7 @@ async def test_model_loads_on_first_use_and_no_drone_is_a_clear_404(
         app.router.lifespan_context(app),
         httpx.AsyncClient(
             transport=httpx.ASGITransport(app=app),
-            base_url="http://127.0.0.1:8000",
+            base_url="http://127.0.0.1:8000",  # no socket: Settings' default host and port
             headers={"Authorization": f"Bearer {PILOT}"},
             timeout=120,
         ) as client,

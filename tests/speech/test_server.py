@@ -1,7 +1,7 @@
 """The whole server on a non-loopback bind, as a phone and a remote vehicle see it.
 
 ``uav-console serve --host 0.0.0.0`` in a subprocess serves HTTPS/WSS with its own CA (the
-simulated drone on 127.0.15.2, this suite's loopback range). httpx verifies the generated CA;
+simulated drone on a loopback address of its own). httpx verifies the generated CA;
 spoken WAV files fly the simulated drone through ``POST /api/v1/speech``; the microphone stream
 is spoken to over WSS with the ``websockets`` client; ``uav-console vehicle`` refuses a central
 whose certificate it cannot verify.
@@ -32,12 +32,12 @@ from websockets.exceptions import ConnectionClosed
 from server.http.tls import fingerprint
 from server.speech.audio import read_wav, to_wav
 from tests.speech.conftest import HAVE_TTS, synthesise
-from tests.support.loopback import free_port
+from tests.support.loopback import bus_endpoint, free_port, fresh_address
 
 ROOT = Path(__file__).resolve().parents[2]
 PILOT = "speech-pilot-token"
 OBSERVER = "speech-observer-token"
-SIM_ADDR = "127.0.15.2"
+SIM_ADDR = fresh_address()
 
 pytestmark = pytest.mark.skipif(not HAVE_TTS, reason="espeak-ng and sox are needed")
 
@@ -91,6 +91,7 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Served]:
     port = free_port()
     env = dict(os.environ, UAVC_SIM_BASE_ADDR=SIM_ADDR, UAVC_SIM_SPEED="1")
     env.setdefault("UAVC_VEHICLES", "inline")  # speech, not isolation (tests/isolation)
+    env.setdefault("UAVC_BUS_LISTEN", bus_endpoint())  # a bus router off 7447
     log_path = data / "server.log"
     cmd = [
         sys.executable, "-m", "server", "serve", "--host", "0.0.0.0", "--port", str(port),
@@ -303,7 +304,7 @@ def test_microphone_stream_refusals(served: Served, query: str, reason: str) -> 
 
 def test_vehicle_verifies_the_central_certificate(served: Served, tmp_path: Path) -> None:
     url = f"wss://127.0.0.1:{served.port}/rosbridge"
-    env = dict(os.environ, UAVC_SIM_BASE_ADDR="127.0.15.3", UAVC_TOKEN=PILOT)
+    env = dict(os.environ, UAVC_SIM_BASE_ADDR=fresh_address(), UAVC_TOKEN=PILOT)
     base = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", "uav2"]
     untrusted = subprocess.run(base, cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
     assert untrusted.returncode == 2

@@ -27,7 +27,7 @@ from server.settings import Settings
 
 
 def test_loopback_stays_http_and_other_hosts_get_https(tmp_path: Path) -> None:
-    for host in ("127.0.0.1", "127.0.15.9", "::1", "localhost"):
+    for host in ("127.0.0.1", "127.0.15.9", "::1", "localhost"):  # classified, never bound
         assert is_loopback(host) and not wants_tls(host, tls=True, cert=None)
     for host in ("0.0.0.0", "192.168.1.20", "console.local"):
         assert wants_tls(host, tls=True, cert=None)
@@ -90,7 +90,7 @@ def test_serve_refuses_half_a_certificate_and_a_bad_recognizer(
     """``uav-console serve`` in this process: both refusals come before anything starts."""
     from server.cli import main
 
-    base = ["serve", "--data-dir", str(tmp_path), "--port", "1"]
+    base = ["serve", "--data-dir", str(tmp_path), "--port", "1"]  # never reached
     assert main([*base, "--host", "0.0.0.0", "--cert", str(tmp_path / "c.pem")]) == 2
     assert "--cert and --key go together" in capsys.readouterr().err
     monkeypatch.setenv("UAVC_RECOGNIZER", "cloud")

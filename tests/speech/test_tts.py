@@ -40,7 +40,7 @@ async def api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
         app.router.lifespan_context(app),
         httpx.AsyncClient(
             transport=httpx.ASGITransport(app=app),
-            base_url="http://127.0.0.1:8000",
+            base_url="http://127.0.0.1:8000",  # no socket: Settings' default host and port
             headers={"Authorization": f"Bearer {PILOT}"},
             timeout=60,
         ) as client,

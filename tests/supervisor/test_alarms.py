@@ -38,7 +38,7 @@ def test_a_vehicle_shares_its_alarms_with_the_console() -> None:
     assert names.alarm_topic("uav3") == "/uav3/vehicle/alarm"
 
 
-api = app_fixture("127.0.14.41", "alarm-pilot", "alarm-observer")
+api = app_fixture("alarm-pilot", "alarm-observer")
 
 
 async def wait_for(client: httpx.AsyncClient, path: str, pred: Callable[[Any], bool]) -> None:
