@@ -14,6 +14,7 @@ never leaves the router.
 
 from __future__ import annotations
 
+import hashlib
 import ipaddress
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -204,10 +205,10 @@ def client_config(
     }
 
 
-def router_zid(password: str, listen: str) -> str:
-    """A console router's Zenoh id: the same for the same console (its bus password) listening
-    on the same endpoint, so a router that joined it trusts it again after it restarts."""
-    import hashlib
-
-    digest = hashlib.sha256(f"{password}\n{listen}".encode()).hexdigest()[:32]
-    return digest.lstrip("0") or "1"
+def router_id(fleet: str, console: str) -> str:
+    """The Zenoh id of console ``console``'s router in ``fleet``: SHA-256 of the two names, 32 hex
+    digits without leading zeros (Zenoh refuses an id with a leading ``0``: "Leading 0s are not
+    valid"), so the same across restarts and unique while console names are. Routers that join
+    it name it in their access control by this id."""
+    digest = hashlib.sha256(f"uavc/{keys.segment(fleet)}/{keys.segment(console)}".encode())
+    return digest.hexdigest()[:32].lstrip("0") or "1"

@@ -3,7 +3,6 @@ hears (which vehicles are alive, their latest telemetry)."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import threading
@@ -23,7 +22,7 @@ from drone.bus.config import (
     as_tls,
     client_config,
     router_config,
-    router_zid,
+    router_id,
     vehicle_user,
 )
 from drone.bus.credentials import Credentials, write_private
@@ -54,6 +53,8 @@ class ConsoleBus:
         directory: ``<data dir>/bus`` (credentials and the client files, 0600).
         fleet: the fleet's name, the second key segment.
         vehicles: the vehicle names that get a credential (the ACL is fixed at start).
+        name: the console's name (one key segment, unique in the fleet): its router's Zenoh id
+            derives from it (:func:`drone.bus.config.router_id`).
         vehicle_passwords: name → password for vehicles whose password is given (the
             console's vehicle keys); they are on the bus too.
         listen: endpoints to listen on; empty: ``tcp/127.0.0.1:7447`` or the next free port.
@@ -69,10 +70,11 @@ class ConsoleBus:
         directory: Path,
         fleet: str,
         vehicles: Iterable[str],
+        *,
+        name: str,
         listen: Iterable[str] = (),
         connect: Iterable[str] = (),
         vehicle_passwords: Mapping[str, str] | None = None,
-        name: str | None = None,
         tls: BusTLS | None = None,
     ) -> None:
         self.directory = directory
@@ -85,7 +87,7 @@ class ConsoleBus:
         wrap = as_tls if tls is not None and tls.cert is not None else str
         self.listen = [wrap(e) for e in listen] or [free_listen_endpoint(wrap(DEFAULT_LISTEN))]
         self.connect = list(connect)
-        self.name = name  # the console's name: its router's id derives from it (router_id)
+        self.name = keys.segment(name)  # the console's name: its router's id (router_id)
         self.credentials: Credentials | None = None
         self.session: zenoh.Session | None = None
         self._lock = threading.Lock()
@@ -116,11 +118,7 @@ class ConsoleBus:
                 dictionary_file=str(creds.path),
                 acl=acl,
                 # the same id across restarts: the routers that joined it name it in their ACL
-                zid=(
-                    router_id(self.fleet, self.name)
-                    if self.name is not None
-                    else router_zid(creds.password(CONSOLE_USER), self.listen[0])
-                ),
+                zid=router_id(self.fleet, self.name),
                 tls=self.tls,
             )
         )
@@ -201,13 +199,6 @@ class ConsoleBus:
             return
         with self._lock:
             self._latest[drone] = telemetry
-
-
-def router_id(fleet: str, console: str) -> str:
-    """The Zenoh id of console ``console``'s router: 16 bytes of SHA-256 of the fleet and the
-    console's name, in hex (stable across restarts, unique while console names are)."""
-    digest = hashlib.sha256(f"uavc/{fleet}/{console}".encode()).hexdigest()[:32]
-    return digest if digest.strip("0") else "1" + digest[1:]
 
 
 def _reachable(endpoint: str) -> str:

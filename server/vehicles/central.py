@@ -193,6 +193,7 @@ class VehicleCentral:
         self._misnamed: set[str] = set()
         self._utterances: Any = None
         self.bus: ConsoleBus | None = None
+        self.bus_error: str | None = None  # why the bus did not start (serve says it)
         self.commander: BusCommander | None = None
         self.door_secrets = DoorSecrets(pid_dir_of(s))
         self.door_ports: dict[str, int] = {}  # spawned vehicles' door ports
@@ -267,8 +268,7 @@ class VehicleCentral:
         try:
             tls = bus_tls(s)
         except TLSError as exc:
-            log.error("the bus did not start: %s", exc)
-            self.alerts.append(f"the bus did not start: {exc}")
+            self._bus_failed(str(exc))
             return None
         passwords = {v: self.keys.ensure(v).secret for v in vehicles}
         passwords |= {k.name: k.secret for k in self.keys.all()}  # vehicles from elsewhere
@@ -285,12 +285,16 @@ class VehicleCentral:
         try:
             bus.start()
         except BusError as exc:
-            log.error("the bus did not start: %s", exc)
-            self.alerts.append(f"the bus did not start: {exc}")
+            self._bus_failed(str(exc))
             return None
         assert bus.session is not None
         self.commander = BusCommander(bus.session, s.fleet_name, console_name(s))
         return bus
+
+    def _bus_failed(self, why: str) -> None:
+        self.bus_error = why
+        log.error("the bus did not start: %s", why)
+        self.alerts.append(f"the bus did not start: {why}")
 
     def _bus_env(self, name: str) -> dict[str, str]:
         if self.bus is None:

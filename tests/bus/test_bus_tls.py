@@ -60,6 +60,7 @@ def console(tmp_path: Path) -> Iterator[ConsoleBus]:
         tmp_path / "bus",
         "default",
         ["uav1"],
+        name="first",
         listen=settings.bus_listen,
         tls=bus_tls(settings),
     )
@@ -250,7 +251,13 @@ def test_a_console_off_tls_joins_a_tls_router_with_its_ca(
     assert tls is not None and tls.cert is None and console.tls is not None
     assert tls.ca == console.tls.ca
     second = ConsoleBus(
-        tmp_path / "bus", "default", [], settings.bus_listen, settings.bus_connect, tls=tls
+        tmp_path / "bus",
+        "default",
+        [],
+        name="second",
+        listen=settings.bus_listen,
+        connect=settings.bus_connect,
+        tls=tls,
     )
     second.start()
     try:

@@ -31,7 +31,11 @@ from tests.support.polling import wait_for
 @pytest.fixture
 def console(tmp_path: Path) -> Iterator[ConsoleBus]:
     bus = ConsoleBus(
-        tmp_path / "bus", "default", ["uav1", "uav2"], listen=[f"tcp/127.0.0.1:{free_port()}"]
+        tmp_path / "bus",
+        "default",
+        ["uav1", "uav2"],
+        name="west",
+        listen=[f"tcp/127.0.0.1:{free_port()}"],
     )
     bus.start()
     yield bus
@@ -291,13 +295,18 @@ def test_a_console_that_joins_another_router_commands_its_vehicles(tmp_path: Pat
 
     async def main() -> None:
         west = ConsoleBus(
-            tmp_path / "bus", "default", ["uav1"], listen=[f"tcp/127.0.0.1:{free_port()}"]
+            tmp_path / "bus",
+            "default",
+            ["uav1"],
+            name="west",
+            listen=[f"tcp/127.0.0.1:{free_port()}"],
         )
         west.start()
         east = ConsoleBus(
             tmp_path / "bus",
             "default",
             ["uav1"],
+            name="east",
             listen=[f"tcp/127.0.0.1:{free_port()}"],
             connect=west.listen,
         )

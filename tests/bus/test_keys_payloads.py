@@ -7,11 +7,12 @@ import json
 import math
 
 import pytest
+import zenoh
 from hypothesis import given
 from hypothesis import strategies as st
 
 from drone.bus import keys
-from drone.bus.config import access_control, client_config, vehicle_user
+from drone.bus.config import access_control, client_config, router_id, vehicle_user
 from drone.bus.errors import KeySegmentError, PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry, encode
 
@@ -110,3 +111,22 @@ def test_client_configuration_never_scouts() -> None:
     cfg = client_config(connect=["tcp/127.0.0.1:7447"], user="observer", password="p")
     assert cfg["scouting"]["multicast"]["enabled"] is False
     assert cfg["mode"] == "client"
+
+
+SEGMENTS = st.from_regex(keys.SEGMENT, fullmatch=True)
+
+
+@given(SEGMENTS, SEGMENTS)
+def test_every_console_name_gives_a_router_id_zenoh_takes(fleet: str, console: str) -> None:
+    """Zenoh refuses an id with a leading 0 ("Leading 0s are not valid"): one console name in
+    16 hashes to one (``serve`` on 127.0.13.1:30029 is ``127-0-13-1-30029``), and that
+    console's bus did not start."""
+    zid = router_id(fleet, console)
+    zenoh.Config.from_json5(json.dumps({"id": zid}))
+    assert zid == router_id(fleet, console) and len(zid) <= 32
+
+
+def test_router_ids_are_stable_and_differ_by_name() -> None:
+    assert router_id("default", "127-0-13-1-30029") == "bb2d10a528463effa1e64c5e5e26a71"
+    assert router_id("default", "console-a") != router_id("default", "console-b")
+    assert router_id("default", "a") != router_id("site-b", "a")

@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from drone.bus.central import CentralBus
-from drone.bus.console import ConsoleBus, router_id
+from drone.bus.config import router_id
+from drone.bus.console import ConsoleBus
 from drone.bus.plans import VehiclePlans
 from drone.bus.vehicle import VehicleBus
 from tests.support.loopback import free_port
