@@ -90,6 +90,7 @@ class ConsoleBus:
         self.name = keys.segment(name)  # the console's name: its router's id (router_id)
         self.credentials: Credentials | None = None
         self.session: zenoh.Session | None = None
+        self._presence: zenoh.LivelinessToken | None = None
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._latest: dict[str, Telemetry] = {}
@@ -125,6 +126,9 @@ class ConsoleBus:
         self._write_client(CLIENT_FILE, OBSERVER_USER)
         self._write_client(PILOT_FILE, PILOT_USER)
         liveliness = self.session.liveliness()
+        # this console on the bus (any role), as long as its router: the vehicles' watch of
+        # their consoles and the central's election both go by this one token
+        self._presence = liveliness.declare_token(keys.console_alive(self.fleet, self.name))
         self._subs.append(
             liveliness.declare_subscriber(keys.all_alive(self.fleet), self._on_alive, history=True)
         )
@@ -159,6 +163,9 @@ class ConsoleBus:
             return self._latest.get(drone)
 
     def close(self) -> None:
+        if self._presence is not None:
+            self._presence.undeclare()  # type: ignore[no-untyped-call]
+            self._presence = None
         if self.session is not None:
             self.session.close()  # type: ignore[no-untyped-call]
             self.session = None

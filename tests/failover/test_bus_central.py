@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from drone.bus.central import CentralBus
+from drone.bus.commanded import ConsolePresence
 from drone.bus.config import router_id
 from drone.bus.console import ConsoleBus
 from drone.bus.plans import VehiclePlans
@@ -87,6 +89,39 @@ async def test_each_console_sees_the_other_and_the_holder(fleet: Fleet) -> None:
     )
     fleet.a.central.release()
     await until_async(lambda: fleet.b.central.view()[1] == set(), 10.0, "the holder's token gone")
+
+
+async def test_a_console_has_one_presence_token_for_the_vehicles_and_the_election(
+    fleet: Fleet,
+) -> None:
+    """``uavc/<fleet>/console/<name>/alive``, declared by the console's router, is what the
+    vehicles watch their consoles by and whom the election counts; it goes with the router."""
+    both = {"console-a", "console-b"}
+    session = fleet.vehicle.session
+    assert session is not None
+    presence = ConsolePresence(session, "default", time.monotonic)
+    try:
+        await until_async(lambda: fleet.a.central.view()[0] == both, 10.0, "a sees b")
+        await until_async(lambda: set(presence.consoles()) == both, 10.0, "the vehicle's view")
+
+        def tokens() -> set[str]:
+            return {
+                str(r.ok.key_expr)
+                for r in session.liveliness().get("uavc/default/**", timeout=5)
+                if r.ok is not None
+            }
+
+        assert await asyncio.to_thread(tokens) == {
+            "uavc/default/console/console-a/alive",
+            "uavc/default/console/console-b/alive",
+            "uavc/default/uav1/alive",
+        }
+        fleet.b.central.close()
+        fleet.b.router.close()
+        await until_async(lambda: fleet.a.central.view()[0] == {"console-a"}, 10.0, "b gone")
+        await until_async(lambda: presence.consoles() == ["console-a"], 10.0, "b gone too")
+    finally:
+        presence.close()
 
 
 async def test_the_routers_ids_derive_from_the_consoles_names(fleet: Fleet) -> None:
