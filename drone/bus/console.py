@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ from drone.bus.config import (
     access_control,
     as_tls,
     client_config,
+    joiner_config,
     router_config,
     router_id,
     vehicle_user,
@@ -28,12 +30,22 @@ from drone.bus.config import (
 from drone.bus.credentials import Credentials, write_private
 from drone.bus.errors import PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry
-from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session, router_ids
+from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session
 
 log = logging.getLogger(__name__)
 
 CLIENT_FILE = "client.json5"  # observer: watch only
 PILOT_FILE = "pilot.json5"
+JOIN_WATCH_S = 0.5  # how often the joiners' links are looked at (the log, /health)
+
+
+@dataclass(frozen=True)
+class Join:
+    """A router this console joins (``--bus-connect``) and whether the link to it is up."""
+
+    endpoint: str
+    joined: bool
+    since: float | None  # Unix time it came up (joined) or went or was first dialled (not)
 
 
 @dataclass(frozen=True)
@@ -58,7 +70,9 @@ class ConsoleBus:
         vehicle_passwords: name → password for vehicles whose password is given (the
             console's vehicle keys); they are on the bus too.
         listen: endpoints to listen on; empty: ``tcp/127.0.0.1:7447`` or the next free port.
-        connect: other routers to join (consoles on other hosts, ``zenohd``).
+        connect: other routers to join (consoles on other hosts, ``zenohd``), each through a
+            joiner of its own (:func:`drone.bus.config.joiner_config`): dialled until it
+            answers, so either console may start first; :meth:`joins` says which are up.
         tls: the router's certificate, key and CA: it then listens on ``tls/`` endpoints only
             (a ``tcp/`` one given is served as ``tls/`` on the same address) and the client
             files it writes carry the CA. A CA alone: it listens as given and verifies the
@@ -87,7 +101,8 @@ class ConsoleBus:
         wrap = as_tls if tls is not None and tls.cert is not None else str
         self.listen = [wrap(e) for e in listen] or [free_listen_endpoint(wrap(DEFAULT_LISTEN))]
         self.connect = list(connect)
-        self.name = keys.segment(name)  # the console's name: its router's id (router_id)
+        self.name = keys.segment(name)
+        self.zid = router_id(self.fleet, self.name)  # its router's Zenoh id, from its name
         self.credentials: Credentials | None = None
         self.session: zenoh.Session | None = None
         self._presence: zenoh.LivelinessToken | None = None
@@ -96,6 +111,10 @@ class ConsoleBus:
         self._latest: dict[str, Telemetry] = {}
         self.refused = 0  # payloads that did not decode (logged, never shown)
         self._subs: list[object] = []
+        self._joiners: list[tuple[str, zenoh.Session]] = []
+        self._joins: dict[str, Join] = {}
+        self._stop = threading.Event()
+        self._watch: threading.Thread | None = None
 
     def start(self) -> None:
         """Open the router and write ``client.json5`` / ``pilot.json5``.
@@ -107,19 +126,16 @@ class ConsoleBus:
             self.directory, self.vehicle_names, self.vehicle_passwords
         )
         self.credentials = creds
-        # the routers we join, known by their ids (drone.bus.session.router_ids)
-        ca = self.tls.ca if self.tls is not None else None
-        peers = router_ids(self.connect, CONSOLE_USER, creds.password(CONSOLE_USER), ca=ca)
-        acl = access_control(self.fleet, creds.vehicles(), peers)
+        acl = access_control(self.fleet, creds.vehicles())
         self.session = open_session(
             router_config(
                 listen=self.listen,
-                connect=self.connect,
+                connect=[],  # others' routers are joined through the joiners below
                 password=creds.password(CONSOLE_USER),
                 dictionary_file=str(creds.path),
                 acl=acl,
                 # the same id across restarts: the routers that joined it name it in their ACL
-                zid=router_id(self.fleet, self.name),
+                zid=self.zid,
                 tls=self.tls,
             )
         )
@@ -135,6 +151,57 @@ class ConsoleBus:
         self._subs.append(
             self.session.declare_subscriber(keys.all_telemetry(self.fleet), self._on_telemetry)
         )
+        self._join(creds.password(CONSOLE_USER))
+
+    def _join(self, password: str) -> None:
+        """A joiner for each router in ``connect``; a thread that says when each link comes
+        up or goes (the log; :meth:`joins`)."""
+        if not self.connect:
+            return
+        assert self.session is not None
+        ca = self.tls.ca if self.tls is not None else None
+        now = time.time()
+        for endpoint in self.connect:
+            config = joiner_config(
+                router=self.client_endpoints[0], peer=endpoint, password=password, ca=ca
+            )
+            self._joiners.append((endpoint, open_session(config)))
+            self._joins[endpoint] = Join(endpoint, False, now)
+        self._look()
+        for endpoint, join in self._joins.items():
+            if not join.joined:
+                log.warning("bus: the router at %s is not up; joining it when it is", endpoint)
+        self._watch = threading.Thread(target=self._watching, name="bus-joins", daemon=True)
+        self._watch.start()
+
+    def _watching(self) -> None:
+        while not self._stop.wait(JOIN_WATCH_S):
+            try:
+                self._look()
+            except zenoh.ZError as exc:  # a session closing under us: the console stops
+                log.debug("bus: joins not looked at: %s", exc)
+
+    def _look(self) -> None:
+        """Each joiner's link to its router: up when it has a router besides ours."""
+        now = time.time()
+        for endpoint, joiner in self._joiners:
+            up = any(str(z) != self.zid for z in joiner.info.routers_zid())
+            with self._lock:
+                before = self._joins[endpoint]
+                if up == before.joined:
+                    continue
+                self._joins[endpoint] = Join(endpoint, up, now)
+            if up:
+                log.warning("bus: joined the router at %s", endpoint)
+            else:
+                log.warning(
+                    "bus: the router at %s went; joining it again when it is back", endpoint
+                )
+
+    def joins(self) -> list[Join]:
+        """The routers this console joins (``connect``), each up or not."""
+        with self._lock:
+            return [self._joins[e] for e in self.connect if e in self._joins]
 
     @property
     def client_endpoints(self) -> list[str]:
@@ -163,6 +230,13 @@ class ConsoleBus:
             return self._latest.get(drone)
 
     def close(self) -> None:
+        self._stop.set()
+        if self._watch is not None:
+            self._watch.join(timeout=5)
+            self._watch = None
+        for _endpoint, joiner in self._joiners:
+            joiner.close()  # type: ignore[no-untyped-call]
+        self._joiners = []
         if self._presence is not None:
             self._presence.undeclare()  # type: ignore[no-untyped-call]
             self._presence = None
