@@ -73,6 +73,20 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="TLS on the bus router's endpoints with the console's CA (auto: off loopback)",
     )
+    s.add_argument(
+        "--bus-credentials",
+        type=Path,
+        default=None,
+        help="another console's DATA/bus/credentials.txt: share its bus users and passwords, "
+        "to join its router (docs/failover.md)",
+    )
+    s.add_argument(
+        "--bus-ca",
+        type=Path,
+        default=None,
+        help="CA file the tls/ routers joined with --bus-connect are verified with (another "
+        "console's DATA/tls/ca.pem; default: this data directory's)",
+    )
     s.add_argument("--fleet-name", default=None, help="the fleet's name on the bus (default)")
     s.add_argument(
         "--console-name", default=None, help="this console's name on the bus (HOST-PORT)"
@@ -288,6 +302,8 @@ def _serve(args: argparse.Namespace) -> int:
         bus_listen=tuple(args.bus_listen) if args.bus_listen else None,
         bus_connect=tuple(args.bus_connect) if args.bus_connect else None,
         bus_tls=args.bus_tls,
+        bus_credentials=args.bus_credentials,
+        bus_ca=args.bus_ca,
         fleet_name=args.fleet_name,
         console_name=args.console_name,
         sim_base_addr=args.sim_addr,

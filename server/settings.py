@@ -196,8 +196,13 @@ class Settings(BaseSettings):
     )
     bus_ca: Path | None = Field(
         None,
-        description="For a vehicle process: the CA file a tls/ bus router is verified with; "
-        "unset: the data directory's tls/ca.pem.",
+        description="The CA file a tls/ bus router that a vehicle or a console joins is "
+        "verified with (another console's tls/ca.pem); unset: the data directory's tls/ca.pem.",
+    )
+    bus_credentials: Path | None = Field(
+        None,
+        description="Another console's bus/credentials.txt: this console's bus takes its users "
+        "and passwords (the consoles of a fleet share them), its own vehicle keys excepted.",
     )
     fleet_name: str = Field("default", description="The fleet's name on the bus (its keys).")
     console_name: str | None = Field(

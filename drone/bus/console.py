@@ -7,9 +7,10 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import zenoh
 
@@ -37,6 +38,7 @@ log = logging.getLogger(__name__)
 CLIENT_FILE = "client.json5"  # observer: watch only
 PILOT_FILE = "pilot.json5"
 JOIN_WATCH_S = 0.5  # how often the joiners' links are looked at (the log, /health)
+JOIN_GRACE_S = 2.0  # a router not joined this long after the start is said to be not up
 
 
 @dataclass(frozen=True)
@@ -45,7 +47,17 @@ class Join:
 
     endpoint: str
     joined: bool
-    since: float | None  # Unix time it came up (joined) or went or was first dialled (not)
+    since: float  # Unix time it came up (joined) or went or was first dialled (not)
+    state: Literal["dialling", "not up", "joined", "went"] = "dialling"
+
+    def said(self) -> str:
+        """The change, in a line for the log."""
+        return {
+            "dialling": f"bus: dialling the router at {self.endpoint}",
+            "not up": f"bus: the router at {self.endpoint} is not up; joining it when it is",
+            "joined": f"bus: joined the router at {self.endpoint}",
+            "went": f"bus: the router at {self.endpoint} went; joining it again when it is back",
+        }[self.state]
 
 
 @dataclass(frozen=True)
@@ -77,6 +89,10 @@ class ConsoleBus:
             (a ``tcp/`` one given is served as ``tls/`` on the same address) and the client
             files it writes carry the CA. A CA alone: it listens as given and verifies the
             ``tls/`` routers it joins with that CA.
+        shared_credentials: another console's ``credentials.txt``, whose users and passwords
+            this console's bus takes (:meth:`Credentials.load_or_create`'s ``shared``).
+        on_join: told each change of a join (:class:`Join`), on a thread of its own: a
+            router not up at the start, joined, gone.
     """
 
     def __init__(
@@ -90,9 +106,13 @@ class ConsoleBus:
         connect: Iterable[str] = (),
         vehicle_passwords: Mapping[str, str] | None = None,
         tls: BusTLS | None = None,
+        shared_credentials: Path | None = None,
+        on_join: Callable[[Join], object] | None = None,
     ) -> None:
         self.directory = directory
         self.tls = tls
+        self.shared_credentials = shared_credentials
+        self.on_join = on_join
         self.fleet = keys.segment(fleet)
         self.vehicle_passwords = dict(vehicle_passwords or {})
         self.vehicle_names = sorted(
@@ -123,7 +143,7 @@ class ConsoleBus:
             BusConfigError: an endpoint cannot be listened on or the credentials are unusable.
         """
         creds = Credentials.load_or_create(
-            self.directory, self.vehicle_names, self.vehicle_passwords
+            self.directory, self.vehicle_names, self.vehicle_passwords, self.shared_credentials
         )
         self.credentials = creds
         acl = access_control(self.fleet, creds.vehicles())
@@ -168,9 +188,6 @@ class ConsoleBus:
             self._joiners.append((endpoint, open_session(config)))
             self._joins[endpoint] = Join(endpoint, False, now)
         self._look()
-        for endpoint, join in self._joins.items():
-            if not join.joined:
-                log.warning("bus: the router at %s is not up; joining it when it is", endpoint)
         self._watch = threading.Thread(target=self._watching, name="bus-joins", daemon=True)
         self._watch.start()
 
@@ -188,15 +205,21 @@ class ConsoleBus:
             up = any(str(z) != self.zid for z in joiner.info.routers_zid())
             with self._lock:
                 before = self._joins[endpoint]
-                if up == before.joined:
+                if up and not before.joined:
+                    join = Join(endpoint, True, now, "joined")
+                elif not up and before.joined:
+                    join = Join(endpoint, False, now, "went")
+                elif before.state == "dialling" and now - before.since >= JOIN_GRACE_S:
+                    join = Join(endpoint, False, before.since, "not up")
+                else:
                     continue
-                self._joins[endpoint] = Join(endpoint, up, now)
-            if up:
-                log.warning("bus: joined the router at %s", endpoint)
-            else:
-                log.warning(
-                    "bus: the router at %s went; joining it again when it is back", endpoint
-                )
+                self._joins[endpoint] = join
+            self._said(join)
+
+    def _said(self, join: Join) -> None:
+        log.warning("%s", join.said())
+        if self.on_join is not None:
+            self.on_join(join)
 
     def joins(self) -> list[Join]:
         """The routers this console joins (``connect``), each up or not."""

@@ -39,7 +39,7 @@ from fastapi import APIRouter, WebSocket
 
 from drone.bus.commander import BusCommander
 from drone.bus.config import BusTLS, endpoint_host, on_loopback, wants_tls
-from drone.bus.console import ConsoleBus
+from drone.bus.console import ConsoleBus, Join
 from drone.bus.errors import BusError
 from drone.bus.session import DEFAULT_LISTEN
 from server.http.tls import TLSError, ensure_ca, ensure_server_cert
@@ -281,6 +281,8 @@ class VehicleCentral:
             vehicle_passwords=passwords,
             name=console_name(s),
             tls=tls,
+            shared_credentials=s.bus_credentials,
+            on_join=self._said_join,
         )
         try:
             bus.start()
@@ -290,6 +292,12 @@ class VehicleCentral:
         assert bus.session is not None
         self.commander = BusCommander(bus.session, s.fleet_name, console_name(s))
         return bus
+
+    @staticmethod
+    def _said_join(join: Join) -> None:
+        """A router this console joins came, went, or is not up: on serve's output (the log
+        has it too, on /rosout)."""
+        print(f"uav-console: {join.said()}", file=sys.stderr, flush=True)
 
     def _bus_failed(self, why: str) -> None:
         self.bus_error = why
@@ -583,6 +591,8 @@ def bus_tls(settings: Settings) -> BusTLS | None:
     listen = list(settings.bus_listen) or [DEFAULT_LISTEN]
     if not wants_tls(settings.bus_tls, listen):
         if any(e.startswith("tls/") for e in settings.bus_connect):  # joins a TLS router
+            if settings.bus_ca is not None:  # another console's CA (--bus-ca)
+                return BusTLS(str(settings.bus_ca.resolve()))
             return BusTLS(str(ensure_ca(settings.data_dir.resolve() / "tls")[0]))
         return None
     hosts = [endpoint_host(e) for e in listen if not on_loopback(e)] or ["127.0.0.1"]
