@@ -88,9 +88,7 @@ class CommandResponse(BaseModel):
 class BusJoin(BaseModel):
     endpoint: str = Field(description="a router this console joins (--bus-connect)")
     joined: bool = Field(description="the link to it is up; false: dialled until it answers")
-    since: float | None = Field(
-        description="Unix time the link came up, went, or was first dialled"
-    )
+    since: float = Field(description="Unix time the link came up, went, or was first dialled")
 
 
 class BusHealth(BaseModel):
