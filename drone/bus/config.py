@@ -234,7 +234,6 @@ def client_config(
 def router_id(fleet: str, console: str) -> str:
     """The Zenoh id of console ``console``'s router in ``fleet``: SHA-256 of the two names, 32 hex
     digits without leading zeros (Zenoh refuses an id with a leading ``0``: "Leading 0s are not
-    valid"), so the same across restarts and unique while console names are. Routers that join
-    it name it in their access control by this id."""
+    valid"), so the same across restarts and unique while console names are."""
     digest = hashlib.sha256(f"uavc/{keys.segment(fleet)}/{keys.segment(console)}".encode())
     return digest.hexdigest()[:32].lstrip("0") or "1"

@@ -154,8 +154,7 @@ class ConsoleBus:
                 password=creds.password(CONSOLE_USER),
                 dictionary_file=str(creds.path),
                 acl=acl,
-                # the same id across restarts: the routers that joined it name it in their ACL
-                zid=self.zid,
+                zid=self.zid,  # the same across restarts (router_id)
                 tls=self.tls,
             )
         )
