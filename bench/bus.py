@@ -198,7 +198,11 @@ def bus_central_worker(directory: str, names: list[str], ready: Any, ask: Any, s
     from drone.bus.session import free_listen_endpoint
 
     bus = ConsoleBus(
-        Path(directory), FLEET, names, listen=[free_listen_endpoint("tcp/127.0.0.1:17447")]
+        Path(directory),
+        FLEET,
+        names,
+        name="bench",
+        listen=[free_listen_endpoint("tcp/127.0.0.1:17447")],
     )
     bus.start()
     creds = {n: bus.vehicle_credential(n) for n in names}

@@ -79,7 +79,11 @@ async def measure(n: int, queue: int) -> dict[str, Any]:
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as tmp:
         bus = ConsoleBus(
-            Path(tmp) / "bus", FLEET, [NAME], listen=[free_listen_endpoint("tcp/127.0.0.1:17547")]
+            Path(tmp) / "bus",
+            FLEET,
+            [NAME],
+            name="bench",
+            listen=[free_listen_endpoint("tcp/127.0.0.1:17547")],
         )
         bus.start()
         assert bus.session is not None

@@ -327,6 +327,8 @@ class Runtime:
         if bus is not None:
             endpoints = ", ".join(bus.listen)
             lines.append(f"  bus: {endpoints} · Zenoh client configuration: {bus.client_file}")
+        elif self.vehicles.bus_error is not None:
+            lines.append(f"  bus: did not start: {self.vehicles.bus_error}")
         if self.tls is not None:
             lines.append(f"  certificate SHA-256: {self.tls.fingerprint}")
             if self.tls.ca is not None:

@@ -367,8 +367,14 @@ class Settings(BaseSettings):
     )
     bus_ca: Path | None = Field(
         None,
-        description="For a vehicle process: the CA file a tls/ bus router is verified with; "
-        "unset: the data directory's tls/ca.pem.",
+        description="The CA file a tls/ bus router that a vehicle or a console joins is "
+        "verified with (another console's tls/ca.pem); unset: the data directory's tls/ca.pem.",
+        json_schema_extra=_topic(BUS),
+    )
+    bus_credentials: Path | None = Field(
+        None,
+        description="Another console's bus/credentials.txt: this console's bus takes its users "
+        "and passwords (the consoles of a fleet share them), its own vehicle keys excepted.",
         json_schema_extra=_topic(BUS),
     )
     fleet_name: str = Field(

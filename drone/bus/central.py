@@ -1,7 +1,9 @@
 """A console's side of the central role on the bus: presence, the role's tokens, the central's
 state for the standbys, the LTMs' status and the plans sent to them.
 
-- ``uavc/<fleet>/central/consoles/<console>``: liveliness of every console of the fleet;
+- ``uavc/<fleet>/console/<console>/alive``: liveliness of every console of the fleet, the
+  one presence token a console has (its router declares it: ``drone.bus.console``); the
+  consoles it names take part in the election;
 - ``uavc/<fleet>/central/alive`` and ``…/alive/<console>``: liveliness of the central;
 - ``uavc/<fleet>/central/missions``: the JSON of ``GET /api/v1/patrol``, from the central;
 - ``uavc/<fleet>/central/replica``: the CTM's state (``server.fleet.replica``), from the central;
@@ -9,8 +11,8 @@ state for the standbys, the LTMs' status and the plans sent to them.
 - ``uavc/<fleet>/<drone>/plan``: plans, as queries the vehicle answers.
 
 Who holds the role is decided by ``server.fleet.election`` from :meth:`CentralBus.view`; this
-class only declares and watches. Payloads are bytes: the console decodes them. Zenoh calls back
-in its own threads; replicas and statuses are handed to ``loop``.
+class only declares the role's tokens and watches. Payloads are bytes: the console decodes
+them. Zenoh calls back in its own threads; replicas and statuses are handed to ``loop``.
 """
 
 from __future__ import annotations
@@ -25,15 +27,11 @@ import zenoh
 
 from drone.bus import keys
 from drone.bus.errors import BusError
-from drone.bus.plans import CONSOLES, all_ltm, central_holder, plan_key
+from drone.bus.plans import all_ltm, central_holder, plan_key
 
 log = logging.getLogger(__name__)
 
 REPLICA = "replica"
-
-
-def console_key(fleet: str, console: str) -> str:
-    return f"{keys.ROOT}/{keys.segment(fleet)}/{keys.CENTRAL}/{CONSOLES}/{keys.segment(console)}"
 
 
 def replica_key(fleet: str) -> str:
@@ -41,7 +39,7 @@ def replica_key(fleet: str) -> str:
 
 
 class CentralBus:
-    """One console's presence and central role on the bus.
+    """One console's central role on the bus, and the consoles it sees there.
 
     Args:
         session: the console's Zenoh session (its embedded router's).
@@ -72,23 +70,22 @@ class CentralBus:
         self._consoles: set[str] = set()
         self._holders: set[str] = set()
         self._decls: list[object] = []
-        self._presence: zenoh.LivelinessToken | None = None
         self._role: list[zenoh.LivelinessToken] = []
         self._missions: zenoh.Publisher | None = None
         self._replica: zenoh.Publisher | None = None
 
     def start(self) -> None:
-        central = f"{keys.ROOT}/{self.fleet}/{keys.CENTRAL}"
         lv = self.session.liveliness()
         self._decls.append(
-            lv.declare_subscriber(f"{central}/{CONSOLES}/*", self._on_console, history=True)
+            lv.declare_subscriber(
+                keys.all_consoles_alive(self.fleet), self._on_console, history=True
+            )
         )
         self._decls.append(
             lv.declare_subscriber(
                 f"{keys.central_alive(self.fleet)}/*", self._on_holder, history=True
             )
         )
-        self._presence = lv.declare_token(console_key(self.fleet, self.console))
         self._decls.append(
             self.session.declare_subscriber(replica_key(self.fleet), self._on_replica)
         )
@@ -152,9 +149,6 @@ class CentralBus:
 
     def close(self) -> None:
         self.release()
-        if self._presence is not None:
-            self._presence.undeclare()  # type: ignore[no-untyped-call]
-            self._presence = None
         for d in self._decls:
             undeclare = getattr(d, "undeclare", None)
             if callable(undeclare):
@@ -167,13 +161,14 @@ class CentralBus:
 
     # ------------------------------------------------------------------ Zenoh's threads
     def _on_console(self, sample: zenoh.Sample) -> None:
-        self._track(self._consoles, sample)
+        name = keys.console_of(str(sample.key_expr))
+        if name is not None:
+            self._track(self._consoles, name, sample)
 
     def _on_holder(self, sample: zenoh.Sample) -> None:
-        self._track(self._holders, sample)
+        self._track(self._holders, str(sample.key_expr).rsplit("/", 1)[1], sample)
 
-    def _track(self, names: set[str], sample: zenoh.Sample) -> None:
-        name = str(sample.key_expr).rsplit("/", 1)[1]
+    def _track(self, names: set[str], name: str, sample: zenoh.Sample) -> None:
         with self._lock:
             if sample.kind == zenoh.SampleKind.PUT:
                 names.add(name)

@@ -269,7 +269,9 @@ class ConsolePresence:
             self.on_beat(float(sent))
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
-        name = str(sample.key_expr).split("/")[3]
+        name = keys.console_of(str(sample.key_expr))
+        if name is None:
+            return
         with self._lock:
             if sample.kind == zenoh.SampleKind.PUT:
                 self._consoles.add(name)

@@ -35,7 +35,7 @@ CameraCallback = Callable[[int, bytes], None]
 
 class BusCommander:
     """See the module docstring. ``console``: this console's name, one key segment (the lease
-    holder's half); its liveliness ``uavc/<fleet>/console/<console>/alive`` lasts as long."""
+    holder's half; its presence on the bus is its router's token, ``drone.bus.console``)."""
 
     def __init__(self, session: zenoh.Session, fleet: str, console: str) -> None:
         self.session = session
@@ -47,8 +47,6 @@ class BusCommander:
         self._status: dict[str, Status] = {}
         self._camera: dict[str, tuple[int, bytes]] = {}
         self.refused = 0  # status payloads that did not decode
-        # this console on the bus, for the vehicles' watch (any role, central or not)
-        self._token = session.liveliness().declare_token(keys.console_alive(self.fleet, console))
         self._beat = session.declare_publisher(
             keys.console_heartbeat(self.fleet, console),
             congestion_control=zenoh.CongestionControl.DROP,
@@ -231,7 +229,6 @@ class BusCommander:
             watcher[2](count, jpeg)
 
     def close(self) -> None:
-        self._token.undeclare()  # type: ignore[no-untyped-call]
         self._beat.undeclare()  # type: ignore[no-untyped-call]
         for sub in self._subs:
             sub.undeclare()

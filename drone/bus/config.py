@@ -14,6 +14,7 @@ never leaves the router.
 
 from __future__ import annotations
 
+import hashlib
 import ipaddress
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -41,6 +42,8 @@ _EVERYTHING = [
 # at SCHED_FIFO 1 (seen in /proc/<pid>/task of a vehicle process), above every normal thread,
 # which a vehicle keeps for its 100 Hz control thread alone; the bus's messages are small.
 NO_SHARED_MEMORY: dict[str, Any] = {"shared_memory": {"enabled": False}}
+
+JOIN_RETRY_MS = 1000  # a joiner dials a router that is not up (yet, or again) this often
 
 _WATCH = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
 _OWN = ["put", "delete", "liveliness_token", "declare_queryable", "reply"]
@@ -100,14 +103,11 @@ def vehicle_user(name: str) -> str:
     return VEHICLE_PREFIX + keys.segment(name)
 
 
-def access_control(
-    fleet: str, vehicles: Iterable[str], peers: Iterable[str] = ()
-) -> dict[str, Any]:
+def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
     """The router's ACL for ``fleet`` and these vehicle names (ACLs are fixed at start).
 
-    ``peers``: the Zenoh ids of the consoles' routers this one joins; they may do what a
-    console does (the link to a router we join carries no user name on our side:
-    ``drone.bus.session.router_ids``)."""
+    The routers of other consoles reach it only through its joiners
+    (:func:`joiner_config`), which authenticate as ``console``."""
     root = f"{keys.ROOT}/{keys.segment(fleet)}"
     rules: list[dict[str, Any]] = [
         _rule("deliver", ["egress"], _EVERYTHING, [f"{keys.ROOT}/**"]),
@@ -125,9 +125,6 @@ def access_control(
         {"id": "pilots-command", "rules": ["command"], "subjects": ["commanders"]},
         {"id": "consoles-all", "rules": ["console"], "subjects": ["consoles"]},
     ]
-    if peers := sorted(set(peers)):
-        subjects.append({"id": "peer-routers", "zids": peers})
-        policies.append({"id": "peers-all", "rules": ["console"], "subjects": ["peer-routers"]})
     for name in sorted(set(vehicles)):
         rid = f"own-{name}"
         rules.append(_rule(rid, ["ingress"], _OWN, [f"{root}/{keys.segment(name)}/**"]))
@@ -187,6 +184,36 @@ def router_config(
     }
 
 
+def joiner_config(
+    *, router: str, peer: str, password: str, ca: str | None = None
+) -> dict[str, Any]:
+    """A console's joiner: a router of its own that listens nowhere and links the console's
+    router (``router``, dialled as a client would) with another console's or ``zenohd``
+    (``peer``), authenticating to both as ``console``. It keeps dialling ``peer`` until it
+    answers and after it goes (Zenoh's router retries for ever), so a console may start before
+    the one it joins.
+
+    Why a router between them: the router that dials another authenticates itself but learns
+    no user name of the other, so its access control could only admit the other by a Zenoh
+    id known before it starts. Both routers admit the joiner by its user name instead, and the
+    joiner, which accepts no link, needs no access control. ``ca``: the CA ``tls/`` routers
+    are verified with."""
+    return {
+        "mode": "router",
+        "listen": {"endpoints": []},
+        "connect": {
+            "endpoints": [router, peer],
+            "retry": {"period_init_ms": JOIN_RETRY_MS, "period_max_ms": JOIN_RETRY_MS},
+        },
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {
+            "auth": {"usrpwd": {"user": CONSOLE_USER, "password": password}},
+            **NO_SHARED_MEMORY,
+            **(tls_link(BusTLS(ca)) if ca is not None else {}),
+        },
+    }
+
+
 def client_config(
     *, connect: list[str], user: str, password: str, ca: str | None = None
 ) -> dict[str, Any]:
@@ -204,10 +231,9 @@ def client_config(
     }
 
 
-def router_zid(password: str, listen: str) -> str:
-    """A console router's Zenoh id: the same for the same console (its bus password) listening
-    on the same endpoint, so a router that joined it trusts it again after it restarts."""
-    import hashlib
-
-    digest = hashlib.sha256(f"{password}\n{listen}".encode()).hexdigest()[:32]
-    return digest.lstrip("0") or "1"
+def router_id(fleet: str, console: str) -> str:
+    """The Zenoh id of console ``console``'s router in ``fleet``: SHA-256 of the two names, 32 hex
+    digits without leading zeros (Zenoh refuses an id with a leading ``0``: "Leading 0s are not
+    valid"), so the same across restarts and unique while console names are."""
+    digest = hashlib.sha256(f"uavc/{keys.segment(fleet)}/{keys.segment(console)}".encode())
+    return digest.hexdigest()[:32].lstrip("0") or "1"

@@ -3,13 +3,14 @@ hears (which vehicles are alive, their latest telemetry)."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import threading
-from collections.abc import Iterable, Mapping
+import time
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import zenoh
 
@@ -22,19 +23,41 @@ from drone.bus.config import (
     access_control,
     as_tls,
     client_config,
+    joiner_config,
     router_config,
-    router_zid,
+    router_id,
     vehicle_user,
 )
 from drone.bus.credentials import Credentials, write_private
 from drone.bus.errors import PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry
-from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session, router_ids
+from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session
 
 log = logging.getLogger(__name__)
 
 CLIENT_FILE = "client.json5"  # observer: watch only
 PILOT_FILE = "pilot.json5"
+JOIN_WATCH_S = 0.5  # how often the joiners' links are looked at (the log, /health)
+JOIN_GRACE_S = 2.0  # a router not joined this long after the start is said to be not up
+
+
+@dataclass(frozen=True)
+class Join:
+    """A router this console joins (``--bus-connect``) and whether the link to it is up."""
+
+    endpoint: str
+    joined: bool
+    since: float  # Unix time it came up (joined) or went or was first dialled (not)
+    state: Literal["dialling", "not up", "joined", "went"] = "dialling"
+
+    def said(self) -> str:
+        """The change, in a line for the log."""
+        return {
+            "dialling": f"bus: dialling the router at {self.endpoint}",
+            "not up": f"bus: the router at {self.endpoint} is not up; joining it when it is",
+            "joined": f"bus: joined the router at {self.endpoint}",
+            "went": f"bus: the router at {self.endpoint} went; joining it again when it is back",
+        }[self.state]
 
 
 @dataclass(frozen=True)
@@ -54,14 +77,22 @@ class ConsoleBus:
         directory: ``<data dir>/bus`` (credentials and the client files, 0600).
         fleet: the fleet's name, the second key segment.
         vehicles: the vehicle names that get a credential (the ACL is fixed at start).
+        name: the console's name (one key segment, unique in the fleet): its router's Zenoh id
+            derives from it (:func:`drone.bus.config.router_id`).
         vehicle_passwords: name → password for vehicles whose password is given (the
             console's vehicle keys); they are on the bus too.
         listen: endpoints to listen on; empty: ``tcp/127.0.0.1:7447`` or the next free port.
-        connect: other routers to join (consoles on other hosts, ``zenohd``).
+        connect: other routers to join (consoles on other hosts, ``zenohd``), each through a
+            joiner of its own (:func:`drone.bus.config.joiner_config`): dialled until it
+            answers, so either console may start first; :meth:`joins` says which are up.
         tls: the router's certificate, key and CA: it then listens on ``tls/`` endpoints only
             (a ``tcp/`` one given is served as ``tls/`` on the same address) and the client
             files it writes carry the CA. A CA alone: it listens as given and verifies the
             ``tls/`` routers it joins with that CA.
+        shared_credentials: another console's ``credentials.txt``, whose users and passwords
+            this console's bus takes (:meth:`Credentials.load_or_create`'s ``shared``).
+        on_join: told each change of a join (:class:`Join`), on a thread of its own: a
+            router not up at the start, joined, gone.
     """
 
     def __init__(
@@ -69,14 +100,19 @@ class ConsoleBus:
         directory: Path,
         fleet: str,
         vehicles: Iterable[str],
+        *,
+        name: str,
         listen: Iterable[str] = (),
         connect: Iterable[str] = (),
         vehicle_passwords: Mapping[str, str] | None = None,
-        name: str | None = None,
         tls: BusTLS | None = None,
+        shared_credentials: Path | None = None,
+        on_join: Callable[[Join], object] | None = None,
     ) -> None:
         self.directory = directory
         self.tls = tls
+        self.shared_credentials = shared_credentials
+        self.on_join = on_join
         self.fleet = keys.segment(fleet)
         self.vehicle_passwords = dict(vehicle_passwords or {})
         self.vehicle_names = sorted(
@@ -85,14 +121,20 @@ class ConsoleBus:
         wrap = as_tls if tls is not None and tls.cert is not None else str
         self.listen = [wrap(e) for e in listen] or [free_listen_endpoint(wrap(DEFAULT_LISTEN))]
         self.connect = list(connect)
-        self.name = name  # the console's name: its router's id derives from it (router_id)
+        self.name = keys.segment(name)
+        self.zid = router_id(self.fleet, self.name)  # its router's Zenoh id, from its name
         self.credentials: Credentials | None = None
         self.session: zenoh.Session | None = None
+        self._presence: zenoh.LivelinessToken | None = None
         self._lock = threading.Lock()
         self._alive: set[str] = set()
         self._latest: dict[str, Telemetry] = {}
         self.refused = 0  # payloads that did not decode (logged, never shown)
         self._subs: list[object] = []
+        self._joiners: list[tuple[str, zenoh.Session]] = []
+        self._joins: dict[str, Join] = {}
+        self._stop = threading.Event()
+        self._watch: threading.Thread | None = None
 
     def start(self) -> None:
         """Open the router and write ``client.json5`` / ``pilot.json5``.
@@ -101,38 +143,87 @@ class ConsoleBus:
             BusConfigError: an endpoint cannot be listened on or the credentials are unusable.
         """
         creds = Credentials.load_or_create(
-            self.directory, self.vehicle_names, self.vehicle_passwords
+            self.directory, self.vehicle_names, self.vehicle_passwords, self.shared_credentials
         )
         self.credentials = creds
-        # the routers we join, known by their ids (drone.bus.session.router_ids)
-        ca = self.tls.ca if self.tls is not None else None
-        peers = router_ids(self.connect, CONSOLE_USER, creds.password(CONSOLE_USER), ca=ca)
-        acl = access_control(self.fleet, creds.vehicles(), peers)
+        acl = access_control(self.fleet, creds.vehicles())
         self.session = open_session(
             router_config(
                 listen=self.listen,
-                connect=self.connect,
+                connect=[],  # others' routers are joined through the joiners below
                 password=creds.password(CONSOLE_USER),
                 dictionary_file=str(creds.path),
                 acl=acl,
-                # the same id across restarts: the routers that joined it name it in their ACL
-                zid=(
-                    router_id(self.fleet, self.name)
-                    if self.name is not None
-                    else router_zid(creds.password(CONSOLE_USER), self.listen[0])
-                ),
+                zid=self.zid,  # the same across restarts (router_id)
                 tls=self.tls,
             )
         )
         self._write_client(CLIENT_FILE, OBSERVER_USER)
         self._write_client(PILOT_FILE, PILOT_USER)
         liveliness = self.session.liveliness()
+        # this console on the bus (any role), as long as its router: the vehicles' watch of
+        # their consoles and the central's election both go by this one token
+        self._presence = liveliness.declare_token(keys.console_alive(self.fleet, self.name))
         self._subs.append(
             liveliness.declare_subscriber(keys.all_alive(self.fleet), self._on_alive, history=True)
         )
         self._subs.append(
             self.session.declare_subscriber(keys.all_telemetry(self.fleet), self._on_telemetry)
         )
+        self._join(creds.password(CONSOLE_USER))
+
+    def _join(self, password: str) -> None:
+        """A joiner for each router in ``connect``; a thread that says when each link comes
+        up or goes (the log; :meth:`joins`)."""
+        if not self.connect:
+            return
+        assert self.session is not None
+        ca = self.tls.ca if self.tls is not None else None
+        now = time.time()
+        for endpoint in self.connect:
+            config = joiner_config(
+                router=self.client_endpoints[0], peer=endpoint, password=password, ca=ca
+            )
+            self._joiners.append((endpoint, open_session(config)))
+            self._joins[endpoint] = Join(endpoint, False, now)
+        self._look()
+        self._watch = threading.Thread(target=self._watching, name="bus-joins", daemon=True)
+        self._watch.start()
+
+    def _watching(self) -> None:
+        while not self._stop.wait(JOIN_WATCH_S):
+            try:
+                self._look()
+            except zenoh.ZError as exc:  # a session closing under us: the console stops
+                log.debug("bus: joins not looked at: %s", exc)
+
+    def _look(self) -> None:
+        """Each joiner's link to its router: up when it has a router besides ours."""
+        now = time.time()
+        for endpoint, joiner in self._joiners:
+            up = any(str(z) != self.zid for z in joiner.info.routers_zid())
+            with self._lock:
+                before = self._joins[endpoint]
+                if up and not before.joined:
+                    join = Join(endpoint, True, now, "joined")
+                elif not up and before.joined:
+                    join = Join(endpoint, False, now, "went")
+                elif before.state == "dialling" and now - before.since >= JOIN_GRACE_S:
+                    join = Join(endpoint, False, before.since, "not up")
+                else:
+                    continue
+                self._joins[endpoint] = join
+            self._said(join)
+
+    def _said(self, join: Join) -> None:
+        log.warning("%s", join.said())
+        if self.on_join is not None:
+            self.on_join(join)
+
+    def joins(self) -> list[Join]:
+        """The routers this console joins (``connect``), each up or not."""
+        with self._lock:
+            return [self._joins[e] for e in self.connect if e in self._joins]
 
     @property
     def client_endpoints(self) -> list[str]:
@@ -161,6 +252,16 @@ class ConsoleBus:
             return self._latest.get(drone)
 
     def close(self) -> None:
+        self._stop.set()
+        if self._watch is not None:
+            self._watch.join(timeout=5)
+            self._watch = None
+        for _endpoint, joiner in self._joiners:
+            joiner.close()  # type: ignore[no-untyped-call]
+        self._joiners = []
+        if self._presence is not None:
+            self._presence.undeclare()  # type: ignore[no-untyped-call]
+            self._presence = None
         if self.session is not None:
             self.session.close()  # type: ignore[no-untyped-call]
             self.session = None
@@ -201,13 +302,6 @@ class ConsoleBus:
             return
         with self._lock:
             self._latest[drone] = telemetry
-
-
-def router_id(fleet: str, console: str) -> str:
-    """The Zenoh id of console ``console``'s router: 16 bytes of SHA-256 of the fleet and the
-    console's name, in hex (stable across restarts, unique while console names are)."""
-    digest = hashlib.sha256(f"uavc/{fleet}/{console}".encode()).hexdigest()[:32]
-    return digest if digest.strip("0") else "1" + digest[1:]
 
 
 def _reachable(endpoint: str) -> str:

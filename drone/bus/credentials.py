@@ -38,27 +38,29 @@ class Credentials:
         directory: Path,
         vehicles: Iterable[str],
         vehicle_passwords: Mapping[str, str] | None = None,
+        shared: Path | None = None,
     ) -> Credentials:
         """Read the dictionary, adding the roles and any of ``vehicles`` it lacks.
 
-        ``vehicle_passwords`` (name → password: the console's vehicle keys) are authoritative:
-        a vehicle joins the bus with the same key it joins the console with.
+        ``shared``: another console's dictionary (the consoles of a fleet share one): its
+        users and passwords replace this one's. ``vehicle_passwords`` (name → password: the
+        console's vehicle keys) are authoritative over both: a vehicle joins the bus with the
+        same key it joins the console with.
 
         Raises:
-            BusConfigError: a line of the file is not ``user:password``.
+            BusConfigError: a line of a file is not ``user:password``, or ``shared`` cannot
+                be read.
         """
         directory.mkdir(parents=True, exist_ok=True)
         os.chmod(directory, 0o700)
         path = directory / FILE_NAME
-        users: dict[str, str] = {}
-        if path.exists():
-            for n, line in enumerate(path.read_text().splitlines(), 1):
-                if not line.strip():
-                    continue
-                user, sep, password = line.partition(":")
-                if not sep or not user or not password:
-                    raise BusConfigError(f"{path}:{n}: not user:password")
-                users[user] = password
+        users = read_dictionary(path) if path.exists() else {}
+        before = dict(users)
+        if shared is not None:
+            try:
+                users.update(read_dictionary(shared))
+            except OSError as exc:
+                raise BusConfigError(f"the shared bus credentials: {exc}") from None
         given = {vehicle_user(n): p for n, p in (vehicle_passwords or {}).items()}
         changed = {u for u, p in given.items() if users.get(u) != p}
         users.update(given)
@@ -66,9 +68,27 @@ class Credentials:
         missing = [u for u in wanted if u not in users]
         for user in missing:
             users[user] = secrets.token_urlsafe(24)
-        if missing or changed or not path.exists():
+        if missing or changed or users != before or not path.exists():
             write_private(path, "".join(f"{u}:{p}\n" for u, p in users.items()))
         return cls(path, users)
+
+
+def read_dictionary(path: Path) -> dict[str, str]:
+    """``user:password`` lines (Zenoh's ``dictionary_file``).
+
+    Raises:
+        BusConfigError: a line is not ``user:password``.
+        OSError: the file cannot be read.
+    """
+    users: dict[str, str] = {}
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        user, sep, password = line.partition(":")
+        if not sep or not user or not password:
+            raise BusConfigError(f"{path}:{n}: not user:password")
+        users[user] = password
+    return users
 
 
 def write_private(path: Path, text: str) -> None:

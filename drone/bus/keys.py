@@ -8,7 +8,7 @@
 | ``uavc/<fleet>/<drone>/status`` | :class:`~drone.bus.payloads.Status`, JSON, 1 Hz |
 | ``uavc/<fleet>/<drone>/camera`` | JPEG frames, dropped rather than queued |
 | ``uavc/<fleet>/<drone>/graph/<topic>`` | its own graph topics, JSON (what a console shows) |
-| ``uavc/<fleet>/console/<name>/alive`` | liveliness of each console on the bus |
+| ``uavc/<fleet>/console/<name>/alive`` | liveliness of each console on the bus (one token) |
 | ``uavc/<fleet>/console/<name>/heartbeat`` | ``{"t": Unix s}`` at 10 Hz from each console |
 | ``uavc/<fleet>/central/alive`` | liveliness of the console holding the central role |
 | ``uavc/<fleet>/central/missions`` | the JSON of ``GET /api/v1/patrol`` |
@@ -100,12 +100,21 @@ def all_alive(fleet: str) -> str:
 
 
 def console_alive(fleet: str, console: str) -> str:
-    """Liveliness of one console on the bus (any role): a vehicle hears its consoles by it."""
+    """Liveliness of one console on the bus (any role), its only presence token: a vehicle
+    hears its consoles by it, and the consoles elect the central among those it names."""
     return f"{ROOT}/{segment(fleet)}/{CONSOLE}/{segment(console)}/alive"
 
 
 def all_consoles_alive(fleet: str) -> str:
     return f"{ROOT}/{segment(fleet)}/{CONSOLE}/*/alive"
+
+
+def console_of(key: str) -> str | None:
+    """The console a ``uavc/<fleet>/console/<name>/…`` key names (None for other keys)."""
+    parts = key.split("/")
+    if len(parts) < 5 or parts[0] != ROOT or parts[2] != CONSOLE:
+        return None
+    return parts[3]
 
 
 def console_heartbeat(fleet: str, console: str) -> str:

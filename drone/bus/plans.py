@@ -28,7 +28,6 @@ log = logging.getLogger(__name__)
 
 PLAN_TOPIC = "plan"
 LTM_TOPIC = "ltm"
-CONSOLES = "consoles"
 PLAN_REPLY_TIMEOUT_S = 5.0  # the vehicle answers from its loop; a stalled loop answers nothing
 
 

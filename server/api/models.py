@@ -85,10 +85,19 @@ class CommandResponse(BaseModel):
     )
 
 
+class BusJoin(BaseModel):
+    endpoint: str = Field(description="a router this console joins (--bus-connect)")
+    joined: bool = Field(description="the link to it is up; false: dialled until it answers")
+    since: float = Field(description="Unix time the link came up, went, or was first dialled")
+
+
 class BusHealth(BaseModel):
     endpoints: list[str] = Field(description="where the router listens")
     alive: list[str] = Field(description="vehicles whose liveliness token is on the bus")
     client_config: str = Field(description="the observer's Zenoh client configuration file")
+    joins: list[BusJoin] = Field(
+        default_factory=list, description="the routers this console joins, each up or not"
+    )
 
 
 class Health(BaseModel):

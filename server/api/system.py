@@ -8,7 +8,7 @@ from fastapi import APIRouter
 
 from server import __version__
 from server.api.deps import RoleDep, RuntimeDep
-from server.api.models import BusHealth, Health, WorldInfo
+from server.api.models import BusHealth, BusJoin, Health, WorldInfo
 
 router = APIRouter(tags=["system"])
 
@@ -27,7 +27,14 @@ def health(runtime: RuntimeDep) -> Health:
         captioner=captioner,
         bus=None
         if bus is None
-        else BusHealth(endpoints=bus.listen, alive=bus.alive(), client_config=str(bus.client_file)),
+        else BusHealth(
+            endpoints=bus.listen,
+            alive=bus.alive(),
+            client_config=str(bus.client_file),
+            joins=[
+                BusJoin(endpoint=j.endpoint, joined=j.joined, since=j.since) for j in bus.joins()
+            ],
+        ),
     )
 
 

@@ -1,7 +1,7 @@
 """Who holds the fleet's central role, decided through the bus; sans-I/O, time passed in.
 
-Every console on the bus declares its presence (a liveliness token under
-``uavc/<fleet>/central/consoles/<name>``); the one holding the central role also declares
+Every console on the bus declares its presence (its one liveliness token,
+``uavc/<fleet>/console/<name>/alive``); the one holding the central role also declares
 ``uavc/<fleet>/central/alive`` and ``uavc/<fleet>/central/alive/<name>``. The rule, the same in
 every console so that all of them reach the same answer from the same view:
 

@@ -1,8 +1,9 @@
 """No single point of failure: several consoles on one fleet's bus, one of them central.
 
 Each console runs a :class:`CentralRole` beside its fleet service. Through the bus
-(:class:`drone.bus.central.CentralBus`) it declares itself, and the election
-(:mod:`server.fleet.election`) decides which console holds the central role:
+(:class:`drone.bus.central.CentralBus`) it sees the consoles there (each one's presence token,
+which its router declares) and the holders of the role, and the election
+(:mod:`server.fleet.election`) decides which console holds it:
 
 - **central**: its central task manager decides and sends plans to the vehicles' LTMs as queries
   on ``uavc/<fleet>/<drone>/plan`` (over the graph to a drone the bus does not carry); it

@@ -39,7 +39,7 @@ from fastapi import APIRouter, WebSocket
 
 from drone.bus.commander import BusCommander
 from drone.bus.config import BusTLS, endpoint_host, on_loopback, wants_tls
-from drone.bus.console import ConsoleBus
+from drone.bus.console import ConsoleBus, Join
 from drone.bus.errors import BusError
 from drone.bus.session import DEFAULT_LISTEN
 from server.http.tls import TLSError, ensure_ca, ensure_server_cert
@@ -194,6 +194,7 @@ class VehicleCentral:
         self._misnamed: set[str] = set()
         self._utterances: Any = None
         self.bus: ConsoleBus | None = None
+        self.bus_error: str | None = None  # why the bus did not start (serve says it)
         self.commander: BusCommander | None = None
         self.door_secrets = DoorSecrets(pid_dir_of(s))
         self.door_ports: dict[str, int] = {}  # spawned vehicles' door ports
@@ -268,8 +269,7 @@ class VehicleCentral:
         try:
             tls = bus_tls(s)
         except TLSError as exc:
-            log.error("the bus did not start: %s", exc)
-            self.alerts.append(f"the bus did not start: {exc}")
+            self._bus_failed(str(exc))
             return None
         passwords = {v: self.keys.ensure(v).secret for v in vehicles}
         passwords |= {k.name: k.secret for k in self.keys.all()}  # vehicles from elsewhere
@@ -282,16 +282,28 @@ class VehicleCentral:
             vehicle_passwords=passwords,
             name=console_name(s),
             tls=tls,
+            shared_credentials=s.bus_credentials,
+            on_join=self._said_join,
         )
         try:
             bus.start()
         except BusError as exc:
-            log.error("the bus did not start: %s", exc)
-            self.alerts.append(f"the bus did not start: {exc}")
+            self._bus_failed(str(exc))
             return None
         assert bus.session is not None
         self.commander = BusCommander(bus.session, s.fleet_name, console_name(s))
         return bus
+
+    @staticmethod
+    def _said_join(join: Join) -> None:
+        """A router this console joins came, went, or is not up: on serve's output (the log
+        has it too, on /rosout)."""
+        print(f"uav-console: {join.said()}", file=sys.stderr, flush=True)
+
+    def _bus_failed(self, why: str) -> None:
+        self.bus_error = why
+        log.error("the bus did not start: %s", why)
+        self.alerts.append(f"the bus did not start: {why}")
 
     def _bus_env(self, name: str) -> dict[str, str]:
         if self.bus is None:
@@ -580,6 +592,8 @@ def bus_tls(settings: Settings) -> BusTLS | None:
     listen = list(settings.bus_listen) or [DEFAULT_LISTEN]
     if not wants_tls(settings.bus_tls, listen):
         if any(e.startswith("tls/") for e in settings.bus_connect):  # joins a TLS router
+            if settings.bus_ca is not None:  # another console's CA (--bus-ca)
+                return BusTLS(str(settings.bus_ca.resolve()))
             return BusTLS(str(ensure_ca(settings.data_dir.resolve() / "tls")[0]))
         return None
     hosts = [endpoint_host(e) for e in listen if not on_loopback(e)] or ["127.0.0.1"]

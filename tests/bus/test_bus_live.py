@@ -34,7 +34,11 @@ def telemetry(drone: str, battery: float = 80.0) -> Telemetry:
 @pytest.fixture
 def console(tmp_path: Path) -> Iterator[ConsoleBus]:
     bus = ConsoleBus(
-        tmp_path / "bus", "default", ["uav1", "uav2"], listen=[f"tcp/127.0.0.1:{free_port()}"]
+        tmp_path / "bus",
+        "default",
+        ["uav1", "uav2"],
+        name="console",
+        listen=[f"tcp/127.0.0.1:{free_port()}"],
     )
     bus.start()
     yield bus
@@ -52,6 +56,31 @@ def vehicle(bus: ConsoleBus, name: str) -> VehicleBus:
     v = VehicleBus(cred.connect, cred.user, cred.password, "default", name)
     v.start()
     return v
+
+
+def test_a_console_whose_router_id_hashes_to_a_leading_zero_is_on_the_bus(
+    tmp_path: Path,
+) -> None:
+    """``serve --host 127.0.13.1 --port 30029`` is the console ``127-0-13-1-30029``, whose
+    name's SHA-256 starts with 0: its router starts, and a vehicle on it is seen."""
+    bus = ConsoleBus(
+        tmp_path / "bus",
+        "default",
+        ["uav7"],
+        name="127-0-13-1-30029",
+        listen=[f"tcp/127.0.0.1:{free_port()}"],
+    )
+    bus.start()
+    try:
+        assert bus.session is not None
+        assert str(bus.session.info.zid()) == "bb2d10a528463effa1e64c5e5e26a71"
+        v = vehicle(bus, "uav7")
+        try:
+            wait_for(bus.alive, lambda a: a == ["uav7"], 10, "uav7 alive on the bus")
+        finally:
+            v.close()
+    finally:
+        bus.close()
 
 
 def test_a_vehicle_is_alive_and_its_telemetry_arrives(console: ConsoleBus) -> None:
@@ -193,6 +222,7 @@ def test_a_vehicle_joins_with_its_vehicle_key(tmp_path: Path) -> None:
         tmp_path / "bus",
         "default",
         ["uav1"],
+        name="console",
         listen=[f"tcp/127.0.0.1:{free_port()}"],
         vehicle_passwords={"uav1": "uavk_one", "uav7": "uavk_seven"},
     )

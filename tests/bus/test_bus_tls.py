@@ -60,6 +60,7 @@ def console(tmp_path: Path) -> Iterator[ConsoleBus]:
         tmp_path / "bus",
         "default",
         ["uav1"],
+        name="first",
         listen=settings.bus_listen,
         tls=bus_tls(settings),
     )
@@ -251,18 +252,35 @@ def test_a_console_off_tls_joins_a_tls_router_with_its_ca(
     assert tls is not None and tls.cert is None and console.tls is not None
     assert tls.ca == console.tls.ca
     second = ConsoleBus(
-        tmp_path / "bus", "default", [], settings.bus_listen, settings.bus_connect, tls=tls
+        tmp_path / "bus",
+        "default",
+        [],
+        name="second",
+        listen=settings.bus_listen,
+        connect=settings.bus_connect,
+        tls=tls,
     )
     second.start()
     try:
         assert second.listen == list(settings.bus_listen)  # as given: tcp/ on loopback
         assert second.session is not None and console.session is not None
-        first_zid = str(console.session.info.zid())
         wait_for(
-            lambda: [str(z) for z in second.session.info.routers_zid()],  # type: ignore[union-attr]
-            lambda zids: first_zid in zids,
+            lambda: [j.joined for j in second.joins()],
+            lambda up: up == [True],
             10,
-            "the second console's router connected to the first",
+            "the second console joined the first's router",
+        )
+        session = second.session
+
+        def consoles() -> set[str]:
+            replies = session.liveliness().get(keys.all_consoles_alive("default"), timeout=5)
+            return {str(r.ok.key_expr) for r in replies if r.ok is not None}
+
+        wait_for(
+            consoles,
+            lambda seen: "uavc/default/console/first/alive" in seen,
+            10,
+            "the first console's presence at the second, over TLS",
         )
     finally:
         second.close()

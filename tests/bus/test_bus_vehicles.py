@@ -322,6 +322,54 @@ def test_one_lease_across_two_consoles(tmp_path: Path) -> None:
     assert PILOT
 
 
+@pytest.mark.timeout(480)
+def test_a_console_started_first_joins_the_one_it_names_when_that_one_comes(
+    tmp_path: Path,
+) -> None:
+    """``serve --bus-connect`` before the console it joins is up: it says it will join it,
+    keeps dialling, and joins when it comes; the consoles share the bus credentials with
+    ``--bus-credentials`` (each has its own data directory); the vehicle on the second console
+    is seen and flown from the first."""
+    east_data, west_data = tmp_path / "east", tmp_path / "west"
+    key = vehicle_key(west_data, NAME)
+    west_bus, east_bus = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    east_extra = ("--fleet", "0", "--console-name", "east", "--bus-listen", east_bus)
+    east_extra += ("--bus-connect", west_bus)
+    credentials = east_data / "bus" / "credentials.txt"
+    west_extra = ("--fleet", "0", "--console-name", "west", "--bus-listen", west_bus)
+    west_extra += ("--bus-credentials", str(credentials))
+    with serve_quick(
+        tmp_path, "sim", extra=east_extra, env={"UAVC_DATA_DIR": str(east_data)}, start_s=120
+    ) as east:
+        [join] = east.http.get("/api/v1/health").json()["bus"]["joins"]
+        assert join["endpoint"] == west_bus and not join["joined"]
+        said = f"uav-console: bus: the router at {west_bus} is not up; joining it when it is"
+        wait_for(lambda: said in east.log(), "east says it will join", 20)
+        with (
+            serve_quick(
+                tmp_path,
+                "sim",
+                extra=west_extra,
+                env={"UAVC_DATA_DIR": str(west_data)},
+                port=free_port(HOST),
+                start_s=120,
+            ) as west,
+            bus_vehicle(tmp_path, west_bus, key) as (proc, log_path),
+        ):
+            rig = Rig(west, west_bus, west_data, proc, log_path)
+            wait_for(
+                lambda: east.http.get("/api/v1/health").json()["bus"]["joins"][0]["joined"],
+                "east joined west's router",
+                60,
+            )
+            assert f"uav-console: bus: joined the router at {west_bus}" in east.log()
+            rig.wait_joined(east)
+            assert rig.act("takeoff", east)["accepted"]
+            wait_for(lambda: rig.flying(west), "the take-off from east, seen at west", 40)
+            assert rig.act("land", east)["accepted"]
+            wait_for(lambda: not rig.flying(east), "the landing", 40)
+
+
 def test_a_vehicle_needs_a_bus_or_a_central(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -36,6 +36,7 @@ def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ConsoleBus]:
         tmp_path_factory.mktemp("commands-live") / "bus",
         "default",
         ["uav1", "uav2"],
+        name="west",
         listen=[f"tcp/127.0.0.1:{free_port()}"],
     )
     bus.start()
@@ -296,13 +297,18 @@ def test_a_console_that_joins_another_router_commands_its_vehicles(tmp_path: Pat
 
     async def main() -> None:
         west = ConsoleBus(
-            tmp_path / "bus", "default", ["uav1"], listen=[f"tcp/127.0.0.1:{free_port()}"]
+            tmp_path / "bus",
+            "default",
+            ["uav1"],
+            name="west",
+            listen=[f"tcp/127.0.0.1:{free_port()}"],
         )
         west.start()
         east = ConsoleBus(
             tmp_path / "bus",
             "default",
             ["uav1"],
+            name="east",
             listen=[f"tcp/127.0.0.1:{free_port()}"],
             connect=west.listen,
         )

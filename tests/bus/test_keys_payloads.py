@@ -5,14 +5,17 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+from pathlib import Path
 
 import pytest
+import zenoh
 from hypothesis import given
 from hypothesis import strategies as st
 
 from drone.bus import keys
-from drone.bus.config import access_control, client_config, vehicle_user
-from drone.bus.errors import KeySegmentError, PayloadError
+from drone.bus.config import access_control, client_config, router_id, vehicle_user
+from drone.bus.credentials import Credentials
+from drone.bus.errors import BusConfigError, KeySegmentError, PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry, encode
 from drone.bus.session import DEFAULT_LISTEN
 
@@ -111,3 +114,43 @@ def test_client_configuration_never_scouts() -> None:
     cfg = client_config(connect=[DEFAULT_LISTEN], user="observer", password="p")
     assert cfg["scouting"]["multicast"]["enabled"] is False
     assert cfg["mode"] == "client"
+
+
+SEGMENTS = st.from_regex(keys.SEGMENT, fullmatch=True)
+
+
+@given(SEGMENTS, SEGMENTS)
+def test_every_console_name_gives_a_router_id_zenoh_takes(fleet: str, console: str) -> None:
+    """Zenoh refuses an id with a leading 0 ("Leading 0s are not valid"): one console name in
+    16 hashes to one (``serve`` on 127.0.13.1:30029 is ``127-0-13-1-30029``), and that
+    console's bus did not start."""
+    zid = router_id(fleet, console)
+    zenoh.Config.from_json5(json.dumps({"id": zid}))
+    assert zid == router_id(fleet, console) and len(zid) <= 32
+
+
+def test_router_ids_are_stable_and_differ_by_name() -> None:
+    assert router_id("default", "127-0-13-1-30029") == "bb2d10a528463effa1e64c5e5e26a71"
+    assert router_id("default", "console-a") != router_id("default", "console-b")
+    assert router_id("default", "a") != router_id("site-b", "a")
+
+
+def test_a_console_takes_another_consoles_bus_credentials_but_keeps_its_vehicle_keys(
+    tmp_path: Path,
+) -> None:
+    """``serve --bus-credentials FILE``: this console's bus users and passwords become the
+    other's (so its joiner is let in there), kept for its next start; its own vehicle keys win."""
+    first = Credentials.load_or_create(tmp_path / "a", ["uav1", "uav2"])
+    own = Credentials.load_or_create(tmp_path / "b", [], {"uav2": "uavk_b2"})
+    assert own.password("console") != first.password("console")
+    shared = Credentials.load_or_create(tmp_path / "b", [], {"uav2": "uavk_b2"}, first.path)
+    for user in ("console", "observer", "pilot", "vehicle-uav1"):
+        assert shared.password(user) == first.password(user), user
+    assert shared.password("vehicle-uav2") == "uavk_b2"
+    again = Credentials.load_or_create(tmp_path / "b", [], {"uav2": "uavk_b2"})
+    assert again.users == shared.users
+    with pytest.raises(BusConfigError, match="the shared bus credentials"):
+        Credentials.load_or_create(tmp_path / "b", [], shared=tmp_path / "missing.txt")
+    (tmp_path / "bad.txt").write_text("console\n")
+    with pytest.raises(BusConfigError, match=r"bad\.txt:1: not user:password"):
+        Credentials.load_or_create(tmp_path / "b", [], shared=tmp_path / "bad.txt")

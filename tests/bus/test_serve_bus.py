@@ -22,6 +22,8 @@ from tests.support.loopback import free_port, fresh_address
 # is refused), which a second test run on the same 2 cores made them miss
 pytestmark = pytest.mark.serial
 
+START_S = 120  # serve's start on a busy 2-core machine (tests/bus/test_bus_vehicles.py's)
+
 SCRIPT = textwrap.dedent(
     """
     import json, sys, threading, zenoh
@@ -44,7 +46,7 @@ def test_a_third_party_script_watches_a_served_drone(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     env = {"UAVC_SIM_BASE_ADDR": fresh_address()}
     extra = ("--vehicles", "process", "--bus-listen", endpoint)
-    with serve(tmp_path, "sim", extra=extra, env=env) as srv:
+    with serve(tmp_path, "sim", extra=extra, env=env, start_s=START_S) as srv:
         srv.wait_vehicle()
         health = wait_for(
             lambda: (h := srv.http.get("/api/v1/health").json())["bus"]["alive"] and h,
@@ -82,7 +84,7 @@ def test_a_vehicle_from_elsewhere_joins_the_bus_with_its_key(tmp_path: Path) -> 
     key_file = tmp_path / "data" / "vehicle-keys" / "uav7.key"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     extra = ("--vehicles", "process", "--fleet", "0", "--bus-listen", endpoint)
-    with serve(tmp_path, "sim", extra=extra) as srv:
+    with serve(tmp_path, "sim", extra=extra, start_s=START_S) as srv:
         assert srv.http.get("/api/v1/drones").json() == []  # --fleet 0: none of its own
         env = {**os.environ, "UAVC_SIM_BASE_ADDR": fresh_address()}
         env.pop("UAVC_VEHICLE_KEY", None)

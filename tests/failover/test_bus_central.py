@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,11 +15,13 @@ from pathlib import Path
 import pytest
 
 from drone.bus.central import CentralBus
-from drone.bus.console import ConsoleBus, router_id
+from drone.bus.commanded import ConsolePresence
+from drone.bus.config import router_id
+from drone.bus.console import ConsoleBus
 from drone.bus.plans import VehiclePlans
 from drone.bus.vehicle import VehicleBus
 from tests.support.loopback import free_port
-from tests.support.polling import until_async
+from tests.support.polling import until_async, wait_for
 
 
 @dataclass
@@ -88,6 +91,39 @@ async def test_each_console_sees_the_other_and_the_holder(fleet: Fleet) -> None:
     await until_async(lambda: fleet.b.central.view()[1] == set(), 10.0, "the holder's token gone")
 
 
+async def test_a_console_has_one_presence_token_for_the_vehicles_and_the_election(
+    fleet: Fleet,
+) -> None:
+    """``uavc/<fleet>/console/<name>/alive``, declared by the console's router, is what the
+    vehicles watch their consoles by and whom the election counts; it goes with the router."""
+    both = {"console-a", "console-b"}
+    session = fleet.vehicle.session
+    assert session is not None
+    presence = ConsolePresence(session, "default", time.monotonic)
+    try:
+        await until_async(lambda: fleet.a.central.view()[0] == both, 10.0, "a sees b")
+        await until_async(lambda: set(presence.consoles()) == both, 10.0, "the vehicle's view")
+
+        def tokens() -> set[str]:
+            return {
+                str(r.ok.key_expr)
+                for r in session.liveliness().get("uavc/default/**", timeout=5)
+                if r.ok is not None
+            }
+
+        assert await asyncio.to_thread(tokens) == {
+            "uavc/default/console/console-a/alive",
+            "uavc/default/console/console-b/alive",
+            "uavc/default/uav1/alive",
+        }
+        fleet.b.central.close()
+        fleet.b.router.close()
+        await until_async(lambda: fleet.a.central.view()[0] == {"console-a"}, 10.0, "b gone")
+        await until_async(lambda: presence.consoles() == ["console-a"], 10.0, "b gone too")
+    finally:
+        presence.close()
+
+
 async def test_the_routers_ids_derive_from_the_consoles_names(fleet: Fleet) -> None:
     assert fleet.a.router.session is not None
     assert str(fleet.a.router.session.info.zid()) == router_id("default", "console-a")
@@ -134,3 +170,43 @@ async def test_a_plan_to_a_vehicle_that_is_not_there_is_a_clear_error(fleet: Fle
 
     with pytest.raises(BusError, match="uav9 did not answer"):
         await fleet.a.central.send_plan("uav9", b"{}", 0.5)
+
+
+def test_a_console_that_starts_first_joins_the_other_when_it_comes_and_again_after_it_restarts(
+    tmp_path: Path,
+) -> None:
+    """``serve --bus-connect`` started before the console it joins: it keeps dialling, joins
+    when the other's router comes (and sees what is on it), and joins again when that router
+    restarts on the same port with the same id."""
+    bus_a, bus_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+
+    def console(name: str, listen: str, connect: list[str]) -> ConsoleBus:
+        bus = ConsoleBus(
+            tmp_path / "bus", "default", ["uav1"], name=name, listen=[listen], connect=connect
+        )
+        bus.start()
+        return bus
+
+    b = console("console-b", bus_b, [bus_a])
+    a: ConsoleBus | None = None
+    vehicle: VehicleBus | None = None
+    try:
+        assert [(j.endpoint, j.joined) for j in b.joins()] == [(bus_a, False)]
+        a = console("console-a", bus_a, [])
+        cred = a.vehicle_credential("uav1")
+        vehicle = VehicleBus([bus_a], cred.user, cred.password, "default", "uav1")
+        vehicle.start()
+        wait_for(b.alive, lambda alive: alive == ["uav1"], 15, "uav1, on console-a, at console-b")
+        assert [(j.endpoint, j.joined) for j in b.joins()] == [(bus_a, True)]
+        a.close()
+        wait_for(b.joins, lambda js: not js[0].joined, 15, "console-a's router gone")
+        assert b.alive() == []
+        a = console("console-a", bus_a, [])  # the same port, the same id
+        wait_for(b.joins, lambda js: js[0].joined, 15, "console-a's router back")
+        wait_for(b.alive, lambda alive: alive == ["uav1"], 15, "uav1 back at console-b")
+    finally:
+        if vehicle is not None:
+            vehicle.close()
+        if a is not None:
+            a.close()
+        b.close()
