@@ -51,7 +51,7 @@ from server.dialog.ports import (
     TaskPort,
     VehiclePort,
 )
-from server.dialog.preflight import EMERGENCY_DOWN, DroneFacts, refusal
+from drone.preflight import EMERGENCY_DOWN, DroneFacts, refusal
 from server.dialog.states import MOTION, STATELESS, State, next_state
 from server.language.nlu import NLU, Interpretation, default_nlu
 from server.msgs import header

@@ -2,7 +2,7 @@
 
 ``POST /api/v1/drones/{id}/{action}`` comes here. A take-off the drone cannot do now (in
 emergency, battery below the low threshold, no link) is refused before anything is sent, with
-the reason and the way out (server.dialog.preflight): the caller gets ``accepted: false`` and
+the reason and the way out (drone.preflight): the caller gets ``accepted: false`` and
 the reason, the dialog says it aloud on ``/console/reply``. Every action, accepted or refused,
 is written to the audit log with where it came from (a button, a keyboard shortcut, a script),
 like a spoken command.
@@ -31,7 +31,7 @@ from drone.deadline import (
     label,
     not_flown,
 )
-from server.dialog.preflight import DroneFacts, refusal
+from drone.preflight import DroneFacts, refusal
 from server.vehicles.stops import StopVerdict
 
 # Where a direct action came from: the page says which (X-Command-Source); anything else is
