@@ -101,7 +101,7 @@ async def perform_async(
 ) -> DirectOutcome:
     """:func:`perform` for any drone: a drone in its own vehicle process
     (``server.vehicles.remote``, which has ``act``) checks and does the action there, on its
-    state now, and its own dialog follows and says a refusal; the audit row is written here.
+    state now; its dialog (here) follows and says a refusal; the audit row is written here.
     A motion action is judged against its deadline here, as the console hands it over, and
     by the vehicle again as it receives it (``act_in_time``).
 
@@ -132,6 +132,7 @@ async def perform_async(
             except Exception as exc:
                 _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
                 raise
+            _tell(dialog, action, outcome)
         _audit(audit, stack, dialog, action, source, outcome)
         return outcome
     try:
@@ -140,8 +141,19 @@ async def perform_async(
         _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
         raise
     outcome = DirectOutcome(accepted, detail)
+    _tell(dialog, action, outcome)
     _audit(audit, stack, dialog, action, source, outcome)
     return outcome
+
+
+def _tell(dialog: Any, action: str, outcome: DirectOutcome) -> None:
+    """The drone's dialog follows an action a vehicle process did, or says its refusal."""
+    if dialog is None:
+        return
+    if outcome.accepted:
+        dialog.note_direct(action)
+    else:
+        dialog.announce(outcome.detail, "warn")
 
 
 def perform_stop(
@@ -210,6 +222,8 @@ async def perform_stop_async(
     except Exception as exc:
         _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
         raise
+    if verdict.accepted and dialog is not None:
+        dialog.note_direct(action)
     _audit(audit, stack, dialog, action, source, DirectOutcome(verdict.accepted, verdict.detail))
     return verdict
 
