@@ -69,6 +69,11 @@ class BusVehicleSide:
                 host.clock_offset.sample, sent, time.time()
             ),
         )
+        # the consoles' beats also carry the id of the flight recording, for our audit rows
+        self._recordings = bus.session.declare_subscriber(
+            keys.all_console_heartbeats(bus.fleet),
+            lambda sample: self._on_beat(sample, loop),
+        )
         self._alarms: deque[tuple[float, str]] = deque(maxlen=20)
         self._alarm_sub = host.graph.subscribe(
             names.alarm_topic(host.name), self._on_alarm, type=names.STRING
@@ -99,6 +104,16 @@ class BusVehicleSide:
             pub.put(to_json_text(msg))
 
         return put
+
+    def _on_beat(self, sample: zenoh.Sample, loop: asyncio.AbstractEventLoop) -> None:
+        """A console's beat (Zenoh thread): the recording id it carries, if any, as the link's
+        ``/console/recording`` gives it."""
+        try:
+            recording = json.loads(sample.payload.to_bytes()).get("recording")
+        except (ValueError, AttributeError):
+            return
+        if isinstance(recording, str) and len(recording) <= 128:
+            loop.call_soon_threadsafe(setattr, self.host, "recording_id", recording)
 
     def _on_alarm(self, msg: dict[str, Any]) -> None:
         """A supervisor's alarm (``/NAME/vehicle/alarm``): in the status for a while."""
@@ -177,5 +192,6 @@ class BusVehicleSide:
         for pub in self._graph_pubs.values():
             pub.undeclare()  # type: ignore[no-untyped-call]
         self._alarm_sub.close()
+        self._recordings.undeclare()  # type: ignore[no-untyped-call]
         self.presence.close()
         self.commanded.close()

@@ -377,9 +377,13 @@ class VehicleCentral:
         self._publish_recording(rec.touch())
 
     def _publish_recording(self, recording: str) -> None:
+        """The recording's id to the vehicles: on the link, and at once in a beat on the bus
+        (not only at the next one), when it changed."""
         if recording != self._recording_sent:
             self._recording_sent = recording
             self.runtime.graph.publish(names.RECORDING, {"data": recording})
+            if self.commander is not None:
+                self.commander.beat(time.time(), recording)
 
     async def stop(self) -> None:
         if self._utterances is not None:
@@ -515,7 +519,7 @@ class VehicleCentral:
             beat = json.dumps({"n": n, "t": now})
             self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
             if self.commander is not None:
-                self.commander.beat(now)
+                self.commander.beat(now, self.runtime.recording_id() or "")
             self._publish_recording(self.runtime.recording_id() or "")
             if n % DISCOVER_EVERY == 0:
                 try:

@@ -198,3 +198,30 @@ def test_the_task_ops_on_the_bus_carry_typed_commands_and_a_preempted_stop_is_a_
     ]:
         with pytest.raises(PayloadError, match=why):
             decode_command(bad)
+
+
+class _Sample:
+    """What the vehicle reads of a Zenoh sample: its payload's bytes."""
+
+    def __init__(self, data: bytes) -> None:
+        self.payload = self
+        self._data = data
+
+    def to_bytes(self) -> bytes:
+        return self._data
+
+
+async def test_a_consoles_beat_gives_a_vehicle_on_the_bus_the_recording_id() -> None:
+    """The id of the flight recording reaches a vehicle with no vehicle link (its audit rows
+    carry it), in the consoles' beats; a beat without one, or a bad one, changes nothing."""
+    from types import SimpleNamespace
+
+    from server.vehicles.bus_vehicle import BusVehicleSide
+
+    loop = asyncio.get_running_loop()
+    host = SimpleNamespace(recording_id="")
+    side = SimpleNamespace(host=host)
+    for payload in (b'{"t": 1.0, "recording": "20261126-120000"}', b'{"t": 2.0}', b"junk"):
+        BusVehicleSide._on_beat(side, _Sample(payload), loop)  # type: ignore[arg-type]
+        await asyncio.sleep(0)
+        assert host.recording_id == "20261126-120000"
