@@ -8,7 +8,8 @@ what its link declares (:func:`server.vehicles.host.link_spec` for that name and
 - it may advertise and publish only its own drone's topics (navdata or MAVROS, camera, pose,
   markers, task, ``/NAME/fleet/ltm_status``, ``/NAME/vehicle/*``): never another drone's, never
   a command topic (``/cmd_vel``, ``/ardrone/*``), never ``/console/*`` or ``/fleet/*`` of the
-  server (it runs no dialog: the console's dialog for its drone speaks);
+  server (it runs no dialog; what its own nodes say goes through ``/NAME/vehicle/reply``, which
+  the console checks and re-publishes: :mod:`server.vehicles.relay`);
 - it may provide only its own services (``/NAME/vehicle/control``, ``/NAME/fleet/plan``);
 - it may call none of the server's services (:data:`VEHICLE_CALLS` is empty: the captioner and
   the fleet's patrol are the console dialog's own).

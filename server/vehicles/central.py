@@ -4,8 +4,9 @@
   (:mod:`server.vehicles.keys`; never the pilot or observer token) and no browser (a request
   with ``Origin`` is refused); a vehicle may publish only its own drone's topics and provide only
   its own services (:mod:`server.vehicles.access`). A vehicle runs no dialog: each drone's
-  dialog runs here (:mod:`server.vehicles.console_dialog`), so this process is the only
-  publisher of ``/console/reply``.
+  dialog runs here (:mod:`server.vehicles.console_dialog`); what a vehicle's nodes say comes
+  under its own name and is re-published after a check (:mod:`server.vehicles.relay`), so this
+  process is the only publisher of ``/console/reply``.
 - Keys: ``serve`` makes one per vehicle it spawns (``<data dir>/vehicle-keys``) and hands it over
   in the child's environment (``UAVC_VEHICLE_KEY``), not on its command line.
 - Discovery: every ``/NAME/vehicle/info`` on the graph becomes a drone of the runtime
@@ -51,6 +52,7 @@ from server.vehicles import names
 from server.vehicles.access import VehicleLinkSecurity
 from server.vehicles.keys import VehicleKeys, vehicle_env
 from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
+from server.vehicles.relay import ReplyRelay
 from server.vehicles.tickets import TICKET_TTL_S, DoorSecrets, mint
 
 if TYPE_CHECKING:
@@ -186,6 +188,7 @@ class VehicleCentral:
         self.ctx = BridgeContext(runtime.graph, security, s)
         self.processes: dict[str, VehicleProcess] = {}
         self.dialogs: list[RemoteDialog] = []
+        self.relays: dict[str, ReplyRelay] = {}
         self.alerts: list[str] = []
         self._tasks: list[asyncio.Task[Any]] = []
         self._stopping = False
@@ -404,6 +407,9 @@ class VehicleCentral:
         for dialog in self.dialogs:
             dialog.close()
         self.dialogs.clear()
+        for relay in self.relays.values():
+            relay.close()
+        self.relays.clear()
 
     def prefix_of(self, name: str) -> str:
         """The prefix of vehicle ``name``'s drone topics: what ``serve`` gave the vehicle it
@@ -450,6 +456,7 @@ class VehicleCentral:
         )
         self.dialogs.append(dialog)
         rt.dialogs[name] = dialog
+        self.relays[name] = ReplyRelay(rt.graph, name)  # what its own nodes say
         self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
         # Listings (REST, fleet status, the console's selector) follow the names, not the
         # order in which the vehicles joined.

@@ -65,6 +65,7 @@ from server.vehicles.door_protocol import (
 from server.vehicles.errors import CannotStart, DoorProtocolError, VehicleError
 from server.vehicles.link import GraphLink
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
+from server.vehicles.relay import replies_out
 from server.vehicles.task_ops import TASK_OPS, notice_message, run_task_op
 from server.vehicles.watch import CentralWatch, LossAction
 
@@ -113,7 +114,8 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
 
     What it publishes and provides is all its own drone's (the central server lets a vehicle
     publish nothing else: :mod:`server.vehicles.access`); its task notices and alarms go out
-    under ``/NAME/vehicle/*`` for the console's dialog."""
+    under ``/NAME/vehicle/*`` for the console's dialog, and what its nodes say on its
+    ``/NAME/vehicle/reply`` (:mod:`server.vehicles.relay`)."""
     from server.fleet.messages import (
         PLAN_SERVICE,
         PLAN_SERVICE_TYPE,
@@ -150,6 +152,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         TopicSpec(f"{p}/uav/markers", MARKERS),
         TopicSpec(f"{p}/uav/task", TASK, latch=True),
         TopicSpec(names.task_event_topic(name), names.STRING),
+        TopicSpec(names.reply_topic(name), "uav_console/Reply"),
         TopicSpec(f"/{name}/{STATUS_TOPIC}", STATUS_TYPE),
         TopicSpec(names.info_topic(name), names.STRING, latch=True),
         TopicSpec(names.telemetry_topic(name), names.STRING),
@@ -251,6 +254,8 @@ class VehicleHost:
         self._recording_sub = self.graph.subscribe(
             names.RECORDING, self._on_recording, type=names.STRING
         )
+        # what its nodes say (a late command, an autopilot's denial), under its own name
+        self._replies_out = replies_out(self.graph, self.name)
         # the task manager's notices, for the console's dialog to follow and say
         self.graph.advertise(names.task_event_topic(self.name), names.STRING)
         loop = asyncio.get_running_loop()
@@ -586,6 +591,7 @@ class VehicleHost:
             self.bus.close()
         self._heartbeat_sub.close()
         self._recording_sub.close()
+        self._replies_out.close()
         self.ltm.close()
         self.core.close()
         st = self.stack

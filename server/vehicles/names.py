@@ -17,8 +17,10 @@ A vehicle process puts its drone on the central graph through the vehicle link
 - ``/NAME/vehicle/task_event`` (std_msgs/String; ``data`` = JSON ``{kind, text, task, state,
   queued}``): the task executor's notices, which the console's dialog follows and says;
 - ``/NAME/vehicle/alarm`` (std_msgs/String): the supervisor's alarms, which the console's dialog
-  says. The vehicle runs no dialog: the console is the only publisher of ``/console/reply``,
-  ``PREFIX/console/state`` and ``PREFIX/console/interpret``;
+  says; ``/NAME/vehicle/reply`` (uav_console/Reply): what the vehicle's nodes say themselves (a
+  command past its deadline, a MAVLink autopilot's denial), checked and re-published by the
+  console (:mod:`server.vehicles.relay`). The vehicle runs no dialog: the console is the only
+  publisher of ``/console/reply``, ``PREFIX/console/state`` and ``PREFIX/console/interpret``;
 - ``/console/recording`` (std_msgs/String, latched, from the central server): the id of the
   flight recording being written (``""``: none), for the vehicle's audit rows; published before
   an operator's command is passed on, so its rows carry the recording it opened;
@@ -58,6 +60,11 @@ def alarm_topic(name: str) -> str:
 
 def control_service(name: str) -> str:
     return f"/{name}/vehicle/control"
+
+
+def reply_topic(name: str) -> str:
+    """What the vehicle's own parts say (uav_console/Reply; :mod:`server.vehicles.relay`)."""
+    return f"/{name}/vehicle/reply"
 
 
 def task_event_topic(name: str) -> str:

@@ -180,9 +180,10 @@ async def test_a_command_to_a_vehicle_that_does_not_join_gives_up_within_a_few_s
     graph.bind_loop(asyncio.get_running_loop())
     stack = _stack(graph)
     stack.expect()  # restarting: other calls may wait 30 s for it
+    dialog = _dialog(graph, stack)
     t0 = time.monotonic()
     with pytest.raises(VehicleUnavailable, match="has not joined") as caught:
-        await _dialog(graph, stack).handle_utterance("take off")
+        await dialog.handle_utterance("take off")
     assert time.monotonic() - t0 < 5.0  # before: the whole JOIN_WAIT_S (30 s), then a 200
     assert caught.value.drone == "uav1" and caught.value.retry_after_s > 0
     assert stack.expected_until is not None  # still expected: a retry waits again
@@ -240,6 +241,7 @@ async def test_rest_command_and_speech_answer_503_with_retry_after(
     from tests.app_client import app_client
 
     monkeypatch.setattr(remote, "COMMAND_JOIN_WAIT_S", 0.2)
+    monkeypatch.setattr(remote, "SILENT_S", 3600.0)  # uav2's one telemetry stays fresh
     settings = Settings(data_dir=tmp_path, token="units-pilot", drone="none")
     async with app_client(settings) as client:
         rt = client.app.state.runtime  # type: ignore[attr-defined]

@@ -248,9 +248,8 @@ def test_a_vehicle_key_publishes_only_its_own_drones_topics(srv: Served) -> None
         reply = {"text": FAKE, "level": "alert", "speak": True, "drone": "uav1"}
         refused = {
             "/console/reply": ("uav_console/Reply", reply),
+            "/uav2/vehicle/reply": ("uav_console/Reply", {**reply, "drone": "uav2"}),
             "/uav2/vehicle/alarm": ("std_msgs/String", {"data": "{}"}),
-            # it runs no dialog: it says nothing in words, its console's dialog speaks
-            "/uav1/vehicle/reply": ("uav_console/Reply", reply),
             "/uav2/ardrone/navdata": ("ardrone_autonomy/Navdata", {"batteryPercent": 2.0}),
             "/uav2/cmd_vel": ("geometry_msgs/Twist", JOG),
             "/uav1/cmd_vel": ("geometry_msgs/Twist", JOG),
@@ -270,15 +269,25 @@ def test_a_vehicle_key_publishes_only_its_own_drones_topics(srv: Served) -> None
         assert errors and "may not provide the service /uav2/vehicle/control" in errors[0]
         out = rogue.call("/uav2/vehicle/control", {"op": "direct", "action": "takeoff"})
         assert out["result"] is False and "vehicle uav1 may not call" in out["values"]
-        # Its own alarm topic: said by the console's dialog, as its own drone's words only.
-        own = "/uav1/vehicle/alarm"
-        assert not rogue.errors_of({"op": "advertise", "topic": own, "type": "std_msgs/String"})
-        alarm = {"drone": "uav2", "monitor": "link", "severity": "warn",
-                 "text": "uav1 speaking for itself", "action": None}  # fmt: skip
-        assert not rogue.errors_of({"op": "publish", "topic": own,
-                                    "msg": {"data": json.dumps(alarm)}})  # fmt: skip
-        said = wait_for(lambda: [m for m in obs.replies() if "for itself" in m["text"]], "alarm")
+        # Its own reply topic: re-published only as its own drone's words.
+        own = "/uav1/vehicle/reply"
+        assert not rogue.errors_of({"op": "advertise", "topic": own, "type": "uav_console/Reply"})
+        assert not rogue.errors_of(
+            {"op": "publish", "topic": own, "msg": {**reply, "drone": "uav2"}}
+        )
+        mine = {**reply, "text": "uav1 speaking for itself", "drone": ""}
+        assert not rogue.errors_of({"op": "publish", "topic": own, "msg": mine})
+        said = wait_for(lambda: [m for m in obs.replies() if "for itself" in m["text"]], "relay")
         assert said[0]["drone"] == "uav1"
+        # Its own alarm topic: said by the console's dialog for uav1, whatever drone it names.
+        alarm = {"drone": "uav2", "monitor": "link", "severity": "warn",
+                 "text": "uav1 alarmed for itself", "action": None}  # fmt: skip
+        topic = "/uav1/vehicle/alarm"
+        assert not rogue.errors_of({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
+        assert not rogue.errors_of({"op": "publish", "topic": topic,
+                                    "msg": {"data": json.dumps(alarm)}})  # fmt: skip
+        said = wait_for(lambda: [m for m in obs.replies() if "alarmed for" in m["text"]], "alarm")
+        assert said[0]["drone"] == "uav1" and said[0]["alarm"] == "link"
         assert not [m for m in obs.replies() if FAKE in m["text"]]
         assert not [f for f in list(obs.frames) if f.get("topic") == "/uav2/ardrone/navdata"
                     and f["msg"].get("batteryPercent") == 2.0]  # fmt: skip
@@ -289,6 +298,8 @@ def test_a_vehicle_key_publishes_only_its_own_drones_topics(srv: Served) -> None
 
         line = wait_for(lambda: logged("vehicle uav1 may not publish to /console/reply"), "log")
         assert line[0].startswith("refused on /vehicle-link (1×): ")
+        wait_for(lambda: logged("uav1: reply from its vehicle not re-published: it names drone"),
+                 "the relay's refusal in the log")  # fmt: skip
 
 
 def test_a_vehicle_from_elsewhere_joins_with_a_key_made_while_serve_runs(srv: Served) -> None:

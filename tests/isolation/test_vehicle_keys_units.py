@@ -29,6 +29,7 @@ from server.vehicles.keys import (
     read_key_file,
     vehicle_env,
 )
+from server.vehicles.relay import checked_reply
 
 
 class Clock:
@@ -166,10 +167,9 @@ def test_a_vehicles_scope_is_its_own_drone_and_nothing_of_the_server(
     assert {f"{prefix}/ardrone/navdata", f"{prefix}/mavros/state", f"{prefix}/uav/pose"} <= (
         scope.topics
     )
-    own = {f"/{name}/vehicle/{t}" for t in ("alarm", "task_event", "info", "telemetry")}
-    assert own <= scope.topics
-    # it runs no dialog: it says nothing in words, and has no dialog state of its own
-    assert not {f"/{name}/vehicle/reply", f"/{name}/vehicle/state"} & scope.topics
+    own = {"alarm", "task_event", "reply", "info", "telemetry"}
+    assert {f"/{name}/vehicle/{t}" for t in own} <= scope.topics
+    assert f"/{name}/vehicle/state" not in scope.topics  # it runs no dialog
     assert f"/{name}/fleet/ltm_status" in scope.topics
     for topic in scope.topics:
         assert not SERVER_TOPIC_RE.match(topic), topic
@@ -224,6 +224,21 @@ def test_pilots_may_not_speak_or_answer_as_a_vehicle(tmp_path: Path) -> None:
     assert not sec.can_provide(Role.PILOT, "/uav1/vehicle/control")
     assert sec.can_publish(Role.PILOT, "/uav1/fleet/ltm_status")  # the rosbridge fleet client's
     assert sec.can_provide(Role.PILOT, "/uav1/fleet/flight_plan")
+
+
+# ------------------------------------------------------------------------------ replies
+
+
+def test_the_console_relays_a_reply_only_as_its_own_vehicles() -> None:
+    msg = {"text": "Not flown: 'take off' reached the drone 3.1 s late.", "level": "warn"}
+    out, _ = checked_reply({**msg, "drone": ""}, "uav1")
+    assert out is not None and out["drone"] == "uav1"
+    assert checked_reply({**msg, "drone": "uav1"}, "uav1")[0] is not None
+    out, why = checked_reply({**msg, "drone": "uav2"}, "uav1")
+    assert out is None and "uav2" in why
+    out, why = checked_reply({**msg, "level": "console"}, "uav1")
+    assert out is None and "level" in why
+    assert checked_reply({**msg, "text": "x" * 5000}, "uav1")[0] is None
 
 
 # ------------------------------------------------------------------------------ the lease
