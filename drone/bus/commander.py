@@ -144,10 +144,14 @@ class BusCommander:
         except TimeoutError as exc:
             raise NoReply(f"{drone} did not answer {command.op} in {timeout_s} s") from exc
 
-    def beat(self, now: float) -> None:
+    def beat(self, now: float, recording: str | None = None) -> None:
         """This console's heartbeat (call at 10 Hz): ``now`` is its Unix time, from which a
-        vehicle learns the console's clock (command deadlines)."""
-        self._beat.put(json.dumps({"t": now}))
+        vehicle learns the console's clock (command deadlines); ``recording``: the id of the
+        flight recording the console writes (``""``: none), for the vehicles' audit rows."""
+        body: dict[str, float | str] = {"t": now}
+        if recording is not None:
+            body["recording"] = recording
+        self._beat.put(json.dumps(body))
 
     # ------------------------------------------------------------------ publications
     def status(self, drone: str) -> Status | None:

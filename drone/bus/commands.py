@@ -7,6 +7,9 @@ Command: ``v`` (1), ``id`` (the sender's id, echoed), ``op`` (:data:`OPS`), ``ar
 ``issued`` (Unix seconds on the sending console's clock, or null), ``console`` (the sending
 console's name), ``pilot`` (who commands at that console; with ``console`` the lease holder).
 
+The task ops (``submit``, ``preempt``, ``cancel``) carry typed commands
+(:mod:`drone.commands`): what a console's dialog understood, for the vehicle's task executor.
+
 Reply: ``v``, ``id``, ``accepted`` (bool), ``reason`` (why not; empty when accepted),
 ``result`` (the op's answer, an object), ``drone`` (who answered).
 """
@@ -20,10 +23,28 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from drone.bus.errors import PayloadError
+from drone.commands import InvalidCommand, parse_command
 
 MAX_COMMAND_BYTES = 16 * 1024
-# What a vehicle answers: direct actions, the dialog, reads, simulator faults, its lease.
-OPS = ("direct", "utterance", "telemetry", "truth", "fault", "lease", "jog")
+# What a vehicle answers: direct actions, its task executor's queue (a console's dialog
+# submits what it understood), reads, simulator faults, its lease, jogs. ``utterance`` is
+# decoded so that a console of another version is refused with the reason, not "unknown op".
+OPS = (
+    "direct",
+    "submit",
+    "preempt",
+    "cancel",
+    "utterance",
+    "telemetry",
+    "truth",
+    "fault",
+    "lease",
+    "jog",
+)
+TASK_OPS = frozenset({"submit", "preempt", "cancel"})
+# What ``preempt`` runs: the task executor's safety actions (TaskManager.preempt), or one
+# command that replaces everything (a supervisor's descent).
+PREEMPT_ACTIONS = frozenset({"land", "hover", "emergency", "return_home"})
 # Actions any pilot may send, lease or not; they never wait behind anything (DESIGN §5).
 STOP_ACTIONS = frozenset({"land", "hover", "emergency"})
 DIRECT_ACTIONS = frozenset({"takeoff", "reset"}) | STOP_ACTIONS
@@ -32,7 +53,18 @@ READ_OPS = frozenset({"telemetry", "truth"})
 # A jog's velocity (``geometry_msgs/Twist`` as ``/cmd_vel`` carries it): these axes only.
 JOG_AXES = {"linear": ("x", "y", "z"), "angular": ("z",)}
 
-Op = Literal["direct", "utterance", "telemetry", "truth", "fault", "lease", "jog"]
+Op = Literal[
+    "direct",
+    "submit",
+    "preempt",
+    "cancel",
+    "utterance",
+    "telemetry",
+    "truth",
+    "fault",
+    "lease",
+    "jog",
+]
 
 
 class Command(BaseModel):
@@ -62,7 +94,12 @@ class Command(BaseModel):
 
     @property
     def action(self) -> str | None:
-        """A direct command's action (``takeoff``, ``land`` …); None for other ops."""
+        """A direct command's action (``takeoff``, ``land`` …), or the action a ``preempt``
+        runs; None for other ops."""
+        if self.op == "preempt":
+            command = self.args.get("command")
+            value = command.get("action") if isinstance(command, dict) else None
+            return value if isinstance(value, str) and len(command or {}) == 1 else None
         if self.op != "direct":
             return None
         value = self.args.get("action")
@@ -137,7 +174,28 @@ def decode_command(data: bytes) -> Command:
         raise PayloadError("command args.text: an utterance needs its text")
     if command.op == "jog":
         _check_jog(command.args)
+    if command.op in ("submit", "preempt"):
+        _check_tasks(command.op, command.args)
     return command
+
+
+def _check_tasks(op: str, args: dict[str, Any]) -> None:
+    """``submit``: ``commands``, a list of typed commands; ``preempt``: ``command``, one."""
+    if op == "submit":
+        commands = args.get("commands")
+        if not isinstance(commands, list) or not commands:
+            raise PayloadError("command args.commands: a submit needs a list of commands")
+        where = [f"commands.{i}" for i in range(len(commands))]
+    else:
+        commands = [args.get("command")]
+        where = ["command"]
+        if not isinstance(commands[0], dict):
+            raise PayloadError("command args.command: a preempt needs one command")
+    for at, obj in zip(where, commands, strict=True):
+        try:
+            parse_command(obj)
+        except InvalidCommand as exc:
+            raise PayloadError(f"command args.{at}: {exc}") from exc
 
 
 def _jog_values(args: dict[str, Any]) -> list[float]:

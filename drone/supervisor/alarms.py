@@ -30,6 +30,10 @@ class ActionKind(StrEnum):
 PREEMPTING = (ActionKind.HOVER, ActionKind.LAND, ActionKind.RETURN_HOME)
 
 
+class BadAlarm(ValueError):
+    """An alarm message that is not one (:meth:`Alarm.from_message`); the text says why."""
+
+
 @dataclass(frozen=True)
 class Action:
     """One action the supervisor took; :meth:`command` is it as a DESIGN §4 command."""
@@ -47,6 +51,27 @@ class Action:
             x, y, z = self.to
             return {"action": "waypoints", "waypoints": [{"x": x, "y": y, "z": z}]}
         return {"action": self.kind.value}
+
+    @classmethod
+    def from_command(cls, command: dict[str, Any]) -> Action:
+        """The action :meth:`command` made ``command`` of.
+
+        Raises:
+            BadAlarm: a command no supervisor action gives.
+        """
+        action = command.get("action")
+        try:
+            if action == "move" and command.get("direction") == "down":
+                return cls(ActionKind.DESCEND, distance_m=float(command["distance"]))
+            if action == "waypoints":
+                (point,) = command["waypoints"]
+                return cls(
+                    ActionKind.BACK_OFF,
+                    to=(float(point["x"]), float(point["y"]), float(point["z"])),
+                )
+            return cls(ActionKind(str(action)))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise BadAlarm(f"no supervisor action is {command!r}") from exc
 
     @property
     def event(self) -> str:
@@ -72,3 +97,25 @@ class Alarm:
             "text": self.text,
             "action": self.action.command() if self.action is not None else None,
         }
+
+    @classmethod
+    def from_message(cls, msg: object) -> Alarm:
+        """The alarm :meth:`as_message` wrote (a vehicle's, read by its console).
+
+        Raises:
+            BadAlarm: not an alarm message (the text names what is wrong).
+        """
+        if not isinstance(msg, dict):
+            raise BadAlarm("an alarm message is a JSON object")
+        monitor, text, action = msg.get("monitor"), msg.get("text"), msg.get("action")
+        if not isinstance(monitor, str) or not monitor or not isinstance(text, str):
+            raise BadAlarm("an alarm names its monitor and says its text")
+        try:
+            severity = Severity(str(msg.get("severity")))
+        except ValueError as exc:
+            raise BadAlarm(f"unknown severity {msg.get('severity')!r}") from exc
+        if action is not None and not isinstance(action, dict):
+            raise BadAlarm("an alarm's action is a command object or null")
+        return cls(
+            monitor, severity, text, Action.from_command(action) if action is not None else None
+        )

@@ -40,29 +40,34 @@ class TaskManagerPort:
 
     def on_event(self, callback: Callable[[TaskEvent], None]) -> None:
         def translate(notice: Any) -> None:
-            kind = str(notice.kind)
-            task = str(notice.task or "")
-            cmd = {"action": task} if task else {}
-            if kind == "done" and task == "takeoff":
-                kind = "took_off"
-            elif kind == "done" and task in ("land", "emergency"):
-                kind = "landed"
-            elif kind == "started" and task == "land":
-                kind = "landing"
-            elif kind == "searching":
-                kind = "marker_lost"
-            elif kind in ("cancelled", "preempted"):
-                return
-            callback(TaskEvent(kind, cmd, str(notice.text or "")))
-            status = self.tm.status
-            if (
-                kind in ("done", "failed", "took_off")
-                and status.state == "idle"
-                and not status.queued
-            ):
-                callback(TaskEvent("idle"))
+            for event in task_events(str(notice.kind), str(notice.task or ""), notice.text):
+                callback(event)
+                status = self.tm.status
+                if (
+                    event.kind in ("done", "failed", "took_off")
+                    and status.state == "idle"
+                    and not status.queued
+                ):
+                    callback(TaskEvent("idle"))
 
         self.tm.on_event(translate)
+
+
+def task_events(kind: str, task: str, text: str | None) -> list[TaskEvent]:
+    """A task manager's notice (its ``kind`` and ``task``) as the dialog's events: none for
+    a cancelled or preempted task (the dialog made that change itself), else one."""
+    cmd = {"action": task} if task else {}
+    if kind == "done" and task == "takeoff":
+        kind = "took_off"
+    elif kind == "done" and task in ("land", "emergency"):
+        kind = "landed"
+    elif kind == "started" and task == "land":
+        kind = "landing"
+    elif kind == "searching":
+        kind = "marker_lost"
+    elif kind in ("cancelled", "preempted"):
+        return []
+    return [TaskEvent(kind, cmd, str(text or ""))]
 
 
 class VehicleAdapter:

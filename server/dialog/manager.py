@@ -20,6 +20,7 @@ import asyncio
 import contextlib
 import inspect
 import json
+import logging
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
@@ -38,6 +39,7 @@ from drone.commands import (
     parse_command,
 )
 from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, audit_outcome, not_flown
+from drone.preflight import EMERGENCY_DOWN, DroneFacts, refusal
 from drone.supervisor.alarms import Alarm
 from server.dialog import assist, clarify, confirm, replies
 from server.dialog.addressing import parse_address, recipients
@@ -51,10 +53,11 @@ from server.dialog.ports import (
     TaskPort,
     VehiclePort,
 )
-from server.dialog.preflight import EMERGENCY_DOWN, DroneFacts, refusal
 from server.dialog.states import MOTION, STATELESS, State, next_state
 from server.language.nlu import NLU, Interpretation, default_nlu
 from server.msgs import header
+
+log = logging.getLogger(__name__)
 
 UTTERANCE = "/console/utterance"
 REPLY = "/console/reply"
@@ -279,7 +282,7 @@ class DialogManager:
                 return
         elif drone and drone != self.drone:
             return
-        coro = self.handle_utterance(
+        coro = self._answer_heard(
             text,
             confidence=float(msg.get("confidence", 1.0) or 0.0),
             source=str(msg.get("source") or "speech"),
@@ -293,6 +296,17 @@ class DialogManager:
         task = loop.create_task(coro)
         self._pending.add(task)
         task.add_done_callback(self._pending.discard)
+
+    async def _answer_heard(
+        self, text: str, *, confidence: float, source: str, issued: float | None
+    ) -> None:
+        """A sentence heard on the graph, answered there: a drone that cannot be reached now
+        (a vehicle process not joined, or silent) is said, not lost in a task."""
+        try:
+            await self.handle_utterance(text, confidence=confidence, source=source, issued=issued)
+        except Exception as exc:  # the task's end: nobody else would see it
+            log.warning("%s: %r not answered: %s", self.drone, text, exc)
+            self._reply(f"{self.drone}: {exc}", "warn", text)
 
     async def _interpret_service(self, args: Mapping[str, Any]) -> dict[str, Any]:
         state = args.get("state") or None
@@ -520,7 +534,11 @@ class DialogManager:
                     queue.append(cmd)
                     said.append(replies.confirmation(cmd) + ".")
         if queue:
-            decisions = list(self.tasks.submit(list(queue)))
+            # A task manager in this process answers at once; a vehicle's, after its reply.
+            answer = self.tasks.submit(list(queue))
+            if inspect.isawaitable(answer):
+                answer = await answer
+            decisions = list(answer)
             refused = [d for d in decisions if not d.accepted]
             asking = [c for c, d in zip(queue, decisions, strict=False) if d.question]
             if asking:  # "Which chair? …": the next answer completes this command

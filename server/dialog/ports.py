@@ -52,8 +52,11 @@ class TaskEvent:
 
 
 class TaskPort(Protocol):
-    def submit(self, commands: Sequence[Command]) -> Sequence[TaskDecision]:
-        """Queue ``commands`` in order; one decision per command."""
+    def submit(
+        self, commands: Sequence[Command]
+    ) -> Sequence[TaskDecision] | Awaitable[Sequence[TaskDecision]]:
+        """Queue ``commands`` in order; one decision per command (a task manager in another
+        process answers with an awaitable)."""
         ...
 
     def cancel(self) -> None:

@@ -8,12 +8,11 @@ what its link declares (:func:`server.vehicles.host.link_spec` for that name and
 - it may advertise and publish only its own drone's topics (navdata or MAVROS, camera, pose,
   markers, task, ``/NAME/fleet/ltm_status``, ``/NAME/vehicle/*``): never another drone's, never
   a command topic (``/cmd_vel``, ``/ardrone/*``), never ``/console/*`` or ``/fleet/*`` of the
-  server (its dialog's replies go through ``/NAME/vehicle/reply``, which the console checks and
-  re-publishes: :mod:`server.vehicles.relay`);
-- it may provide only its own services (``/NAME/vehicle/control``, ``/NAME/vehicle/interpret``,
-  ``/NAME/fleet/plan``);
-- it may call only :data:`VEHICLE_CALLS` (the captioner, the fleet's patrol that its dialog
-  relays from an operator's utterance, which the lease judged where it entered).
+  server (it runs no dialog; what its own nodes say goes through ``/NAME/vehicle/reply``, which
+  the console checks and re-publishes: :mod:`server.vehicles.relay`);
+- it may provide only its own services (``/NAME/vehicle/control``, ``/NAME/fleet/plan``);
+- it may call none of the server's services (:data:`VEHICLE_CALLS` is empty: the captioner and
+  the fleet's patrol are the console dialog's own).
 
 A refusal is a rosbridge ``status`` error naming the vehicle ("vehicle uav1 may not publish to
 /console/reply") and a log line (the first of each kind, then every :data:`LOG_EVERY` th).
@@ -31,16 +30,15 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from server.fleet.messages import PATROL_SERVICE
 from server.http.security import SERVER_TOPIC_RE, Role, Security, TokenStore
 from server.settings import Settings
 from server.vehicles.keys import VehicleKeys
 
 log = logging.getLogger("uav_console.vehicle_link")
 
-# Services of the central server a vehicle calls (host.py: the captioner for "describe", and
-# RemoteFleet for "start/stop the patrol" said to this drone).
-VEHICLE_CALLS = frozenset({"/console/describe", "/" + PATROL_SERVICE.lstrip("/")})
+# Services of the central server a vehicle calls: none (what a vehicle needs of its console
+# comes as publications and its heartbeat).
+VEHICLE_CALLS: frozenset[str] = frozenset()
 LOG_EVERY = 100
 MAX_COUNTED = 1024
 
@@ -139,7 +137,8 @@ class VehicleLinkSecurity(Security):
         if role is Role.VEHICLE and who is not None:
             scope = self.scope(who)
             if action == "call":
-                text += f": a vehicle calls only {', '.join(sorted(scope.calls))}"
+                allowed = ", ".join(sorted(scope.calls)) or "none of the server's services"
+                text += f": a vehicle calls {allowed}"
             elif action.startswith("provide"):
                 text += f": a vehicle provides only its own, {', '.join(sorted(scope.services))}"
             else:

@@ -25,7 +25,6 @@ import zenoh
 from drone.bus import keys
 from drone.bus.errors import BusError, NoReply
 from drone.bus.payloads import Status, Telemetry
-from server.dialog.manager import UTTERANCE
 from server.graph import GraphError, ServiceError
 from server.msgs import header
 from server.nodes.vehicle_node import EMPTY, IMAGE, TWIST
@@ -75,9 +74,6 @@ class BusDroneStack(RemoteDroneStack):
         commander.watch(name, self._on_status, self._on_bus_telemetry, self._on_camera)
         self._mirror_sub = commander.session.declare_subscriber(
             keys.all_graph(commander.fleet, name), self._on_graph
-        )
-        self._utterances = graph.subscribe(
-            UTTERANCE, self._on_utterance, type="uav_console/Utterance", owner=self._owner
         )
         self._pending_topics: set[asyncio.Task[Any]] = set()
         owner = f"bus:{name}"
@@ -186,16 +182,6 @@ class BusDroneStack(RemoteDroneStack):
         if self.graph.loop is not None:
             self.graph.loop.call_soon_threadsafe(self._show, spec, msg)
 
-    def _on_utterance(self, msg: dict[str, Any]) -> None:
-        """A sentence typed or said in a console (rosbridge): the vehicle's dialog hears it,
-        as the vehicle link makes it (a door that answered it itself marks it answered)."""
-        if msg.get("answered") or self.linked or not self.on_bus:
-            return
-        keep = ("text", "confidence", "source", "drone", "asked_by")
-        args = {k: msg[k] for k in keep if k in msg}
-        issued = self.graph.issued
-        self._spawn_command("utterance", {**args, "heard": True, "issued": issued})
-
     def _spawn_command(self, op: str, args: dict[str, Any]) -> None:
         task = asyncio.get_running_loop().create_task(self._topic_command(op, args))
         self._pending_topics.add(task)
@@ -248,10 +234,8 @@ class BusDroneStack(RemoteDroneStack):
         log.warning("%s refused %s: %s", self.name, op, reply.reason)
         if reply.result:
             return {**reply.result, "accepted": False, "detail": reply.reason}
-        if op == "direct":
+        if op in ("direct", "submit", "preempt", "cancel"):  # the dialog says the reason
             return {"accepted": False, "detail": reply.reason}
-        if op == "utterance":
-            return {"reply": reply.reason, "commands": [], "accepted": False, "expects": ""}
         raise ServiceError(f"{self.name}/{op} failed: {reply.reason}")
 
     async def call(
@@ -283,7 +267,6 @@ class BusDroneStack(RemoteDroneStack):
 
     def close(self) -> None:
         self._mirror_sub.undeclare()  # type: ignore[no-untyped-call]
-        self._utterances.close()
         for sub in self._topic_subs:
             sub.close()
         for topic in self._advertised:

@@ -2,7 +2,8 @@
 the vehicle's own control ops, its status at 1 Hz and its camera, and the consoles it hears.
 
 The ops are those of the vehicle's control service (:meth:`VehicleHost._control`): ``direct``,
-``utterance``, ``telemetry``, ``truth``, ``fault``, and ``jog`` (its ``/cmd_vel``); each
+the task ops ``submit``, ``preempt`` and ``cancel`` (what a console's dialog understood, as
+typed commands), ``telemetry``, ``truth``, ``fault``, and ``jog`` (its ``/cmd_vel``); each
 command is judged first by the vehicle's own pilot lease
 (:class:`~drone.bus.lease.VehicleLease`), one lease for every console.
 """
@@ -10,6 +11,7 @@ command is judged first by the vehicle's own pilot lease
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import time
 from collections import deque
@@ -43,12 +45,12 @@ class BusVehicleSide:
     """See the module docstring; ``step(now)`` from the host's periodic loop."""
 
     def __init__(self, host: VehicleHost, bus: VehicleBus, spec: LinkSpec) -> None:
-        from server.dialog.manager import REPLY
+        from server.vehicles import names
 
         assert bus.session is not None
         self.host = host
         self.name = host.name
-        self.lease = VehicleLease(actions_of=self._actions_of)
+        self.lease = VehicleLease()
         self.commanded = CommandedVehicle(
             bus.session,
             bus.fleet,
@@ -67,8 +69,15 @@ class BusVehicleSide:
                 host.clock_offset.sample, sent, time.time()
             ),
         )
+        # the consoles' beats also carry the id of the flight recording, for our audit rows
+        self._recordings = bus.session.declare_subscriber(
+            keys.all_console_heartbeats(bus.fleet),
+            lambda sample: self._on_beat(sample, loop),
+        )
         self._alarms: deque[tuple[float, str]] = deque(maxlen=20)
-        self._reply_sub = host.graph.subscribe(REPLY, self._on_reply, type="uav_console/Reply")
+        self._alarm_sub = host.graph.subscribe(
+            names.alarm_topic(host.name), self._on_alarm, type=names.STRING
+        )
         self._next_status = 0.0
         self._next_latched = 0.0
         self._camera_sent = -1
@@ -96,29 +105,33 @@ class BusVehicleSide:
 
         return put
 
-    def _actions_of(self, text: str) -> set[str]:
-        nlu = getattr(self.host.dialog, "nlu", None)
-        if nlu is None:
-            return set()
-        return {str(c.get("action")) for c in nlu.interpret(text, None)}
+    def _on_beat(self, sample: zenoh.Sample, loop: asyncio.AbstractEventLoop) -> None:
+        """A console's beat (Zenoh thread): the recording id it carries, if any, as the link's
+        ``/console/recording`` gives it."""
+        try:
+            recording = json.loads(sample.payload.to_bytes()).get("recording")
+        except (ValueError, AttributeError):
+            return
+        if isinstance(recording, str) and len(recording) <= 128:
+            loop.call_soon_threadsafe(setattr, self.host, "recording_id", recording)
 
-    def _on_reply(self, msg: dict[str, Any]) -> None:
-        if msg.get("alarm"):
-            self._alarms.append((time.monotonic(), str(msg.get("text", ""))))
+    def _on_alarm(self, msg: dict[str, Any]) -> None:
+        """A supervisor's alarm (``/NAME/vehicle/alarm``): in the status for a while."""
+        try:
+            text = str(json.loads(str(msg.get("data", ""))).get("text", ""))
+        except (ValueError, AttributeError):
+            return
+        self._alarms.append((time.monotonic(), text))
 
     async def _command(self, command: Command) -> dict[str, Any]:
         """One command, through the vehicle's control ops; refusals with their reason."""
         if command.op == "jog":
             return self._jog(command)
-        if command.op == "utterance" and command.args.get("heard") is True:
-            return self._heard(command)
         args: dict[str, Any] = {**command.args, "op": command.op}
         if command.issued is not None:
             args["issued"] = command.issued
         if command.op == "direct" and command.is_stop and args.get("id") is None:
             args["id"] = command.id  # a stop runs once per id, whichever road brings it
-        if command.op == "utterance":
-            args.setdefault("role", "pilot")
         try:
             out = await self.host._control(args)
         except VehicleError as exc:
@@ -137,17 +150,6 @@ class BusVehicleSide:
         issued = self.host._issued_arg({"issued": command.issued})
         self.host.graph.publish(f"{self.host.options.prefix}/cmd_vel", twist, issued=issued)
         return {"accepted": True, "detail": "jog sent"}
-
-    def _heard(self, command: Command) -> dict[str, Any]:
-        """A sentence a console heard (its ``/console/utterance``): on this vehicle's graph,
-        where its dialog judges whether it is addressed, as one typed in its own console."""
-        from server.dialog.manager import UTTERANCE
-
-        keep = ("text", "confidence", "source", "drone", "asked_by")
-        msg = {k: command.args[k] for k in keep if k in command.args}
-        issued = self.host._issued_arg({"issued": command.issued})
-        self.host.graph.publish(UTTERANCE, msg, issued=issued)
-        return {"accepted": True, "detail": "heard"}
 
     def step(self, now: float) -> None:
         """Publish the status when due, the camera's newest frame if new, and the latched
@@ -189,6 +191,7 @@ class BusVehicleSide:
             sub.close()
         for pub in self._graph_pubs.values():
             pub.undeclare()  # type: ignore[no-untyped-call]
-        self._reply_sub.close()
+        self._alarm_sub.close()
+        self._recordings.undeclare()  # type: ignore[no-untyped-call]
         self.presence.close()
         self.commanded.close()

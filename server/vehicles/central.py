@@ -3,13 +3,14 @@
 - ``/vehicle-link``: a rosbridge v2 WebSocket for vehicles only. It takes a vehicle key
   (:mod:`server.vehicles.keys`; never the pilot or observer token) and no browser (a request
   with ``Origin`` is refused); a vehicle may publish only its own drone's topics and provide only
-  its own services (:mod:`server.vehicles.access`). Its dialog's replies and state come under its
-  own name and are re-published here after a check (:mod:`server.vehicles.relay`), so this
+  its own services (:mod:`server.vehicles.access`). A vehicle runs no dialog: each drone's
+  dialog runs here (:mod:`server.vehicles.console_dialog`); what a vehicle's nodes say comes
+  under its own name and is re-published after a check (:mod:`server.vehicles.relay`), so this
   process is the only publisher of ``/console/reply``.
 - Keys: ``serve`` makes one per vehicle it spawns (``<data dir>/vehicle-keys``) and hands it over
   in the child's environment (``UAVC_VEHICLE_KEY``), not on its command line.
 - Discovery: every ``/NAME/vehicle/info`` on the graph becomes a drone of the runtime
-  (:class:`~server.vehicles.remote.RemoteDroneStack` + :class:`RemoteDialog`), whether
+  (:class:`~server.vehicles.remote.RemoteDroneStack` and its dialog), whether
   ``serve`` spawned the vehicle or it joined from another host (``uav-console vehicle``).
 - Heartbeat: ``/vehicles/heartbeat`` at 10 Hz, so a vehicle can tell a stalled server.
 - Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle`` child
@@ -51,11 +52,12 @@ from server.vehicles import names
 from server.vehicles.access import VehicleLinkSecurity
 from server.vehicles.keys import VehicleKeys, vehicle_env
 from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
-from server.vehicles.relay import DialogRelay
+from server.vehicles.relay import ReplyRelay
 from server.vehicles.tickets import TICKET_TTL_S, DoorSecrets, mint
 
 if TYPE_CHECKING:
     from server.runtime import Runtime
+    from server.vehicles.console_dialog import RemoteDialog
 
 log = logging.getLogger("uav_console")
 
@@ -185,8 +187,9 @@ class VehicleCentral:
         self.prefixes: dict[str, str] = {}
         security = VehicleLinkSecurity(s, runtime.tokens, self.keys, prefix_of=self.prefix_of)
         self.ctx = BridgeContext(runtime.graph, security, s)
-        self.relays: dict[str, DialogRelay] = {}
         self.processes: dict[str, VehicleProcess] = {}
+        self.dialogs: list[RemoteDialog] = []
+        self.relays: dict[str, ReplyRelay] = {}
         self.alerts: list[str] = []
         self._tasks: list[asyncio.Task[Any]] = []
         self._stopping = False
@@ -390,9 +393,13 @@ class VehicleCentral:
         self._publish_recording(rec.touch())
 
     def _publish_recording(self, recording: str) -> None:
+        """The recording's id to the vehicles: on the link, and at once in a beat on the bus
+        (not only at the next one), when it changed."""
         if recording != self._recording_sent:
             self._recording_sent = recording
             self.runtime.graph.publish(names.RECORDING, {"data": recording})
+            if self.commander is not None:
+                self.commander.beat(time.time(), recording)
 
     async def stop(self) -> None:
         if self._utterances is not None:
@@ -410,6 +417,9 @@ class VehicleCentral:
         if self.bus is not None:
             self.bus.close()
             self.bus = None
+        for dialog in self.dialogs:
+            dialog.close()
+        self.dialogs.clear()
         for relay in self.relays.values():
             relay.close()
         self.relays.clear()
@@ -421,8 +431,10 @@ class VehicleCentral:
 
     # ------------------------------------------------------------------ drones
     def _register(self, name: str, prefix: str, *, simulated: bool) -> None:
+        from server.dialog.adapters import CallableDescriber
         from server.vehicles.bus_remote import BusDroneStack
-        from server.vehicles.remote import RemoteDialog, RemoteDroneStack
+        from server.vehicles.console_dialog import RemoteDialog
+        from server.vehicles.remote import RemoteDroneStack
 
         rt = self.runtime
         if name in rt.drones:
@@ -442,8 +454,23 @@ class VehicleCentral:
             stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
         stack.touch_recording = self.touch_recording
         rt.drones[name] = stack
-        self.relays[name] = DialogRelay(rt.graph, name, prefix)
-        rt.dialogs[name] = RemoteDialog(stack)
+        # Its dialog runs here: it understands what is said to the drone and sends the
+        # vehicle typed commands; it says the vehicle supervisor's alarms.
+        dialog = RemoteDialog(
+            rt.graph,
+            rt.settings,
+            stack,
+            rt.world,
+            CallableDescriber(lambda: rt.describe(name)),
+            rt.audit,
+            nlu=rt.nlu,
+            fleet=rt.fleet.central,
+            drones=lambda: list(rt.drones) or [name],
+        )
+        self.dialogs.append(dialog)
+        rt.dialogs[name] = dialog
+        self.relays[name] = ReplyRelay(rt.graph, name)  # what its own nodes say
+        self._tasks.append(asyncio.create_task(dialog.run(), name=f"dialog:{name}"))
         # Listings (REST, fleet status, the console's selector) follow the names, not the
         # order in which the vehicles joined.
         for table in (rt.drones, rt.dialogs):
@@ -512,7 +539,7 @@ class VehicleCentral:
             beat = json.dumps({"n": n, "t": now})
             self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
             if self.commander is not None:
-                self.commander.beat(now)
+                self.commander.beat(now, self.runtime.recording_id() or "")
             self._publish_recording(self.runtime.recording_id() or "")
             if n % DISCOVER_EVERY == 0:
                 try:

@@ -2,7 +2,7 @@
 
 ``POST /api/v1/drones/{id}/{action}`` comes here. A take-off the drone cannot do now (in
 emergency, battery below the low threshold, no link) is refused before anything is sent, with
-the reason and the way out (server.dialog.preflight): the caller gets ``accepted: false`` and
+the reason and the way out (drone.preflight): the caller gets ``accepted: false`` and
 the reason, the dialog says it aloud on ``/console/reply``. Every action, accepted or refused,
 is written to the audit log with where it came from (a button, a keyboard shortcut, a script),
 like a spoken command.
@@ -31,7 +31,7 @@ from drone.deadline import (
     label,
     not_flown,
 )
-from server.dialog.preflight import DroneFacts, refusal
+from drone.preflight import DroneFacts, refusal
 from server.vehicles.stops import StopVerdict
 
 # Where a direct action came from: the page says which (X-Command-Source); anything else is
@@ -101,7 +101,7 @@ async def perform_async(
 ) -> DirectOutcome:
     """:func:`perform` for any drone: a drone in its own vehicle process
     (``server.vehicles.remote``, which has ``act``) checks and does the action there, on its
-    state now, and its own dialog follows and says a refusal; the audit row is written here.
+    state now; its dialog (here) follows and says a refusal; the audit row is written here.
     A motion action is judged against its deadline here, as the console hands it over, and
     by the vehicle again as it receives it (``act_in_time``).
 
@@ -132,6 +132,7 @@ async def perform_async(
             except Exception as exc:
                 _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
                 raise
+            _tell(dialog, action, outcome)
         _audit(audit, stack, dialog, action, source, outcome)
         return outcome
     try:
@@ -140,8 +141,19 @@ async def perform_async(
         _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
         raise
     outcome = DirectOutcome(accepted, detail)
+    _tell(dialog, action, outcome)
     _audit(audit, stack, dialog, action, source, outcome)
     return outcome
+
+
+def _tell(dialog: Any, action: str, outcome: DirectOutcome) -> None:
+    """The drone's dialog follows an action a vehicle process did, or says its refusal."""
+    if dialog is None:
+        return
+    if outcome.accepted:
+        dialog.note_direct(action)
+    else:
+        dialog.announce(outcome.detail, "warn")
 
 
 def perform_stop(
@@ -210,6 +222,8 @@ async def perform_stop_async(
     except Exception as exc:
         _audit(audit, stack, dialog, action, source, DirectOutcome(False, str(exc)))
         raise
+    if verdict.accepted and dialog is not None:
+        dialog.note_direct(action)
     _audit(audit, stack, dialog, action, source, DirectOutcome(verdict.accepted, verdict.detail))
     return verdict
 

@@ -4,8 +4,11 @@
 process`` spawns one per drone) runs, on its own event loop and its own graph: the simulator
 (``--drone sim``) or the driver of a real drone, the vehicle (EKF, 100 Hz controller thread,
 perception), the task manager, the vehicle node (navdata, camera, pose, markers, task, jog,
-operator watchdog), the dialog manager with its ANS monitors, the fleet's LTM, and the safety
-door. :class:`~server.vehicles.link.GraphLink` mirrors that graph onto the central one, so the
+operator watchdog), the supervisor (the ANS monitors), the fleet's LTM, and the safety door;
+nothing of the web stack, the NLU or the dialog (tests/isolation/test_lean_vehicle.py). The
+console runs this drone's dialog: it understands what the operator says and hands the task
+manager typed commands (:mod:`server.vehicles.task_ops`), and it says the supervisor's alarms.
+:class:`~server.vehicles.link.GraphLink` mirrors that graph onto the central one, so the
 central server and its clients see the drone exactly as an in-process one. The link opens with
 the vehicle's own key (``--key-file`` or ``UAVC_VEHICLE_KEY``: :mod:`server.vehicles.keys`),
 never the pilot token; the central server lets it publish only this drone's topics.
@@ -35,7 +38,6 @@ import secrets
 import signal
 import sys
 import time
-from collections.abc import Awaitable
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -46,7 +48,6 @@ from drone.bus.errors import BusError
 from drone.bus.vehicle import VehicleBus
 from drone.deadline import BadIssued, ClockOffset, parse_issued
 from drone.sim.errors import AddressInUse
-from server.fleet.messages import FLEET_TOPIC, FLEET_TYPE, PATROL_SERVICE
 from server.fleet.planner import FlightModel
 from server.http.tls import TLSError, server_context
 from server.settings import Settings
@@ -62,19 +63,16 @@ from server.vehicles.door_protocol import (
     Superseded,
     stop_message,
 )
-from server.vehicles.errors import (
-    CannotStart,
-    DoorProtocolError,
-    RemoteCallError,
-    VehicleError,
-)
+from server.vehicles.errors import CannotStart, DoorProtocolError, VehicleError
 from server.vehicles.link import GraphLink
 from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
-from server.vehicles.relay import dialog_out
+from server.vehicles.relay import replies_out
+from server.vehicles.task_ops import TASK_OPS, notice_message, run_task_op
 from server.vehicles.watch import CentralWatch, LossAction
 
 if TYPE_CHECKING:
     from drone.supervisor import Alarm
+    from server.tasks.manager import TaskNotice
     from server.vehicles.direct_actions import DirectOutcome
     from server.vehicles.stops import StopVerdict
 
@@ -116,12 +114,10 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
     topics (no camera over MAVLink).
 
     What it publishes and provides is all its own drone's (the central server lets a vehicle
-    publish nothing else: :mod:`server.vehicles.access`); its dialog speaks under
-    ``/NAME/vehicle/*`` (:mod:`server.vehicles.relay`)."""
-    from server.dialog.manager import UTTERANCE
+    publish nothing else: :mod:`server.vehicles.access`); its task notices and alarms go out
+    under ``/NAME/vehicle/*`` for the console's dialog, and what its nodes say on its
+    ``/NAME/vehicle/reply`` (:mod:`server.vehicles.relay`)."""
     from server.fleet.messages import (
-        FLEET_TOPIC,
-        FLEET_TYPE,
         PLAN_SERVICE,
         PLAN_SERVICE_TYPE,
         STATUS_TOPIC,
@@ -156,8 +152,8 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         TopicSpec(f"{p}/uav/pose", POSE),
         TopicSpec(f"{p}/uav/markers", MARKERS),
         TopicSpec(f"{p}/uav/task", TASK, latch=True),
+        TopicSpec(names.task_event_topic(name), names.STRING),
         TopicSpec(names.reply_topic(name), "uav_console/Reply"),
-        TopicSpec(names.state_topic(name), "uav_console/DialogState", latch=True),
         TopicSpec(f"/{name}/{STATUS_TOPIC}", STATUS_TYPE),
         TopicSpec(names.info_topic(name), names.STRING, latch=True),
         TopicSpec(names.telemetry_topic(name), names.STRING),
@@ -168,52 +164,14 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         TopicSpec(f"{p}/ardrone/takeoff", EMPTY),
         TopicSpec(f"{p}/ardrone/land", EMPTY),
         TopicSpec(f"{p}/ardrone/reset", EMPTY),
-        TopicSpec(UTTERANCE, "uav_console/Utterance"),
-        TopicSpec(FLEET_TOPIC, FLEET_TYPE),
         TopicSpec(names.HEARTBEAT, names.STRING),
         TopicSpec(names.RECORDING, names.STRING, latch=True),
     )
     services = (
         (names.control_service(name), names.CONTROL_TYPE),
         (f"/{name}/{PLAN_SERVICE}", PLAN_SERVICE_TYPE),
-        (names.interpret_service(name), "uav_console/Interpret"),
     )
     return LinkSpec(out, inn, services, owner=f"link:{name}")
-
-
-@dataclass(frozen=True)
-class PatrolAnswer:
-    ok: bool
-    text: str
-
-
-class RemoteFleet:
-    """The dialog's fleet port in a vehicle process: the central server's patrol
-    (``/fleet/patrol``), so "start the patrol" said to this drone starts the fleet's."""
-
-    def __init__(self, core: GraphLinkCore) -> None:
-        self.core = core
-
-    async def _call(self, args: dict[str, Any]) -> PatrolAnswer:
-        try:
-            out = await self.core.call(PATROL_SERVICE, args, timeout_s=5.0)
-        except RemoteCallError as exc:
-            return PatrolAnswer(False, f"I cannot reach the fleet manager now ({exc}).")
-        if not isinstance(out, dict):
-            return PatrolAnswer(False, "The fleet manager gave no answer.")
-        return PatrolAnswer(bool(out.get("ok")), str(out.get("text", "")))
-
-    def start(self, threshold: float = 0.30) -> Awaitable[PatrolAnswer]:
-        return self._call({"op": "start", "threshold": threshold})
-
-    def stop(self) -> Awaitable[PatrolAnswer]:
-        return self._call({"op": "stop"})
-
-    def pause(self) -> Awaitable[PatrolAnswer]:
-        return self._call({"op": "pause"})
-
-    def resume(self) -> Awaitable[PatrolAnswer]:
-        return self._call({"op": "resume"})
 
 
 class VehicleHost:
@@ -244,14 +202,11 @@ class VehicleHost:
 
     async def start(self) -> None:
         from drone.sim.world import load_world
-        from server.dialog.adapters import CallableDescriber, TaskManagerPort, VehicleAdapter
-        from server.dialog.manager import DialogManager
         from server.fleet.bus_ltm import BusLtmNode
         from server.fleet.geo import origin_of
         from server.fleet.ltm import LocalTaskManager
         from server.fleet.stations import station_positions
         from server.graph import Graph
-        from server.language.nlu import default_nlu
         from server.store import AuditLog
         from server.vehicles.mavlink_stack import is_mavlink
         from server.vehicles.stack import build_drone_stack
@@ -300,25 +255,16 @@ class VehicleHost:
         self._recording_sub = self.graph.subscribe(
             names.RECORDING, self._on_recording, type=names.STRING
         )
-        self.fleet_names: list[str] = []
-        self._fleet_sub = self.graph.subscribe(FLEET_TOPIC, self._on_fleet, type=FLEET_TYPE)
-        self.dialog = DialogManager(
-            self.graph,
-            s,
-            TaskManagerPort(tasks),
-            VehicleAdapter(vehicle, self.world),
-            CallableDescriber(self._describe),
-            self.audit,
-            vehicle.clock.now,
-            nlu=default_nlu(str(s.grammar_dir)),
-            drone=self.name,
-            prefix=o.prefix,
-            # the central server's patrol, and every drone's name ("uav2 land", "all land")
-            fleet=RemoteFleet(self.core),
-            drones=lambda: self.fleet_names or [self.name],
-        )
-        # its replies, state and interpret service, under this vehicle's own names
-        self._dialog_out = dialog_out(self.graph, self.name, o.prefix)
+        # what its nodes say (a late command, an autopilot's denial), under its own name
+        self._replies_out = replies_out(self.graph, self.name)
+        # the task manager's notices, for the console's dialog to follow and say
+        self.graph.advertise(names.task_event_topic(self.name), names.STRING)
+        loop = asyncio.get_running_loop()
+
+        def notice(n: TaskNotice) -> None:  # from whichever thread gave it: out on the loop
+            loop.call_soon_threadsafe(self._publish_task_event, notice_message(n, tasks))
+
+        tasks.on_event(notice)
         pad = station_positions(self.world, o.index + 1)[-1]
         ltm = LocalTaskManager(
             self.name,
@@ -380,20 +326,21 @@ class VehicleHost:
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         supervisor = self.stack.supervisor
         assert supervisor is not None
-        supervisor.on_alarm(self.dialog.hear)
         self.graph.advertise(names.alarm_topic(self.name), names.STRING)
         supervisor.on_alarm(self._publish_alarm)
         self._tasks = [
             asyncio.create_task(supervisor.run(vehicle.clock.now), name=f"ans:{self.name}"),
-            asyncio.create_task(self.dialog.run(), name=f"dialog:{self.name}"),
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]
 
     def _publish_alarm(self, alarm: Alarm) -> None:
-        """Every alarm on ``/NAME/vehicle/alarm`` too: the console, its clients and the flight
-        recording see what the supervisor did and why."""
+        """Every alarm on ``/NAME/vehicle/alarm``: the console's dialog says it, and its
+        clients and the flight recording see what the supervisor did and why."""
         msg = {"data": json.dumps(alarm.as_message(self.name))}
         self.graph.publish(names.alarm_topic(self.name), msg)
+
+    def _publish_task_event(self, event: dict[str, Any]) -> None:
+        self.graph.publish(names.task_event_topic(self.name), {"data": json.dumps(event)})
 
     def info(self) -> dict[str, Any]:
         return {
@@ -405,37 +352,21 @@ class VehicleHost:
             "pid": os.getpid(),
         }
 
-    async def _describe(self) -> tuple[str, float | None]:
-        try:
-            out = await self.core.call("/console/describe", {"drone": self.name}, timeout_s=10.0)
-        except RemoteCallError as exc:
-            return f"I cannot describe the scene now: {exc}.", None
-        ms = float(out.get("ms", -1.0)) if isinstance(out, dict) else -1.0
-        text = str(out.get("text", "")) if isinstance(out, dict) else str(out)
-        return text, (ms if ms >= 0 else None)
-
     def _on_recording(self, msg: dict[str, Any]) -> None:
         self.recording_id = str(msg.get("data", ""))
-
-    def _on_fleet(self, msg: dict[str, Any]) -> None:
-        drones = msg.get("drones")
-        if isinstance(drones, list):
-            found = {str(d.get("name")) for d in drones if isinstance(d, dict) and d.get("name")}
-            self.fleet_names = sorted(found | {self.name}, key=names.drone_order)
 
     def direct(
         self, action: str, battery_low_pct: float | None = None, issued: float | None = None
     ) -> DirectOutcome:
-        """A button, key or REST action: checked against the drone's state now, sent, and
-        followed (or its refusal said) by this vehicle's dialog, as in-process; one past its
-        deadline (``issued`` on our clock) is not sent. The central server writes the audit
-        row."""
+        """A button, key or REST action: checked against the drone's state now and sent; one
+        past its deadline (``issued`` on our clock) is not sent. The console's dialog says a
+        refusal and the console writes the audit row."""
         from server.vehicles.direct_actions import perform
 
         low = self.settings.battery_low_pct if battery_low_pct is None else battery_low_pct
         return perform(
             self.stack,
-            self.dialog,
+            None,
             None,
             action,
             source="rest",
@@ -480,7 +411,7 @@ class VehicleHost:
 
         return perform_stop(
             self.stack,
-            self.dialog,
+            None,
             self.audit if road == "door" else None,
             action,
             stop_id,
@@ -559,21 +490,17 @@ class VehicleHost:
             if self.stack.sim is None:
                 raise VehicleError(f"{self.name} is a real drone: no ground truth")
             return dict(self.stack.truth())
+        if op in TASK_OPS:
+            assert self.stack.tasks is not None
+            return run_task_op(self.stack.tasks, str(op), args)
         if op == "utterance":
-            result = await self.dialog.handle_utterance(
-                str(args.get("text", "")),
-                confidence=float(args.get("confidence", 1.0)),
-                source=str(args.get("source", "rest")),
-                role=str(args.get("role", "pilot")),
-                issued=self._issued_arg(args),
+            raise VehicleError(
+                "this vehicle runs no dialog: its console understands sentences and sends "
+                "typed commands (submit, preempt, cancel)"
             )
-            return {
-                "reply": result.reply,
-                "commands": result.commands,
-                "accepted": result.accepted,
-                "expects": result.expects,
-            }
-        raise VehicleError(f"unknown op {op!r} (direct, fault, telemetry, truth, utterance)")
+        raise VehicleError(
+            f"unknown op {op!r} (direct, submit, preempt, cancel, fault, telemetry, truth)"
+        )
 
     async def _periodic(self) -> None:
         """Telemetry at 10 Hz, the LTM at 5 Hz, the central-loss watch at 20 Hz."""
@@ -665,9 +592,8 @@ class VehicleHost:
         if self.bus is not None:
             self.bus.close()
         self._heartbeat_sub.close()
-        self._fleet_sub.close()
         self._recording_sub.close()
-        self._dialog_out.close()
+        self._replies_out.close()
         self.ltm.close()
         self.core.close()
         st = self.stack

@@ -11,12 +11,16 @@ A vehicle process puts its drone on the central graph through the vehicle link
   ``GET /drones/{id}``, plus ``truth`` for a simulated drone);
 - ``/NAME/vehicle/control`` (service ``uav_console/VehicleControl``; args ``{op, ...}``): ``op``
   is ``direct`` (``action``), ``fault`` (``kind``, ``duration_s``, ``battery_pct``,
-  ``wind_mps``) or ``utterance`` (``text``, ``confidence``, ``source``, ``role``);
-- ``/NAME/vehicle/reply`` (uav_console/Reply), ``/NAME/vehicle/state`` (uav_console/DialogState,
-  latched) and the service ``/NAME/vehicle/interpret``: the vehicle's dialog, under the vehicle's
-  own name. The central server checks each reply (it names this drone, a known level) and is the
-  only publisher of ``/console/reply``, ``PREFIX/console/state`` and ``PREFIX/console/interpret``
-  (:mod:`server.vehicles.relay`): a vehicle publishes nothing of the server's own;
+  ``wind_mps``), ``telemetry``, ``truth``, or a task op that the console's dialog sends what it
+  understood with: ``submit`` (``commands``), ``preempt`` (``command``, ``by``), ``cancel``
+  (typed commands, drone/commands.py; :mod:`server.vehicles.task_ops`);
+- ``/NAME/vehicle/task_event`` (std_msgs/String; ``data`` = JSON ``{kind, text, task, state,
+  queued}``): the task executor's notices, which the console's dialog follows and says;
+- ``/NAME/vehicle/alarm`` (std_msgs/String): the supervisor's alarms, which the console's dialog
+  says; ``/NAME/vehicle/reply`` (uav_console/Reply): what the vehicle's nodes say themselves (a
+  command past its deadline, a MAVLink autopilot's denial), checked and re-published by the
+  console (:mod:`server.vehicles.relay`). The vehicle runs no dialog: the console is the only
+  publisher of ``/console/reply``, ``PREFIX/console/state`` and ``PREFIX/console/interpret``;
 - ``/console/recording`` (std_msgs/String, latched, from the central server): the id of the
   flight recording being written (``""``: none), for the vehicle's audit rows; published before
   an operator's command is passed on, so its rows carry the recording it opened;
@@ -59,15 +63,13 @@ def control_service(name: str) -> str:
 
 
 def reply_topic(name: str) -> str:
+    """What the vehicle's own parts say (uav_console/Reply; :mod:`server.vehicles.relay`)."""
     return f"/{name}/vehicle/reply"
 
 
-def state_topic(name: str) -> str:
-    return f"/{name}/vehicle/state"
-
-
-def interpret_service(name: str) -> str:
-    return f"/{name}/vehicle/interpret"
+def task_event_topic(name: str) -> str:
+    """The task executor's notices (``std_msgs/String``, JSON: :mod:`server.vehicles.task_ops`)."""
+    return f"/{name}/vehicle/task_event"
 
 
 def drone_order(name: str) -> tuple[str, int, str]:

@@ -3,10 +3,11 @@
 :class:`RemoteDroneStack` answers everything the REST routes ask of a
 :class:`~server.vehicles.stack.DroneStack` (telemetry, direct actions, the latest JPEG, ground
 truth, faults) from what the vehicle publishes over the link (``/NAME/vehicle/telemetry``, the
-camera topic) and through its control service; :class:`RemoteDialog` answers ``POST /command``
-through the vehicle's own dialog manager. Stops (land, emergency) are sent and answered at once
-("emergency sent"), as in-process; other direct actions get the vehicle's own verdict (it checks
-them against its drone's state now, not against telemetry 0.1 s old).
+camera topic) and through its control service; the drone's dialog runs in this process
+(:mod:`server.vehicles.console_dialog`) and hands the vehicle typed commands. Stops (land,
+emergency) are sent and answered at once ("emergency sent"), as in-process; other direct
+actions get the vehicle's own verdict (it checks them against its drone's state now, not
+against telemetry 0.1 s old).
 
 A vehicle that ``serve`` has just spawned (or restarted) takes a few seconds to join: calls made
 meanwhile wait for it (:attr:`RemoteDroneStack.expected_until`, at most ``JOIN_WAIT_S``) instead
@@ -31,9 +32,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 from drone.deadline import Expired
 from server.captioner.grounding import SeenMarker, bearing_deg
-from server.dialog.manager import DialogResult
 from server.graph import Graph, GraphError, NotFound, ServiceError
-from server.msgs import header
 from server.vehicles import names
 from server.vehicles.direct_actions import DirectOutcome
 from server.vehicles.errors import RemoteCallError, VehicleUnavailable
@@ -489,61 +488,3 @@ def _log_stop_failure(name: str, action: str) -> Callable[[asyncio.Future[Any]],
             log.error("%s: %s not delivered: %s", name, action, fut.exception())
 
     return done
-
-
-class RemoteDialog:
-    """``runtime.dialogs[name]`` for a vehicle process: its dialog manager, over the link."""
-
-    def __init__(self, stack: RemoteDroneStack) -> None:
-        self.stack = stack
-
-    def note_direct(self, action: str) -> None:
-        """A button acted on the drone directly. The vehicle's own dialog manager follows
-        the drone from its navdata within one ANS period; the web process keeps no state."""
-
-    def announce(self, text: str, level: str = "info") -> None:
-        """Say ``text`` to every console (a refused button), as the vehicle's dialog would."""
-        msg = {
-            "header": header(now=None),
-            "text": f"{self.stack.name}: {text}" if self.stack.prefix else text,
-            "level": level,
-            "speak": True,
-            "utterance": "",
-            "commands": "[]",
-        }
-        self.stack.graph.publish("/console/reply", msg)
-
-    async def handle_utterance(
-        self,
-        text: str,
-        confidence: float = 1.0,
-        source: str = "text",
-        role: str = "pilot",
-        issued: float | None = None,
-    ) -> DialogResult:
-        """The vehicle's dialog's answer (``issued``: when it was said, console clock; the
-        vehicle judges the deadline on its own clock).
-
-        Raises:
-            VehicleUnavailable: the vehicle has not joined within ``COMMAND_JOIN_WAIT_S``, is
-                not connected, or is (or falls) silent for ``SILENT_S``.
-        """
-        touch = getattr(self.stack, "touch_recording", None)
-        if touch is not None:  # the recording's id reaches the vehicle before the utterance
-            touch()
-        args: dict[str, Any] = {"op": "utterance", "text": text, "source": source, "role": role}
-        args["confidence"] = confidence if math.isfinite(confidence) else 0.0
-        if issued is not None:
-            args["issued"] = issued
-        try:
-            out = await self.stack.call(args, join_wait_s=COMMAND_JOIN_WAIT_S, silent_s=SILENT_S)
-        except VehicleUnavailable:
-            raise  # REST: 503 with Retry-After, within a few seconds
-        except (GraphError, RemoteCallError) as exc:
-            return DialogResult(f"{self.stack.name} cannot be reached now ({exc}).", [], False)
-        return DialogResult(
-            str(out.get("reply", "")),
-            list(out.get("commands") or []),
-            bool(out.get("accepted")),
-            str(out.get("expects") or ""),
-        )

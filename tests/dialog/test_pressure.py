@@ -8,11 +8,11 @@ from dataclasses import replace
 
 import pytest
 
+from drone.preflight import EMERGENCY_DOWN, DroneFacts, refusal
 from server.captioner.grounding import SeenMarker, bearing_deg, ground_marker_ids
 from server.dialog import assist
 from server.dialog.addressing import Address, parse_address, recipients
 from server.dialog.defaults import fill_defaults
-from server.dialog.preflight import EMERGENCY_DOWN, DroneFacts, refusal
 from server.dialog.states import State
 from tests.dialog.test_manager import NLU_, Rig
 

@@ -1,7 +1,6 @@
 """The vehicle process is lean (issue 27): a whole vehicle started in a fresh interpreter
-loads no web stack (FastAPI), no ONNX runtime, no speech, captioner or recorder; and, still to
-come, no NLU and no dialog (they answer utterances in the vehicle until the console's dialog
-drives the vehicle's task executor over the bus)."""
+loads no web stack (FastAPI), no ONNX runtime, no speech, captioner or recorder, no NLU and no
+dialog (the console's dialog drives the vehicle's task executor with typed commands)."""
 
 from __future__ import annotations
 
@@ -42,16 +41,8 @@ def probe(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 
 
 @pytest.mark.timeout(240)
-@pytest.mark.parametrize("part", ["fastapi", "onnxruntime", "speech", "captioner", "recorder"])
-def test_the_vehicle_process_loads_none_of_the_web_stack(probe: dict[str, Any], part: str) -> None:
-    assert part not in probe["loaded"], probe["loaded"]
-
-
-@pytest.mark.timeout(240)
-@pytest.mark.xfail(
-    strict=True,
-    reason="the dialog (and with it the NLU) still answers utterances in the vehicle process",
+@pytest.mark.parametrize(
+    "part", ["fastapi", "onnxruntime", "speech", "captioner", "recorder", "nlu", "dialog"]
 )
-@pytest.mark.parametrize("part", ["nlu", "dialog"])
-def test_the_vehicle_process_loads_no_nlu_and_no_dialog(probe: dict[str, Any], part: str) -> None:
+def test_the_vehicle_process_loads_none_of_the_web_stack(probe: dict[str, Any], part: str) -> None:
     assert part not in probe["loaded"], probe["loaded"]

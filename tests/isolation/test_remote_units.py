@@ -19,10 +19,37 @@ from server.vehicles import names
 from server.vehicles.errors import VehicleUnavailable
 from server.vehicles.remote import RemoteDroneStack
 from tests.dialog.test_manager import Rig
+from tests.support.polling import until_async
 
 
 def _stack(graph: Graph) -> RemoteDroneStack:
     return RemoteDroneStack(graph, "uav1", "", simulated=True)
+
+
+def _dialog(graph: Graph, stack: RemoteDroneStack, drones: list[str] | None = None) -> Any:
+    """The console's dialog for ``stack``'s drone (no captioner, audit or fleet)."""
+    from server.language.nlu import default_nlu
+    from server.settings import Settings
+    from server.vehicles.console_dialog import RemoteDialog
+
+    return RemoteDialog(
+        graph,
+        Settings(),
+        stack,
+        None,
+        None,
+        None,
+        nlu=default_nlu(),
+        fleet=None,
+        drones=lambda: drones or [stack.name],
+    )
+
+
+def _flying(stack: RemoteDroneStack, dialog: Any) -> None:
+    """The vehicle's telemetry says it flies, and its dialog has followed."""
+    stack.last = {"flying": True, "link_ok": True, "battery_pct": 80.0, "battery_known": True}
+    stack.last_t = time.monotonic()
+    dialog.step(0.0)
 
 
 async def test_a_call_waits_for_a_starting_vehicle_to_join() -> None:
@@ -153,9 +180,10 @@ async def test_a_command_to_a_vehicle_that_does_not_join_gives_up_within_a_few_s
     graph.bind_loop(asyncio.get_running_loop())
     stack = _stack(graph)
     stack.expect()  # restarting: other calls may wait 30 s for it
+    dialog = _dialog(graph, stack)
     t0 = time.monotonic()
     with pytest.raises(VehicleUnavailable, match="has not joined") as caught:
-        await remote.RemoteDialog(stack).handle_utterance("take off")
+        await dialog.handle_utterance("take off")
     assert time.monotonic() - t0 < 5.0  # before: the whole JOIN_WAIT_S (30 s), then a 200
     assert caught.value.drone == "uav1" and caught.value.retry_after_s > 0
     assert stack.expected_until is not None  # still expected: a retry waits again
@@ -179,7 +207,8 @@ async def test_a_silent_vehicle_is_sent_no_command_and_one_falling_silent_is_giv
         return {}
 
     graph.advertise_service(names.control_service("uav1"), names.CONTROL_TYPE, control)
-    dialog = remote.RemoteDialog(stack)
+    dialog = _dialog(graph, stack)
+    _flying(stack, dialog)
     stack.last_t = time.monotonic() - 1.0  # its telemetry stopped a second ago
     with pytest.raises(VehicleUnavailable, match="nothing was sent"):
         await dialog.handle_utterance("go forward 1 meter")
@@ -187,7 +216,9 @@ async def test_a_silent_vehicle_is_sent_no_command_and_one_falling_silent_is_giv
     stack.last_t = time.monotonic()  # fresh; it falls silent while answering
     with pytest.raises(VehicleUnavailable, match="stopped answering"):
         await dialog.handle_utterance("go forward 1 meter")
-    assert [a["text"] for a in seen] == ["go forward 1 meter"]
+    # understood here, sent as the typed command
+    assert [a["op"] for a in seen] == ["submit"]
+    assert seen[0]["commands"] == [{"action": "move", "direction": "forward", "distance": 1.0}]
 
 
 class _Speech:
@@ -210,17 +241,22 @@ async def test_rest_command_and_speech_answer_503_with_retry_after(
     from tests.app_client import app_client
 
     monkeypatch.setattr(remote, "COMMAND_JOIN_WAIT_S", 0.2)
+    monkeypatch.setattr(remote, "SILENT_S", 3600.0)  # uav2's one telemetry stays fresh
     settings = Settings(data_dir=tmp_path, token="units-pilot", drone="none")
     async with app_client(settings) as client:
         rt = client.app.state.runtime  # type: ignore[attr-defined]
         for name in ("uav1", "uav2"):
             stack = RemoteDroneStack(rt.graph, name, f"/{name}", simulated=True)
-            rt.drones[name], rt.dialogs[name] = stack, remote.RemoteDialog(stack)
+            rt.drones[name] = stack
+            rt.dialogs[name] = _dialog(rt.graph, stack, ["uav1", "uav2"])
         rt.drones["uav1"].expect()  # uav1 is starting and never joins
+        _flying(rt.drones["uav2"], rt.dialogs["uav2"])
         rt.speech = _Speech()
+        sent: list[dict[str, Any]] = []
 
         async def uav2(args: dict[str, Any]) -> dict[str, Any]:
-            return {"reply": "uav2: Landing.", "commands": [{"action": "land"}], "accepted": True}
+            sent.append(args)
+            return {"accepted": True, "detail": "land"}
 
         rt.graph.advertise_service(names.control_service("uav2"), names.CONTROL_TYPE, uav2)
         r = await client.post("/api/v1/command", json={"text": "take off", "drone": "uav1"})
@@ -240,6 +276,10 @@ async def test_rest_command_and_speech_answer_503_with_retry_after(
             "uav1's flight process" in r.json()["reply"] and "uav2: Landing." in r.json()["reply"]
         )
         assert not r.json()["accepted"]
+        await until_async(
+            lambda: sent, 5.0, "the stop sent to uav2"
+        )  # uav2's dialog sent the stop as a typed command
+        assert sent == [{"op": "preempt", "command": {"action": "land"}, "by": ""}]
 
 
 async def test_rest_advertises_the_safety_door_at_the_host_the_caller_used(

@@ -250,6 +250,7 @@ def test_a_vehicle_key_publishes_only_its_own_drones_topics(srv: Served) -> None
         refused = {
             "/console/reply": ("uav_console/Reply", reply),
             "/uav2/vehicle/reply": ("uav_console/Reply", {**reply, "drone": "uav2"}),
+            "/uav2/vehicle/alarm": ("std_msgs/String", {"data": "{}"}),
             "/uav2/ardrone/navdata": ("ardrone_autonomy/Navdata", {"batteryPercent": 2.0}),
             "/uav2/cmd_vel": ("geometry_msgs/Twist", JOG),
             "/uav1/cmd_vel": ("geometry_msgs/Twist", JOG),
@@ -279,6 +280,15 @@ def test_a_vehicle_key_publishes_only_its_own_drones_topics(srv: Served) -> None
         assert not rogue.errors_of({"op": "publish", "topic": own, "msg": mine})
         said = wait_for(lambda: [m for m in obs.replies() if "for itself" in m["text"]], "relay")
         assert said[0]["drone"] == "uav1"
+        # Its own alarm topic: said by the console's dialog for uav1, whatever drone it names.
+        alarm = {"drone": "uav2", "monitor": "link", "severity": "warn",
+                 "text": "uav1 alarmed for itself", "action": None}  # fmt: skip
+        topic = "/uav1/vehicle/alarm"
+        assert not rogue.errors_of({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
+        assert not rogue.errors_of({"op": "publish", "topic": topic,
+                                    "msg": {"data": json.dumps(alarm)}})  # fmt: skip
+        said = wait_for(lambda: [m for m in obs.replies() if "alarmed for" in m["text"]], "alarm")
+        assert said[0]["drone"] == "uav1" and said[0]["alarm"] == "link"
         assert not [m for m in obs.replies() if FAKE in m["text"]]
         assert not [f for f in list(obs.frames) if f.get("topic") == "/uav2/ardrone/navdata"
                     and f["msg"].get("batteryPercent") == 2.0]  # fmt: skip

@@ -168,9 +168,9 @@ def test_a_vehicles_scope_is_its_own_drone_and_nothing_of_the_server(
     assert {f"{prefix}/ardrone/navdata", f"{prefix}/mavros/state", f"{prefix}/uav/pose"} <= (
         scope.topics
     )
-    assert {f"/{name}/vehicle/reply", f"/{name}/vehicle/state", f"/{name}/vehicle/info"} <= (
-        scope.topics
-    )
+    own = {"alarm", "task_event", "reply", "info", "telemetry"}
+    assert {f"/{name}/vehicle/{t}" for t in own} <= scope.topics
+    assert f"/{name}/vehicle/state" not in scope.topics  # it runs no dialog
     assert f"/{name}/fleet/ltm_status" in scope.topics
     for topic in scope.topics:
         assert not SERVER_TOPIC_RE.match(topic), topic
@@ -178,12 +178,8 @@ def test_a_vehicles_scope_is_its_own_drone_and_nothing_of_the_server(
     commands = {f"{prefix}/cmd_vel", f"{prefix}/ardrone/takeoff", f"{prefix}/ardrone/land"}
     assert not commands & scope.topics
     assert all(CONTROL_TOPIC_RE.match(c) for c in commands)
-    assert scope.services == {
-        f"/{name}/vehicle/control",
-        f"/{name}/vehicle/interpret",
-        f"/{name}/fleet/flight_plan",
-    }
-    assert scope.calls == {"/console/describe", "/fleet/patrol"}
+    assert scope.services == {f"/{name}/vehicle/control", f"/{name}/fleet/flight_plan"}
+    assert scope.calls == set()  # the captioner and the patrol are the console dialog's
 
 
 def test_vehicle_link_security_grants_only_keys_and_only_the_scope(tmp_path: Path) -> None:
@@ -195,16 +191,17 @@ def test_vehicle_link_security_grants_only_keys_and_only_the_scope(tmp_path: Pat
     assert sec.role_for(tokens.observer_token) is None
     assert sec.role_for(k1.secret) is Role.VEHICLE and sec.identify(k1.secret) == "uav1"
     v = Role.VEHICLE
-    assert sec.can_publish(v, "uav1/vehicle/reply", "uav1")
-    assert not sec.can_publish(v, "/uav2/vehicle/reply", "uav1")
+    assert sec.can_publish(v, "uav1/vehicle/alarm", "uav1")
+    assert not sec.can_publish(v, "/uav2/vehicle/alarm", "uav1")
     assert not sec.can_publish(v, "/console/reply", "uav1")
     assert not sec.can_publish(v, "/uav1/cmd_vel", "uav1")
-    assert not sec.can_publish(v, "/uav1/vehicle/reply", None)
-    assert not sec.can_publish(Role.PILOT, "/uav1/vehicle/reply", "uav1")
+    assert not sec.can_publish(v, "/uav1/vehicle/alarm", None)
+    assert not sec.can_publish(Role.PILOT, "/uav1/vehicle/alarm", "uav1")
     assert sec.can_provide(v, "/uav1/vehicle/control", "uav1")
     assert not sec.can_provide(v, "/uav2/vehicle/control", "uav1")
     assert not sec.can_provide(v, "/console/describe", "uav1")
-    assert sec.can_call(v, "/fleet/patrol", "uav1")
+    assert not sec.can_call(v, "/fleet/patrol", "uav1")
+    assert not sec.can_call(v, "/console/describe", "uav1")
     assert not sec.can_call(v, "/uav2/vehicle/control", "uav1")
     assert not sec.can_call(v, "/console/lease", "uav1")
     assert sec.refusal(v, "publish to", "/console/reply", "uav1") == (
@@ -212,7 +209,7 @@ def test_vehicle_link_security_grants_only_keys_and_only_the_scope(tmp_path: Pat
         "a vehicle publishes only its own drone's topics (/uav1/…)"
     )
     assert sec.refusal(v, "call", "/uav2/vehicle/control", "uav1").endswith(
-        "a vehicle calls only /console/describe, /fleet/patrol"
+        "a vehicle calls none of the server's services"
     )
     single = VehicleLinkSecurity(Settings(data_dir=tmp_path), tokens, keys, prefix_of=lambda n: "")
     assert single.refusal(v, "publish to", "/x", "uav1").endswith("(/… and /uav1/…)")
@@ -234,8 +231,8 @@ def test_pilots_may_not_speak_or_answer_as_a_vehicle(tmp_path: Path) -> None:
 
 
 def test_the_console_relays_a_reply_only_as_its_own_vehicles() -> None:
-    msg = {"text": "Battery critical at 2 percent.", "level": "alert", "drone": ""}
-    out, _ = checked_reply(msg, "uav1")
+    msg = {"text": "Not flown: 'take off' reached the drone 3.1 s late.", "level": "warn"}
+    out, _ = checked_reply({**msg, "drone": ""}, "uav1")
     assert out is not None and out["drone"] == "uav1"
     assert checked_reply({**msg, "drone": "uav1"}, "uav1")[0] is not None
     out, why = checked_reply({**msg, "drone": "uav2"}, "uav1")
