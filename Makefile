@@ -22,7 +22,14 @@ $(VENV)/.installed-test: pyproject.toml
 	touch $(VENV)/.installed-run $@
 
 # The lower bounds of pyproject.toml, installed as they are written (uv's lowest-direct
-# resolution): `make test-lower` runs the whole suite on them, so a bound is a version tested.
+# resolution), so that a bound is a version tested: `make test-lower` runs make test's parallel
+# stage on them (every file but the browser tests and the tests marked `serial`: the unit,
+# protocol and loopback tests of the code that uses these libraries); the browser and
+# real-process stages, on wall-clock deadlines and the longer half of the suite's time, run on
+# the current versions in `make test` (on the lower bounds
+# too: `make test-lower ARGS="-m 'serial or browser'"`; with ARGS, one pytest run). There
+# tests/test_dependencies.py checks (UAV_CONSOLE_LOWER_BOUNDS=1) that each installed version is
+# its bound.
 LOWER ?= .venv-lower
 $(LOWER)/.installed-test: pyproject.toml
 	test -x $(LOWER)/bin/python || $(PYTHON) -m venv $(LOWER)
@@ -46,11 +53,12 @@ run: $(VENV)/.installed-run
 # by test count, is off), then those alone: they are CPU-bound or real-time, and failed when a
 # second run shared the 2 cores with them. Both run even if the first fails. With ARGS, one
 # serial pytest run.
+PARALLEL := -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial'
 test: $(VENV)/.installed-test node-deps
 ifeq ($(strip $(ARGS)),)
 	@status=0; \
-	echo "$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial'"; \
-	$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial' || status=$$?; \
+	echo "$(PY) -m pytest $(PARALLEL)"; \
+	$(PY) -m pytest $(PARALLEL) || status=$$?; \
 	echo "$(PY) -m pytest -m 'serial or browser'"; \
 	$(PY) -m pytest -m 'serial or browser' || status=$$?; \
 	exit $$status
@@ -59,7 +67,7 @@ else
 endif
 
 test-lower: $(LOWER)/.installed-test node-deps
-	$(MAKE) test VENV=$(LOWER)
+	UAV_CONSOLE_LOWER_BOUNDS=1 $(LOWER)/bin/python -m pytest $(if $(strip $(ARGS)),$(ARGS),$(PARALLEL))
 
 bench: $(VENV)/.installed-test
 	$(VENV)/bin/uav-console bench $(ARGS)
