@@ -80,8 +80,12 @@ SEND_LOG = """
 (() => {
   const log = (window.__pcm = []);
   const finals = (window.__finals = []);
+  const said = (window.__said = []);
   const send = WebSocket.prototype.send;
   WebSocket.prototype.send = function (data) {
+    const text = typeof data === "string" ? data : "";
+    if (text.includes('"/console/utterance"') && text.includes('"publish"'))
+      said.push(performance.timeOrigin + performance.now());
     if (data instanceof ArrayBuffer && String(this.url).includes("/speech/stream")) {
       const bytes = new Uint8Array(data);
       let s = "";
@@ -313,6 +317,7 @@ def spoken_run(
         offset = clock_offset(page)
         pcm, sent, ends = stream_of(page, offset)
         finals = [(t / 1000 - offset, m) for t, m in page.evaluate("window.__finals")]
+        said = [t / 1000 - offset for t in page.evaluate("window.__said")]
     finally:
         browser.close()
     starts = onsets(pcm, len(utts))
@@ -320,12 +325,18 @@ def spoken_run(
         captured_at(s + (u.end - u.onset), sent, ends) for u, s in zip(utts, starts, strict=False)
     ]
     rows: list[dict[str, Any]] = []
+    epoch = time.time() - time.monotonic()  # the server's stamps are epoch seconds
     for k, (u, end_t) in enumerate(zip(utts, end_times, strict=False)):
         # What follows this utterance, up to the end of the next one, is its answer.
         limit = end_times[k + 1] if k + 1 < len(end_times) else end_t + GAP_S + 2
         at = sim.first_after(u.action, end_t - 1.0)
         final = next(((t, m) for t, m in finals if end_t - 0.5 <= t < limit), None)
         ok = at is not None and at < limit
+        published = next((t for t in said if final is not None and t >= final[0] - 0.001), None)
+        stages = stage_times(
+            end_t, final[1].get("timing", {}) if final else {}, epoch,
+            final[0] if final else None, published, at if ok else None,
+        )  # fmt: skip
         rows.append(
             {
                 "text": u.text,
@@ -337,12 +348,69 @@ def spoken_run(
                 "heard": final[1].get("text") if final else None,
                 "decode_ms": final[1].get("decode_ms") if final else None,
                 "confidence": final[1].get("confidence") if final else None,
+                "stages": stages,
             }
         )
     return rows
 
 
-def typed_run(pw: Any, port: int, sim: EdgeSim, repeats: int) -> list[float]:
+# The stages of one spoken command, in order: (name, from, to) over the stamps of stage_times.
+STAGES = (
+    ("speech end -> silence frame at server (VAD lag + audio transport)", "end", "silence_heard"),
+    ("VAD scoring of that frame batch", "silence_heard", "silence_scored"),
+    ("silence -> speculative decode starts (settle wait + pool queue)", "silence_scored",
+     "spec_start"),
+    ("speculative decode (VAD-trimmed speech)", "spec_start", "spec_end"),
+    ("decode end -> final (commit wait)", "spec_end", "final"),
+    ("final: its decode (reused) -> sent", "final", "sent"),
+    ("sent -> final in the page", "sent", "page_final"),
+    ("page: final -> /console/utterance published", "page_final", "published"),
+    ("published -> AT*REF on the wire (rosbridge, dialog, NLU, vehicle)", "published", "at"),
+    ("total: speech end -> AT*REF", "end", "at"),
+)  # fmt: skip
+CPU_STAGES = ("vad_cpu_ms", "spec_cpu_ms", "decode_cpu_ms")
+
+
+def stage_times(
+    end_t: float,
+    timing: dict[str, float],
+    epoch: float,
+    page_final: float | None,
+    published: float | None,
+    at: float | None,
+) -> dict[str, float]:
+    """The stamps of one utterance on this process's monotonic clock, ms after its real end of
+    speech (the server's epoch stamps moved by ``epoch``), and the CPU ms of the VAD over the
+    utterance, the speculative decode and the final's decode (``*_cpu_ms``)."""
+    stamps = {"end": end_t, "page_final": page_final, "published": published, "at": at}
+    for key in ("silence_heard", "silence_scored", "spec_start", "spec_end", "final", "sent"):
+        if key in timing:
+            stamps[key] = timing[key] - epoch
+    out = {k: (v - end_t) * 1000 for k, v in stamps.items() if v is not None}
+    out.update({k: timing[k] for k in CPU_STAGES if k in timing})
+    out["reused"] = timing.get("reused", float("nan"))
+    return out
+
+
+def breakdown(rows: list[dict[str, Any]]) -> None:
+    """Median of each stage over the utterances that have both its ends."""
+    print("\n| stage | n | p50 ms | p90 ms |")
+    print("|---|---|---|---|")
+    for name, a, b in STAGES:
+        xs = [
+            r["stages"][b] - r["stages"][a] for r in rows if a in r["stages"] and b in r["stages"]
+        ]
+        if xs:
+            print(f"| {name} | {len(xs)} | {statistics.median(xs):.0f} | {pct(xs, 90):.0f} |")
+    for key in CPU_STAGES:
+        xs = [r["stages"][key] for r in rows if key in r["stages"]]
+        if xs:
+            print(f"| CPU: {key} | {len(xs)} | {statistics.median(xs):.0f} | {pct(xs, 90):.0f} |")
+    reused = [r["stages"].get("reused") == 1.0 for r in rows if "reused" in r["stages"]]
+    print(f"finals that reused the speculative decode: {sum(reused)}/{len(reused)}")
+
+
+def typed_run(pw: Any, port: int, sim: EdgeSim, http: httpx.Client, repeats: int) -> list[float]:
     """The baseline: the same commands typed (Enter -> AT*REF), seconds."""
     browser = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
     out: list[float] = []
@@ -356,7 +424,12 @@ def typed_run(pw: Any, port: int, sim: EdgeSim, repeats: int) -> list[float]:
                     page.fill("#text-input", text)
                     t0 = time.monotonic()
                     page.press("#text-input", "Enter")
-                    at = wait_for(lambda a=action, t=t0: sim.first_after(a, t), text, 30, 0.001)
+                    try:
+                        at = wait_for(lambda a=action, t=t0: sim.first_after(a, t), text, 30, 0.001)
+                    except RuntimeError:  # not flown (a starved vehicle process): a miss
+                        print(f"typed {text!r}: no AT*REF in 30 s", flush=True)
+                        reset_landed(sim, http)
+                        continue
                     out.append(at - t0)
                     time.sleep(GAP_S - 1)
     finally:
@@ -404,9 +477,14 @@ def main(argv: list[str] | None = None) -> int:
                     wav = Path(td) / f"{tts}.wav"
                     results[tts + suffix] = spoken_run(pw, port, sim, http, wav, utts)
                     print(f"load after {tts}{suffix}: {os.getloadavg()}", flush=True)
+                    breakdown(results[tts + suffix])
+                    if args.json:  # what was measured survives a later failure
+                        args.json.write_text(json.dumps(results, indent=1))
                 if args.typed and not suffix:
                     reset_landed(sim, http)
-                    results["typed"] = [x * 1000 for x in typed_run(pw, port, sim, args.typed)]
+                    results["typed"] = [
+                        x * 1000 for x in typed_run(pw, port, sim, http, args.typed)
+                    ]
     print(f"load after: {os.getloadavg()}")
     print("\n| end of speech -> AT*REF on the drone | executed | p50 ms | p90 ms | "
           "end of speech -> final text in the page p50 / p90 ms |")  # fmt: skip
@@ -422,6 +500,9 @@ def main(argv: list[str] | None = None) -> int:
             if not r["executed"]:
                 print(f"|   missed: {r['text']!r} ({r['voice']}) heard {r['heard']!r} | | | | |")
     spoken = {k: v for k, v in results.items() if k != "typed" and "(before)" not in k}
+    for tts, rows in spoken.items():
+        print(f"\nwhere the time goes, {tts} (ms after the real end of speech; load above):")
+        breakdown(rows)
     allms = [r["ms"] for rows in spoken.values() for r in rows if r["ms"] is not None]
     if len(spoken) > 1:
         summary("spoken, all voices", allms, sum(len(v) for v in spoken.values()))
