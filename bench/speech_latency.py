@@ -25,6 +25,13 @@ end of speech -> the final recognition reaching the page (the decode's share) an
 
 Usage: ``python bench/speech_latency.py [--tts hibari,espeak-ng] [--repeats 2] [--json F]``.
 The machine is shared: the load average is printed beside the figures.
+
+``--offline``: no page, no server: the same utterances through the stream's end-pointer with
+Silero and the shipped recogniser in this process, each speculation decoded when it is asked
+and told back once its decode's CPU time has passed in the stream (an idle core), for this
+end-pointer and the one before it (decode after 0.3 s of silence, decisive end at 0.35 s).
+Prints when the decode was asked and when the final was ready after the real end of speech:
+what the end-pointer and the decode cost where the machine's load does not decide it.
 """
 
 from __future__ import annotations
@@ -443,6 +450,68 @@ def summary(label: str, ms: list[float], n: int, extra: str = "") -> None:
     print(f"| {label} | {len(ms)}/{n} | {p50:.0f} | {p90:.0f} | {extra} |")
 
 
+# The end-pointer before this one: the decode asked at 0.3 s of silence, a decisive end at 0.35 s.
+BEFORE_ENDPOINTER = {"listen_s": 0.3, "commit_s": 0.35}
+
+
+def offline(tts_sets: list[str], repeats: int) -> int:
+    """End of speech -> final on an idle core, this end-pointer and the one before it."""
+    from server.speech.model import load_whisper, resolve
+    from server.speech.recognizer import THRESHOLD, Recognizer, SileroStream
+    from server.speech.service import decisive
+    from server.speech.stream import Final, Speculation, StreamSession
+
+    nlu = default_nlu()
+    recognizer = Recognizer(load_whisper(resolve(None), workers=1), nlu, reuse=False)
+    recognizer.warm_up()
+    rows: dict[str, list[tuple[float, float, float]]] = {"now": [], "before": []}
+    print("| set | text | end-pointer | decode asked ms | decode CPU ms | final ms | reading |")
+    print("|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as td:
+        for tts in tts_sets:
+            wav = Path(td) / f"{tts}.wav"
+            utts = build_wav(wav, tts, repeats, Path(td))
+            audio = read_wav(wav.read_bytes())
+            for u in utts:
+                first = u.start - SAMPLE_RATE  # a second of the silence before it
+                clip = audio[first : u.end + 2 * SAMPLE_RATE]
+                pcm = (np.clip(clip, -1, 1) * 32767).astype("<i2").tobytes()
+                end_s = (u.end - first) / SAMPLE_RATE
+                for name, opts in (("now", {}), ("before", BEFORE_ENDPOINTER)):
+                    session = StreamSession("handsfree", score=SileroStream(), **opts)
+                    asked = done = final = 0.0
+                    spec: Speculation | None = None
+                    told, sure, text = True, False, ""
+                    for i in range(0, len(pcm), 1024):  # the page's 32 ms frames
+                        now = (i + 1024) / 2 / SAMPLE_RATE
+                        events = session.feed(pcm[i : i + 1024])
+                        if spec is not None and not told and now >= done:
+                            told = True
+                            events += session.decided(spec.serial, sure)
+                        for ev in events:
+                            if isinstance(ev, Speculation):
+                                c0 = time.process_time()
+                                rec = recognizer.recognize(ev.samples, vad=False)
+                                cpu = time.process_time() - c0
+                                spec, asked, done, told = ev, now, now + cpu, False
+                                sure, text = decisive(rec, nlu, THRESHOLD), rec.text
+                            elif isinstance(ev, Final) and not final:
+                                final = max(now, done)
+                        if final:
+                            break
+                    row = ((asked - end_s) * 1000, (done - asked) * 1000, (final - end_s) * 1000)
+                    rows[name].append(row)
+                    print(f"| {tts} | {u.text} | {name} | {row[0]:.0f} | {row[1]:.0f} | "
+                          f"{row[2]:.0f} | {text!r} |")  # fmt: skip
+    print("\n| end-pointer | n | decode asked p50 ms | decode CPU p50 ms | final p50 ms |")
+    print("|---|---|---|---|---|")
+    for name, xs in rows.items():
+        a, c, f = (statistics.median(x[k] for x in xs) for k in range(3))
+        print(f"| {name} | {len(xs)} | {a:.0f} | {c:.0f} | {f:.0f} |")
+    print(f"load: {os.getloadavg()} (CPU times, not wall: the load does not decide them)")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     from playwright.sync_api import sync_playwright
 
@@ -456,7 +525,12 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         help="also serve this checkout (e.g. `git worktree add /tmp/main main`) in the same run",
     )
+    ap.add_argument(
+        "--offline", action="store_true", help="the end-pointer on an idle core (see above)"
+    )
     args = ap.parse_args(argv)
+    if args.offline:
+        return offline(args.tts.split(","), args.repeats)
     print(f"load before: {os.getloadavg()} on {os.cpu_count()} cores (shared machine)")
     results: dict[str, Any] = {}
     servers = [("", ROOT)] + ([(" (before)", args.before)] if args.before else [])
