@@ -360,7 +360,9 @@ class _Stream:
                         # The voice detector heard the speech end in this batch of frames.
                         self._t["silence_heard"] = float(msg.get("at") or time.time())
                         self._t["silence_scored"] = time.time()
+                # The VAD's CPU since the last final, and the 32 ms frames it scored meanwhile.
                 self._t["vad_cpu_ms"] = self._t.get("vad_cpu_ms", 0.0) + cpu * 1000
+                self._t["vad_frames"] = self._t.get("vad_frames", 0.0) + len(pcm) / 1024
             elif text is not None:
                 kind = control_kind(text)
                 if kind == "end":

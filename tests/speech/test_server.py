@@ -373,7 +373,7 @@ async def _until(ws: Any, kinds: tuple[str, ...], text: str = "") -> dict[str, A
 
 def test_handsfree_ends_a_decisive_command_after_a_short_silence(served: Served) -> None:
     """0.35 s of silence after "take off" is all the server gets: a decisive reading ends the
-    utterance there (the full end of an utterance needs 0.7 s)."""
+    utterance there (at 0.3 s of silence; the full end of an utterance needs 0.7 s)."""
     speech = read_wav(served.clip("take off", voice="en-us", speed=150, pad_s=0.0))
     quiet = np.zeros(int(0.35 * 16000), np.float32)
 
@@ -385,6 +385,12 @@ def test_handsfree_ends_a_decisive_command_after_a_short_silence(served: Served)
 
     final = asyncio.run(talk())
     assert final["type"] == "final" and final["commands"] == [{"action": "takeoff"}], final
+    # The final says when each of its stages happened (bench/speech_latency.py's breakdown):
+    # the speculation's decode, reused by the final, came after the silence was heard.
+    t = final["timing"]
+    stages = ["silence_heard", "silence_scored", "spec_start", "spec_end", "final", "sent"]
+    assert [t[k] for k in stages] == sorted(t[k] for k in stages), t
+    assert t["reused"] == 1.0 and t["spec_cpu_ms"] > 0 and t["vad_frames"] > 0, t
 
 
 def test_handsfree_waits_for_the_full_silence_when_the_command_may_go_on(served: Served) -> None:
