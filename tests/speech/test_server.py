@@ -385,12 +385,16 @@ def test_handsfree_ends_a_decisive_command_after_a_short_silence(served: Served)
 
     final = asyncio.run(talk())
     assert final["type"] == "final" and final["commands"] == [{"action": "takeoff"}], final
-    # The final says when each of its stages happened (bench/speech_latency.py's breakdown):
-    # the speculation's decode, reused by the final, came after the silence was heard.
+    # The final says when each of its stages happened (bench/speech_latency.py's breakdown),
+    # in order; it reused the speculation's decode (the speculation's own stamps are there
+    # only when its decode ended before the final: a loaded machine may end the utterance at
+    # the full silence first, the final then waiting for that decode).
     t = final["timing"]
     stages = ["silence_heard", "silence_scored", "spec_start", "spec_end", "final", "sent"]
-    assert [t[k] for k in stages] == sorted(t[k] for k in stages), t
-    assert t["reused"] == 1.0 and t["spec_cpu_ms"] > 0 and t["vad_frames"] > 0, t
+    assert {"silence_heard", "silence_scored", "final", "sent"} <= t.keys(), t
+    present = [t[k] for k in stages if k in t]
+    assert present == sorted(present), t
+    assert t["reused"] == 1.0 and t["vad_frames"] > 0, t
 
 
 def test_handsfree_waits_for_the_full_silence_when_the_command_may_go_on(served: Served) -> None:
