@@ -13,9 +13,12 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import functools
 import json
 import logging
-from typing import Annotated, Any
+import time
+from collections.abc import Callable
+from typing import Annotated, Any, TypeVar
 
 from fastapi import APIRouter, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
 from pydantic import BaseModel, Field
@@ -40,6 +43,7 @@ from server.speech.stream import (
 )
 
 log = logging.getLogger("uav_console.speech")
+T = TypeVar("T")
 router = APIRouter(tags=["speech"])
 
 WAV_TYPES = frozenset({"audio/wav", "audio/x-wav", "audio/wave", "audio/vnd.wave"})
@@ -231,6 +235,15 @@ async def speech_stream(websocket: WebSocket) -> None:
         service.streams -= 1
 
 
+def _timed(fn: Callable[[], T]) -> tuple[T, float, float, float]:
+    """``fn()`` on the calling thread: (its result, wall start and end in epoch seconds, the
+    process's CPU seconds meanwhile: CTranslate2 computes on threads of its own, so the CPU a
+    decode costs is the process's, which includes whatever else ran in it then)."""
+    t0, c0 = time.time(), time.process_time()
+    out = fn()
+    return out, t0, time.time(), time.process_time() - c0
+
+
 async def _refuse(websocket: WebSocket, code: int, reason: str) -> None:
     """Accept, then close with ``code`` and ``reason``: a browser sees a close reason, never
     the body of a refused handshake, and the page shows the operator why."""
@@ -253,8 +266,13 @@ class _Stream:
         self.session = StreamSession(mode, score=SileroStream(), interim_step_s=step)
         self._interim: asyncio.Task[None] | None = None
         self._speculations: set[asyncio.Task[None]] = set()
-        self._finals: asyncio.Queue[Final | None] = asyncio.Queue(maxsize=2)
+        self._finals: asyncio.Queue[tuple[Final, dict[str, float]] | None] = asyncio.Queue(
+            maxsize=2
+        )
         self._vad_lock = asyncio.Lock()
+        # When each stage of the utterance under way happened (epoch seconds) and the CPU it
+        # cost (ms): sent with its final as ``timing`` (bench/speech_latency.py's breakdown).
+        self._t: dict[str, float] = {}
 
     async def run(self) -> None:
         try:
@@ -283,7 +301,7 @@ class _Stream:
         ending with a disconnect, however the socket ended."""
         try:
             while (msg := await self.ws.receive())["type"] != "websocket.disconnect":
-                await inbox.put(dict(msg))
+                await inbox.put({**msg, "at": time.time()})
         finally:
             with contextlib.suppress(asyncio.QueueFull):
                 inbox.put_nowait({"type": "websocket.disconnect"})
@@ -336,7 +354,15 @@ class _Stream:
                 # Whole samples per frame: a frame of odd length loses its last byte, as alone.
                 pcm = b"".join(d[: len(d) - len(d) % 2] for d in audio)
                 async with self._vad_lock:  # the session runs the VAD: off the event loop
-                    events = await asyncio.to_thread(self.session.feed, pcm)
+                    silent = self.session.in_silence
+                    events, cpu = await asyncio.to_thread(self._feed, pcm)
+                    if self.session.in_silence and not silent:
+                        # The voice detector heard the speech end in this batch of frames.
+                        self._t["silence_heard"] = float(msg.get("at") or time.time())
+                        self._t["silence_scored"] = time.time()
+                # The VAD's CPU since the last final, and the 32 ms frames it scored meanwhile.
+                self._t["vad_cpu_ms"] = self._t.get("vad_cpu_ms", 0.0) + cpu * 1000
+                self._t["vad_frames"] = self._t.get("vad_frames", 0.0) + len(pcm) / 1024
             elif text is not None:
                 kind = control_kind(text)
                 if kind == "end":
@@ -364,6 +390,12 @@ class _Stream:
             for ev in events:
                 await self._handle(ev)
 
+    def _feed(self, pcm: bytes) -> tuple[list[Event], float]:
+        """The session's events for ``pcm`` and the thread CPU seconds they cost (the VAD)."""
+        c0 = time.thread_time()
+        events = self.session.feed(pcm)
+        return events, time.thread_time() - c0
+
     async def _handle(self, ev: Event) -> None:
         if isinstance(ev, Problem):
             await self._send({"type": "error", "error": ev.message})
@@ -379,8 +411,9 @@ class _Stream:
         else:
             if self._interim is not None:
                 self._interim.cancel()
+            timing, self._t = {**self._t, "final": time.time()}, {}
             try:
-                self._finals.put_nowait(ev)
+                self._finals.put_nowait((ev, timing))
             except asyncio.QueueFull:
                 await self._send(
                     {"type": "error", "error": "still decoding the previous utterances: dropped"}
@@ -400,10 +433,13 @@ class _Stream:
         decode (server.speech.memo), waiting for it if it is still running."""
         assert self.service.pool is not None and self.service.recognizer is not None
         recognizer = self.service.recognizer
+        asked = time.time()
+        decode = functools.partial(recognizer.recognize, ev.samples, vad=False)
         try:
-            rec = await self.service.pool.run(recognizer.recognize, ev.samples, vad=False)
+            rec, t0, t1, cpu = await self.service.pool.run(_timed, decode)
         except Busy:
             return  # the final decodes it in its turn
+        self._t.update(spec_asked=asked, spec_start=t0, spec_end=t1, spec_cpu_ms=cpu * 1000)
         sure = decisive(rec, self.service.nlu, self.service.config.threshold)
         async with self._vad_lock:
             events = self.session.decided(ev.serial, sure)
@@ -413,8 +449,10 @@ class _Stream:
             await self._handle(out)
 
     async def _decode_finals(self) -> None:
-        while (final := await self._finals.get()) is not None:
+        while (item := await self._finals.get()) is not None:
+            final, timing = item
             samples = final.samples
+            t0, c0 = time.time(), time.process_time()
             try:
                 rec: Recognition = await self.service.recognize(samples, vad=not final.trimmed)
             except Busy as exc:
@@ -423,12 +461,20 @@ class _Stream:
             except ModelError as exc:
                 await self._send({"type": "error", "error": str(exc)})
                 continue
+            timing.update(
+                decode_start=t0,
+                decode_end=time.time(),
+                decode_cpu_ms=(time.process_time() - c0) * 1000,
+                reused=float(rec.reused),
+            )
             msg: dict[str, Any] = {"type": "final", **rec.as_json()}
             log.info(
                 "speech final %r (heard %r, confidence %.2f) from %.1f s of audio%s",
                 msg.get("text"), msg.get("heard"), float(msg.get("confidence") or 0.0),
                 len(samples) / SAMPLE_RATE, " (reused)" if rec.reused else "",
             )  # fmt: skip
+            timing["sent"] = time.time()
+            msg["timing"] = {k: round(v, 4) for k, v in timing.items()}
             await self._send(msg)
 
     async def _send(self, msg: dict[str, Any]) -> None:

@@ -210,6 +210,13 @@ class Recognizer:
         # reuse=False: every call decodes (bench/speech.py decodes one clip over and over).
         self.shared: SharedResults[Recognition] | None = SharedResults(size=8) if reuse else None
 
+    def warm_up(self) -> None:
+        """Decode a second of quiet noise once: CTranslate2's first decode costs about half as
+        much CPU again as the next ones (167 vs 108-126 ms for "take off" on this project's
+        2-core machine), which the operator's first command should not pay."""
+        noise = np.random.default_rng(0).normal(0.0, 1e-3, SAMPLE_RATE).astype(np.float32)
+        self.hypotheses(noise, guided=True)
+
     def hypotheses(self, samples: Samples, *, guided: bool = True) -> list[tuple[str, float]]:
         """The decoder's best transcripts, best first, each with its confidence in 0..1."""
         if self.window_s is None:

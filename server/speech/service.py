@@ -92,14 +92,16 @@ class SpeechService:
         whisper = model_mod.load_whisper(
             source, workers=self.workers, threads_per_worker=self.config.threads_per_worker
         )
-        self.recognizer = Recognizer(
+        recognizer = Recognizer(
             whisper,
             self.nlu,
             window_s=self.config.window_s or window.MIN_S,
             beams=self.config.beams or BEAMS,
             threshold=self.config.threshold,
         )
-        return self.recognizer
+        recognizer.warm_up()  # ready means warm: the first command pays no first-decode cost
+        self.recognizer = recognizer
+        return recognizer
 
     async def start(self, *, preload: bool = True) -> None:
         """Create the pool; with ``preload`` load the model now, in a thread (start-up is not

@@ -26,6 +26,14 @@ still go on. The wrapper tells the result (:meth:`StreamSession.decided`):
 * speech that resumes voids the speculation (the operator paused mid-sentence);
 * push-to-talk ends on release only; the final reuses the speculation when no speech followed.
 
+**Speculating early.** The decode is the longest stage from the end of speech to the command,
+so the speculation is asked once ``listen_s`` of silence is heard, not ``settle_s``: the part
+of the ``settle_s`` pad not heard yet is the silence heard so far, repeated (the pad exists for
+a soft last sound Silero scores as silence; those lie within ``listen_s`` of its end on the
+spoken sets: :data:`LISTEN_S`). When the whole pad has been heard and it is louder than the
+silence that stood in for it (a sound after all), the speculation is asked again with the pad
+as heard, voiding the first.
+
 Memory is bounded in both modes: an utterance longer than ``max_utterance_s`` is refused
 (push-to-talk) or cut there (hands-free), never buffered further.
 
@@ -50,6 +58,17 @@ MODES = ("ptt", "handsfree")
 FRAME = 512  # Silero VAD's window at 16 kHz (faster_whisper.vad: window_size_samples)
 THRESHOLD = 0.5  # Silero's speech threshold (faster_whisper.vad.VadOptions.threshold)
 NEG_THRESHOLD = THRESHOLD - 0.15  # its silence threshold (get_speech_timestamps' default)
+# Silence heard before the speculative decode starts: 4 frames (128 ms). On bench/speech.py's
+# clean clips (36 utterances x 3 speeds each) the last audible sample (-60 dBFS) lies after the
+# start of the first frame Silero scores as silence by at most 36 ms for hibari-tts's commands
+# (128 ms for a lone "the"), 90 ms for espeak-ng's voices and 177 ms for flite's (p90 131 ms):
+# a later sound is caught by the pad's check (LOUDER) and decoded again as heard.
+LISTEN_S = 4 * FRAME / SAMPLE_RATE
+# A pad heard louder than this many times the silence that stood in for it (RMS) is a sound
+# after all, and so is anything above -60 dBFS RMS after digital silence (the end-of-speech
+# threshold of bench/speech_latency.py).
+LOUDER = 2.0
+SILENT_RMS = 2.0**-10
 
 
 @dataclass(frozen=True)
@@ -112,14 +131,15 @@ class StreamSession:
         keep_s: float = 1.0,
         pre_s: float = 0.3,
         settle_s: float = 0.3,
-        commit_s: float = 0.35,
+        commit_s: float = 0.3,
+        listen_s: float = LISTEN_S,
     ) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
         if mode == "handsfree" and score is None:
             raise ValueError("hands-free mode needs a voice activity detector")
-        if not 0 < settle_s <= commit_s <= end_silence_s:
-            raise ValueError("need 0 < settle_s <= commit_s <= end_silence_s")
+        if not 0 < listen_s <= settle_s <= commit_s <= end_silence_s:
+            raise ValueError("need 0 < listen_s <= settle_s <= commit_s <= end_silence_s")
         self.mode = mode
         self.score = score
         self.max_samples = int(max_utterance_s * SAMPLE_RATE)
@@ -133,6 +153,7 @@ class StreamSession:
         # doubt rules were chosen on: with 0.2 s, 3 of bench/speech.py's 324 espeak-ng clips
         # were flown wrong (a beam's doubt no longer showed).
         self.settle = int(settle_s * SAMPLE_RATE)
+        self.listen = int(listen_s * SAMPLE_RATE)
         self.commit = int(commit_s * SAMPLE_RATE)
         self.speculated = 0  # speculative decodes asked for (tests, logs)
         self.committed = 0  # utterances ended early on a decisive reading (tests, logs)
@@ -143,6 +164,7 @@ class StreamSession:
         self._start: int | None = None  # where the utterance's audio starts (pre-roll in)
         self._quiet_from: int | None = None  # where the silence after the speech began
         self._spec: Samples | None = None  # the current speculation's samples
+        self._spec_heard = False  # its settle_s pad was heard whole (not partly repeated)
         self._spec_serial = 0
         self._decisive = False
         self._since_interim = 0
@@ -151,6 +173,12 @@ class StreamSession:
     @property
     def buffered_s(self) -> float:
         return len(self._buf) / SAMPLE_RATE
+
+    @property
+    def in_silence(self) -> bool:
+        """Speech was heard and the voice detector has heard only silence since (the end-pointer
+        is waiting to end the utterance)."""
+        return self._start is not None and self._quiet_from is not None
 
     def feed(self, pcm: bytes) -> list[Event]:
         """Add little-endian 16-bit mono PCM at 16 kHz."""
@@ -193,6 +221,7 @@ class StreamSession:
         if prob >= THRESHOLD:
             if self._quiet_from is not None:  # spoke again: the speculation was premature
                 self._quiet_from, self._spec, self._decisive = None, None, False
+                self._spec_heard = False
             return self._interim_while_speaking()
         if prob >= NEG_THRESHOLD:
             return [] if self._quiet_from is not None else self._interim_while_speaking()
@@ -216,17 +245,33 @@ class StreamSession:
         assert self._quiet_from is not None and self._start is not None
         quiet = self._scored - self._quiet_from
         events: list[Event] = []
-        if self._spec is None and quiet >= self.settle:
-            self._serial += 1
-            self._spec = self._buf[self._start : self._quiet_from + self.settle]
-            self._spec_serial, self._decisive = self._serial, False
-            self.speculated += 1
-            events.append(Speculation(self._spec, self._serial))
+        if self._spec is None and quiet >= self.listen:
+            heard = self._buf[self._quiet_from : self._quiet_from + self.listen]
+            pad = np.resize(heard, self.settle - self.listen) if heard.size else heard
+            speech = self._buf[self._start : self._quiet_from + self.listen]
+            events.append(self._speculate(np.concatenate([speech, pad])))
+            self._spec_heard = self.listen >= self.settle
+        if self._spec is not None and not self._spec_heard and quiet >= self.settle:
+            self._spec_heard = True
+            heard = self._buf[self._quiet_from : self._quiet_from + self.listen]
+            tail = self._buf[self._quiet_from + self.listen : self._quiet_from + self.settle]
+            if _rms(tail) > max(LOUDER * _rms(heard), SILENT_RMS):
+                events.append(
+                    self._speculate(self._buf[self._start : self._quiet_from + self.settle])
+                )
         ends = (self._decisive and quiet >= self.commit) or quiet >= self.end_silence
         if self.mode == "handsfree" and self._spec is not None and ends:
             self.committed += quiet < self.end_silence
             events += self._final(self._spec, trimmed=True)
         return events
+
+    def _speculate(self, samples: Samples) -> Speculation:
+        """A new speculation of ``samples``; an earlier one's reading is void."""
+        self._serial += 1
+        self._spec = samples
+        self._spec_serial, self._decisive = self._serial, False
+        self.speculated += 1
+        return Speculation(samples, self._serial)
 
     def decided(self, serial: int, decisive: bool) -> list[Event]:
         """The reading of :class:`Speculation` ``serial``: decisive or not. Hands-free, a
@@ -279,6 +324,11 @@ class StreamSession:
         self._scored = len(keep)
         self._start = self._quiet_from = None
         self._spec = None
+        self._spec_heard = False
         self._spec_serial = 0
         self._decisive = False
         self._since_interim = 0
+
+
+def _rms(samples: Samples) -> float:
+    return float(np.sqrt(np.mean(np.square(samples, dtype=np.float64)))) if samples.size else 0.0

@@ -83,7 +83,7 @@ def tls_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TlsServer]:
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
     log.close()
     ca = data / "tls" / "ca.pem"
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + 180  # a loaded 2-core machine: imports alone take a minute
     while not ca.is_file():
         assert proc.poll() is None and time.monotonic() < deadline, (
             data / "server.log"

@@ -11,7 +11,7 @@ import pytest
 
 from server.speech.audio import SAMPLE_RATE, read_wav
 from server.speech.recognizer import SileroStream
-from server.speech.stream import Final, Speculation, StreamSession
+from server.speech.stream import LISTEN_S, Final, Speculation, StreamSession
 from tests.speech.conftest import needs_tts, synthesise
 
 pytestmark = needs_tts
@@ -77,3 +77,32 @@ def test_a_long_pause_makes_two_utterances(tmp_path: Path) -> None:
     finals, s = finals_of(audio)
     assert len(finals) == 2 and s.utterances == 2
     assert len(finals[0].samples) < len(first) + 0.7 * SAMPLE_RATE
+
+
+def first_speculation(audio: np.ndarray, **options: float) -> tuple[Speculation, int]:
+    """The first speculation of a hands-free stream and the samples fed when it was asked."""
+    s = StreamSession("handsfree", score=SileroStream(), **options)
+    pcm = (np.clip(audio, -1, 1) * 32767).astype("<i2").tobytes()
+    for i in range(0, len(pcm), 1024):
+        for ev in s.feed(pcm[i : i + 1024]):
+            if isinstance(ev, Speculation):
+                return ev, (i + 1024) // 2
+    raise AssertionError("no speculation")
+
+
+@pytest.mark.parametrize("text", ["take off", "land the drone", "hold still"])
+def test_the_decode_starts_after_listen_s_on_the_speech_it_would_get_later(
+    tmp_path: Path, text: str
+) -> None:
+    """The speculation is asked LISTEN_S after Silero hears the speech end, not settle_s, and
+    (a pad of digital silence) holds the very samples one asked after settle_s would: the
+    decode, and so the reading, is the same, only earlier."""
+    speech = said(tmp_path, text)
+    audio = np.concatenate([quiet(0.5), speech, quiet(1.0)])
+    early, fed_early = first_speculation(audio)
+    late, fed_late = first_speculation(audio, listen_s=0.3)
+    assert np.array_equal(early.samples, late.samples)
+    frames = -(-int(0.3 * SAMPLE_RATE) // 512) - round(LISTEN_S * SAMPLE_RATE / 512)
+    assert fed_late - fed_early == frames * 512  # whole frames of silence: 10 against 4
+    spoken_to = int(0.5 * SAMPLE_RATE) + len(speech)  # the last audible sample
+    assert fed_early - spoken_to <= LISTEN_S * SAMPLE_RATE + 3 * 512  # Silero's lag: <= 3 frames

@@ -374,7 +374,7 @@ async def _until(ws: Any, kinds: tuple[str, ...], text: str = "") -> dict[str, A
 
 def test_handsfree_ends_a_decisive_command_after_a_short_silence(served: Served) -> None:
     """0.35 s of silence after "take off" is all the server gets: a decisive reading ends the
-    utterance there (the full end of an utterance needs 0.7 s)."""
+    utterance there (at 0.3 s of silence; the full end of an utterance needs 0.7 s)."""
     speech = read_wav(served.clip("take off", voice="en-us", speed=150, pad_s=0.0))
     quiet = np.zeros(int(0.35 * 16000), np.float32)
 
@@ -386,6 +386,16 @@ def test_handsfree_ends_a_decisive_command_after_a_short_silence(served: Served)
 
     final = asyncio.run(talk())
     assert final["type"] == "final" and final["commands"] == [{"action": "takeoff"}], final
+    # The final says when each of its stages happened (bench/speech_latency.py's breakdown),
+    # in order; it reused the speculation's decode (the speculation's own stamps are there
+    # only when its decode ended before the final: a loaded machine may end the utterance at
+    # the full silence first, the final then waiting for that decode).
+    t = final["timing"]
+    stages = ["silence_heard", "silence_scored", "spec_start", "spec_end", "final", "sent"]
+    assert {"silence_heard", "silence_scored", "final", "sent"} <= t.keys(), t
+    present = [t[k] for k in stages if k in t]
+    assert present == sorted(present), t
+    assert t["reused"] == 1.0 and t["vad_frames"] > 0, t
 
 
 def test_handsfree_waits_for_the_full_silence_when_the_command_may_go_on(served: Served) -> None:

@@ -230,3 +230,88 @@ def test_frames_that_queued_up_end_point_as_if_fed_one_by_one() -> None:
     b = [e for e in feed(batched, audio, chunk_s=0.7) if isinstance(e, Final | Speculation)]
     assert [type(e) for e in a] == [type(e) for e in b] == [Speculation, Final] * 2
     assert all(np.array_equal(x.samples, y.samples) for x, y in zip(a, b, strict=True))
+
+
+def noise(seconds: float, level: float, seed: int) -> bytes:
+    """Seeded white noise at ``level`` (0..1 full scale, RMS): a microphone's quiet room."""
+    x = np.random.default_rng(seed).normal(0.0, level * 32767, int(seconds * SAMPLE_RATE))
+    return np.clip(x, -32768, 32767).astype("<i2").tobytes()
+
+
+def frames_until(s: StreamSession, data: bytes, kind: type) -> tuple[list[object], int]:
+    """Feed ``data`` frame by frame up to the first event of ``kind``: (the events, the
+    samples fed by then)."""
+    step = FRAME * 2
+    for i in range(0, len(data), step):
+        events = s.feed(data[i : i + step])
+        if any(isinstance(e, kind) for e in events):
+            return events, (i + step) // 2
+    raise AssertionError(f"no {kind.__name__} in {len(data) // 2} samples")
+
+
+def test_handsfree_speculates_after_listen_s_with_the_heard_silence_repeated() -> None:
+    """The decode starts after listen_s of silence, not settle_s; the pad not heard yet is
+    the silence heard, repeated, so the speculation is as long as one after settle_s."""
+    s = StreamSession("handsfree", score=energy, interim_step_s=5.0, pre_s=0.3, settle_s=0.3)
+    stream = pcm(0.5, False) + pcm(1.0, True) + noise(1.0, 0.002, seed=3)
+    events, fed = frames_until(s, stream, Speculation)
+    (spec,) = [e for e in events if isinstance(e, Speculation)]
+    assert isinstance(spec, Speculation)
+    # The first frame the scorer hears as silence: the one after the last loud sample.
+    quiet_from = -(-int(1.5 * SAMPLE_RATE) // FRAME) * FRAME
+    assert fed - quiet_from == s.listen < s.settle  # asked after listen_s of silence
+    samples = np.frombuffer(stream, "<i2").astype(np.float32) / 32768
+    heard = samples[quiet_from : quiet_from + s.listen]
+    pad = spec.samples[-(s.settle - s.listen) :]
+    assert np.array_equal(pad, np.resize(heard, len(pad)))
+    start = int(0.5 * SAMPLE_RATE) // FRAME * FRAME - s.pre  # pre-roll before the first loud frame
+    assert np.array_equal(spec.samples[: -len(pad)], samples[start : quiet_from + s.listen])
+
+
+def test_handsfree_a_quiet_pad_keeps_the_early_speculation_and_its_decisive_end() -> None:
+    s = StreamSession(
+        "handsfree", score=energy, interim_step_s=5.0, settle_s=0.3, commit_s=0.3,
+        end_silence_s=0.7,
+    )  # fmt: skip
+    events, _ = frames_until(s, pcm(1.0, True) + noise(1.0, 0.002, seed=4), Speculation)
+    (spec,) = [e for e in events if isinstance(e, Speculation)]
+    assert isinstance(spec, Speculation)
+    assert s.decided(spec.serial, True) == []  # decisive before commit_s of silence
+    events = feed(s, noise(0.3, 0.002, seed=5))  # the same quiet room: no sound in the pad
+    (final,) = [e for e in events if isinstance(e, Final)]
+    assert isinstance(final, Final) and final.samples is spec.samples
+    assert s.speculated == 1 and s.committed == 1
+
+
+def test_handsfree_a_sound_in_the_pad_asks_again_with_the_pad_as_heard() -> None:
+    """A soft sound after listen_s that the detector scores as silence (a trailing consonant)
+    voids the early speculation: the pad as heard is decoded, and the early reading, even a
+    decisive one, ends nothing."""
+    s = StreamSession(
+        "handsfree", score=energy, interim_step_s=5.0, settle_s=0.3, commit_s=0.3,
+        end_silence_s=0.7,
+    )  # fmt: skip
+    quiet = noise(0.16, 0.002, seed=6)
+    soft = noise(0.1, 0.02, seed=7)  # under the energy scorer's 0.05, 10x the room's level
+    stream = pcm(1.0, True) + quiet + soft + noise(0.5, 0.002, seed=8)
+    events, fed = frames_until(s, stream, Speculation)
+    (first,) = [e for e in events if isinstance(e, Speculation)]
+    assert isinstance(first, Speculation)
+    events = feed(s, stream[fed * 2 :])
+    respec = [e for e in events if isinstance(e, Speculation)]
+    assert len(respec) == 1 and respec[0].serial > first.serial
+    assert s.decided(first.serial, True) == []  # stale: the pad was louder than its stand-in
+    spoken = np.frombuffer(stream, "<i2").astype(np.float32) / 32768
+    tail = respec[0].samples[-s.settle :]
+    quiet_from = -(-int(1.0 * SAMPLE_RATE) // FRAME) * FRAME
+    assert np.array_equal(tail, spoken[quiet_from : quiet_from + s.settle])
+    finals = [e for e in events if isinstance(e, Final)]  # no decisive reading: full silence
+    assert len(finals) == 1 and finals[0].samples is respec[0].samples
+    assert s.committed == 0
+
+
+def test_early_speculation_options() -> None:
+    with pytest.raises(ValueError, match="listen_s"):
+        StreamSession("ptt", listen_s=0.4, settle_s=0.3)
+    with pytest.raises(ValueError, match="listen_s"):
+        StreamSession("ptt", listen_s=0.0)
