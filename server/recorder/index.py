@@ -244,8 +244,8 @@ def _read_info(path: Path, size: int) -> FlightInfo:
     except Exception:  # any reader failure: scan the file tolerantly below
         complete = False
     if not complete:
-        rec = read_recording(path, strict=False)
-        meta, messages = rec.metadata, len(rec.messages)
+        rec = read_recording(path, strict=False, keep_messages=False)
+        meta, messages = rec.metadata, rec.message_count
         first, last = rec.start_ns, rec.end_ns
         drones = drones_of(list(rec.topics))
         ended = None

@@ -193,6 +193,10 @@ class Recording:
     complete: bool = False  # footer and closing magic present
     good_until: int = 0  # offset just after the last record read
     stopped: CorruptRecording | None = None  # why reading stopped early (incomplete file)
+    keep_messages: bool = True  # False: count the messages and their times, keep none
+    message_count: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
 
     def decoders(self) -> dict[int, Callable[[bytes], dict[str, Any]]]:
         """A decoder per channel (raises ``ValueError`` for an encoding it cannot read)."""
@@ -236,22 +240,27 @@ class Recording:
 
     @property
     def start_ns(self) -> int:
-        return min((m.log_time_ns for m in self.messages), default=0)
+        return self.first_ns or 0
 
     @property
     def end_ns(self) -> int:
-        return max((m.log_time_ns for m in self.messages), default=0)
+        return self.last_ns or 0
 
 
 _HEAD = struct.Struct("<BQ")
 
 
-def read_recording(path: Path | str, *, strict: bool = True) -> Recording:
+def read_recording(
+    path: Path | str, *, strict: bool = True, keep_messages: bool = True
+) -> Recording:
     """Read every message of an MCAP file.
 
     Args:
         strict: raise on a file cut short (no footer); False reads up to the last complete
             record and keeps why it stopped in ``Recording.stopped``.
+        keep_messages: False counts the messages and their times but keeps none, in constant
+            memory (a listing row of a 2 GiB recording without a summary: kept, its
+            decompressed messages took the console's 20 GB of memory).
 
     Raises:
         CorruptRecording: not an MCAP file, a record that does not parse, a chunk whose CRC
@@ -264,14 +273,14 @@ def read_recording(path: Path | str, *, strict: bool = True) -> Recording:
         if size == 0:
             raise CorruptRecording(str(path), 0, "empty file, not an MCAP recording")
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
-            rec = _parse(path, data, size)
+            rec = _parse(path, data, size, keep_messages)
     if strict and rec.stopped is not None:
         raise rec.stopped
     return rec
 
 
-def _parse(path: Path, data: mmap.mmap, size: int) -> Recording:
-    rec = Recording(path, size)
+def _parse(path: Path, data: mmap.mmap, size: int, keep_messages: bool = True) -> Recording:
+    rec = Recording(path, size, keep_messages=keep_messages)
     name = str(path)
     if data[:8] != MAGIC:
         raise CorruptRecording(name, 0, "not an MCAP file (bad magic)")
@@ -407,4 +416,9 @@ def _inner(rec: Recording, schemas: dict[int, Schema], record: Any) -> None:
     elif isinstance(record, Message):
         if record.channel_id not in rec.channels:
             raise ValueError(f"message on unknown channel {record.channel_id}")
-        rec.messages.append(RecordedMessage(record.channel_id, record.log_time, record.data))
+        t = record.log_time
+        rec.message_count += 1
+        rec.first_ns = t if rec.first_ns is None else min(rec.first_ns, t)
+        rec.last_ns = t if rec.last_ns is None else max(rec.last_ns, t)
+        if rec.keep_messages:
+            rec.messages.append(RecordedMessage(record.channel_id, t, record.data))
