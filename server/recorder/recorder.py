@@ -287,7 +287,8 @@ class Recorder:
         if over:
             self._stop_recording(
                 f"flight recording {self._current_id} stopped: it reached the disk budget of "
-                f"{self.config.budget_bytes // (1024 * 1024)} MiB; flying goes on"
+                f"{self.config.budget_bytes // (1024 * 1024)} MiB; flying goes on",
+                finish=True,
             )
 
     def _fail(self, exc: OSError) -> None:
@@ -295,11 +296,18 @@ class Recorder:
             f"flight recording {self._current_id} stopped: {_why(exc)}; flying goes on"
         )
 
-    def _stop_recording(self, text: str) -> None:
+    def _stop_recording(self, text: str, *, finish: bool = False) -> None:
+        """Stop this session's recording and say why; ``finish``: the file can still be
+        written (the budget, not a write error), so it gets its summary and reads back whole."""
         f = self._file
         self._file = None
         self._failed = True
-        if f is not None:
+        if f is not None and finish:
+            try:
+                f.finish(self._stamp_ns(), sorted(set(self._drones()) | self._detector.drones))
+            except OSError:
+                f.abandon()
+        elif f is not None:
             f.abandon()
         self._preroll.clear()
         self.last_error = text

@@ -184,6 +184,9 @@ def test_disk_budget_deletes_the_oldest_never_the_current(tmp_path: Path, clock:
     assert [f.id for f in rec.index.listing()] == [current]
     assert rec.last_error is not None and "disk budget" in rec.last_error
     assert alerts and alerts[-1]["level"] == "alert"
+    # stopped at the budget, the file is finished (a summary, listed without a scan)
+    stopped = read_recording(rec.index.path_for(current))
+    assert stopped.complete and stopped.topics.get("/pad") == "std_msgs/String"
     rec.stop()
 
 
