@@ -63,8 +63,8 @@ def test_two_consoles_fly_their_own_drones(tmp_path: Path) -> None:
             assert first.say("land")["accepted"]
             first.wait_truth(lambda t: not t["flying"], 30, "first landed")
 
-            # an address asked for that is taken: one line, before anything starts (port 1:
-            # never reached)
+            # an address asked for that is taken: argparse's usage and one error line, before
+            # anything starts (port 1: never reached)
             asked = subprocess.run(
                 [sys.executable, "-m", "server", "serve", "--sim-addr", BASE, "--port", "1"],
                 cwd=ROOT,
@@ -74,10 +74,10 @@ def test_two_consoles_fly_their_own_drones(tmp_path: Path) -> None:
                 timeout=60,
             )
             assert asked.returncode == 2 and asked.stdout == "", asked
-            assert asked.stderr == (
-                f"uav-console: the simulator address {BASE} is taken (UDP 5554 on {BASE} is in "
-                f"use: another console?); choose another with --sim-addr; e.g. --sim-addr {FREE} "
-                "is free\n"
+            assert asked.stderr.splitlines()[-1] == (
+                f"uav-console serve: error: the simulator address {BASE} is taken (UDP 5554 on "
+                f"{BASE} is in use: another console?); choose another with --sim-addr; e.g. "
+                f"--sim-addr {FREE} is free"
             )
 
             # a vehicle whose simulator address was taken between the look and the start
