@@ -288,12 +288,6 @@ def test_a_vehicle_publishing_under_another_name_reaches_nobody(rig: Rig) -> Non
     assert rig.srv.http.get("/api/v1/health").json()["bus"]["alive"] == [NAME]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known defect: on the joining console (east) the dialog answers a typed motion for a "
-    "flying bus vehicle with 'I need to take off first' while east's REST shows it flying, so "
-    "the vehicle's lease refusal is never reached; the direct actions are judged right",
-)
 def test_one_lease_across_two_consoles(tmp_path: Path) -> None:
     """Two ``serve`` processes on one bus (the second joins the first's router): the console
     whose pilot flies first holds the vehicle's lease; the other's motion is refused by the
@@ -316,9 +310,16 @@ def test_one_lease_across_two_consoles(tmp_path: Path) -> None:
         wait_for(lambda: rig.flying(west), "west's take-off", 40)
         refused = rig.act("takeoff", east)
         assert not refused["accepted"] and "pilot lease is held by pilot@" in refused["detail"]
-        # east's dialog checks a sentence against the drone's telemetry, as east sees it
+        # east's dialog checks a sentence against the drone's bus telemetry and follows a
+        # take-off it did not make within its reconcile period: until it has, it refuses a
+        # motion itself ("I need to take off first"), sending nothing
         wait_for(lambda: rig.flying(east), "east sees it flying", 20)
-        typed = east.http.post("/api/v1/command", json={"text": f"{NAME} go up one metre"})
+
+        def typed_motion() -> Any:
+            r = east.http.post("/api/v1/command", json={"text": f"{NAME} go up one metre"})
+            return None if "take off first" in r.text else r
+
+        typed = wait_for(typed_motion, "east's dialog following the take-off", 10)
         assert typed.status_code == 200 and not typed.json()["accepted"], typed.text
         assert "lease" in typed.json()["reply"]
         hover = rig.act("hover", east)
