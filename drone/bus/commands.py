@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
@@ -29,30 +29,6 @@ MAX_COMMAND_BYTES = 16 * 1024
 # What a vehicle answers: direct actions, its task executor's queue (a console's dialog
 # submits what it understood), reads, simulator faults, its lease, jogs. ``utterance`` is
 # decoded so that a console of another version is refused with the reason, not "unknown op".
-OPS = (
-    "direct",
-    "submit",
-    "preempt",
-    "cancel",
-    "utterance",
-    "telemetry",
-    "truth",
-    "fault",
-    "lease",
-    "jog",
-)
-TASK_OPS = frozenset({"submit", "preempt", "cancel"})
-# What ``preempt`` runs: the task executor's safety actions (TaskManager.preempt), or one
-# command that replaces everything (a supervisor's descent).
-PREEMPT_ACTIONS = frozenset({"land", "hover", "emergency", "return_home"})
-# Actions any pilot may send, lease or not; they never wait behind anything (DESIGN §5).
-STOP_ACTIONS = frozenset({"land", "hover", "emergency"})
-DIRECT_ACTIONS = frozenset({"takeoff", "reset"}) | STOP_ACTIONS
-# Ops that change nothing: any pilot may ask them, lease or not.
-READ_OPS = frozenset({"telemetry", "truth"})
-# A jog's velocity (``geometry_msgs/Twist`` as ``/cmd_vel`` carries it): these axes only.
-JOG_AXES = {"linear": ("x", "y", "z"), "angular": ("z",)}
-
 Op = Literal[
     "direct",
     "submit",
@@ -65,6 +41,18 @@ Op = Literal[
     "lease",
     "jog",
 ]
+OPS: tuple[str, ...] = get_args(Op)
+TASK_OPS = frozenset({"submit", "preempt", "cancel"})
+# What ``preempt`` runs: the task executor's safety actions (TaskManager.preempt), or one
+# command that replaces everything (a supervisor's descent).
+PREEMPT_ACTIONS = frozenset({"land", "hover", "emergency", "return_home"})
+# Actions any pilot may send, lease or not; they never wait behind anything (DESIGN §5).
+STOP_ACTIONS = frozenset({"land", "hover", "emergency"})
+DIRECT_ACTIONS = frozenset({"takeoff", "reset"}) | STOP_ACTIONS
+# Ops that change nothing: any pilot may ask them, lease or not.
+READ_OPS = frozenset({"telemetry", "truth"})
+# A jog's velocity (``geometry_msgs/Twist`` as ``/cmd_vel`` carries it): these axes only.
+JOG_AXES = {"linear": ("x", "y", "z"), "angular": ("z",)}
 
 
 class Command(BaseModel):
