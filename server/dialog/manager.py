@@ -38,7 +38,7 @@ from drone.commands import (
     Query,
     parse_command,
 )
-from drone.deadline import DEFAULT_DEADLINE_S, Deadline, Expired, audit_outcome, not_flown
+from drone.deadline import DEFAULT_DEADLINE_S, STOPS, Deadline, Expired, audit_outcome, not_flown
 from drone.preflight import EMERGENCY_DOWN, DroneFacts, refusal
 from drone.supervisor.alarms import Alarm
 from server.dialog import assist, clarify, confirm, replies
@@ -407,6 +407,8 @@ class DialogManager:
         else:
             question = None  # any other sentence drops the question
         refusal = self._check(interp)
+        if refusal is not None and await self._refreshed():  # the refusal may be of the past
+            refusal = self._check(interp)
         if refusal is not None:
             return DialogResult(refusal, commands, False), "refused"
         late = self._late(commands, issued)
@@ -422,6 +424,11 @@ class DialogManager:
         elif not ok and question is not None:
             self._question = question  # an answer that fits nothing: the question stands
         return DialogResult(reply, commands, ok), "executed" if ok else "refused"
+
+    async def _refreshed(self) -> bool:
+        """Bring the drone's snapshot up to now before a refusal is said; False: it already
+        is (a drone in this process), or the drone did not answer in time."""
+        return False
 
     def _late(self, commands: list[dict[str, Any]], issued: float | None) -> Expired | None:
         """The expiry of a sentence issued at ``issued`` if handed over now, else None."""
@@ -455,10 +462,17 @@ class DialogManager:
         return DialogResult(replies.LOW_CONFIDENCE, [], False), "asked_repeat"
 
     def _check(self, interp: Interpretation) -> str | None:
-        """The reason to refuse the sentence, or None: each command in its predicted state."""
+        """The reason to refuse the sentence, or None: each command in its predicted state.
+
+        The state is first brought up to the drone's snapshot of now (the periodic
+        :meth:`step` may not have seen the last change yet). A stop the state would refuse
+        still goes when the snapshot cannot say the drone is down: no fresh link (a console
+        that has just adopted a flying vehicle, or one whose telemetry lags) — the vehicle
+        answers it (DESIGN §5: stops always get through)."""
+        snap = self.vehicle.snapshot()
+        self._reconcile(snap)
         state = self._state
         known = self.vehicle.marker_ids()
-        snap = self.vehicle.snapshot()
         facts = DroneFacts(
             snap.emergency,
             snap.battery_pct,
@@ -474,6 +488,10 @@ class DialogManager:
             why = refusal(action, facts, self.params.battery_low_pct)
             if why is not None and state in (State.LANDED, State.EMERGENCY, State.LANDING):
                 return why
+            if action in STOPS and not snap.link_ok:
+                with contextlib.suppress(IllegalTransition):
+                    state = next_state(state, action)
+                continue
             active = self.nlu.grammar.active(state.value)
             if p.grammar not in active:
                 spec = self.nlu.grammar.states.get(state.value)

@@ -257,6 +257,9 @@ class RemoteDialog(DialogManager):
             )
         return await super().handle_utterance(text, confidence, source, role, issued)
 
+    async def _refreshed(self) -> bool:
+        return await self.stack.refresh()
+
     def close(self) -> None:
         self._alarms.close()
         self.task_port.close()

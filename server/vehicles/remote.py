@@ -56,6 +56,9 @@ JOIN_POLL_S = 0.05
 COMMAND_JOIN_WAIT_S = 3.0
 SILENT_S = 2.0
 STOPS = ("land", "emergency", "hover")
+# How long the dialog waits for the vehicle's telemetry of now before judging a sentence on
+# the last periodic one (a stop the dialog cannot judge still goes: DialogManager._check).
+REFRESH_TIMEOUT_S = 0.3
 # How long a stop with an id (the page's, down the server road) waits for the vehicle's verdict
 # before the answer says "sent, not confirmed" (the stop itself still goes: see act_stop).
 STOP_CONFIRM_S = 2.0
@@ -192,6 +195,20 @@ class RemoteDroneStack(DroneStack):
             "age_s": None if self.last_t is None else round(time.monotonic() - self.last_t, 3),
         }
         return out
+
+    async def refresh(self, timeout_s: float = REFRESH_TIMEOUT_S) -> bool:
+        """Ask the vehicle for its telemetry now and keep it as the last (the periodic one
+        may be up to a period old, more on a busy machine); False: not answered in time,
+        the last one stays."""
+        try:
+            fresh = await asyncio.wait_for(self.call({"op": "telemetry"}, timeout_s), timeout_s)
+        except (VehicleUnavailable, GraphError, RemoteCallError, TimeoutError) as exc:
+            log.debug("%s: telemetry not refreshed (%s)", self.name, exc)
+            return False
+        if not isinstance(fresh, dict):
+            return False
+        self.last, self.last_t = {**self.last, **fresh}, time.monotonic()
+        return True
 
     def direct(self, action: str) -> str:
         self._send({"op": "direct", "action": action})

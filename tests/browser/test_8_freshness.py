@@ -206,13 +206,15 @@ def test_a_killed_vehicle_process_raises_its_alarm_until_a_new_one_speaks(
             return alarm(v, "fresh:vehicle:uav1") is not None
 
         until(page, raised, "the vehicle's alarm after the kill")
-        assert any(v["telemetry"] and v["map"] for v in seen)  # greyed meanwhile
         first = alarm(seen[-1], "fresh:vehicle:uav1")
-        # raised while it is silent; or, where the new process spoke before the alarm was due
-        # (a restart in under 2 s), raised as the page learns of the new process, then said back
+        # raised while it is silent, its panels greyed in the same view; or, where the new
+        # process spoke before the alarm was due or before this test's next read (a busy
+        # machine), raised as the page learns of the new process and said back at once
         assert first[0].startswith(  # type: ignore[index]
             ("uav1: no telemetry for", "uav1: telemetry is back (it was silent for")
         ), first
+        if first[0].startswith("uav1: no telemetry for"):  # type: ignore[index]
+            assert seen[-1]["telemetry"] and seen[-1]["map"], seen[-1]
         # one alarm, its cause: the camera behind the vehicle is greyed, not blamed
         assert all(alarm(v, "fresh:camera:uav1") is None for v in seen)
         wait_for(lambda: (x := srv.wait_vehicle(timeout=60))["pid"] != old and x, "a new one", 60)

@@ -373,6 +373,50 @@ async def test_state_follows_a_take_off_and_landing_made_outside_the_dialog() ->
     assert rig.dm.state is State.LANDED
 
 
+async def test_a_sentence_is_checked_against_the_drone_of_now_not_the_last_period() -> None:
+    """The drone landed a moment ago and no period has passed: "take off" is not refused
+    with "I am already flying" (and, flying again, "land" is not "already on the ground")."""
+    from dataclasses import replace
+
+    rig = Rig()
+    rig.flight.snap = replace(rig.flight.snap, flying=True, altitude_m=0.8)
+    rig.run(0.5)
+    assert rig.dm.state is State.AIRBORNE_IDLE
+    rig.flight.snap = replace(rig.flight.snap, flying=False, altitude_m=0.0)
+    res = await rig.dm.handle_utterance("take off")
+    assert res.accepted, res.reply
+    rig.run(3.0)
+    rig.flight.snap = replace(rig.flight.snap, flying=False, altitude_m=0.0)
+    rig.flight.queue.clear()
+    rig.run(0.5)
+    assert rig.dm.state is State.LANDED
+    rig.flight.snap = replace(rig.flight.snap, flying=True, altitude_m=1.0)
+    res = await rig.dm.handle_utterance("land")
+    assert res.accepted, res.reply
+
+
+async def test_a_stop_goes_to_a_drone_whose_state_the_dialog_cannot_know() -> None:
+    """No fresh link (a console that has just adopted a vehicle): the dialog still believes
+    "on the ground", but land, hover and emergency are sent for the vehicle to answer."""
+    from dataclasses import replace
+
+    rig = Rig()
+    rig.flight.snap = replace(rig.flight.snap, link_ok=False)
+    for said, action in (("land", "land"), ("hover", "hover"), ("emergency stop", "emergency")):
+        rig.flight.log.clear()
+        res = await rig.dm.handle_utterance(said)
+        assert res.accepted, (said, res.reply)
+        assert rig.flight.log == [("preempt", {"action": action})], said
+    # with a fresh link the drone's own word stands: on the ground, "land" is refused
+    rig.flight.snap = replace(rig.flight.snap, link_ok=True, flying=False, emergency=False)
+    rig.dm.note_direct("reset")
+    rig.run(0.5)
+    rig.flight.log.clear()
+    res = await rig.dm.handle_utterance("land")
+    assert not res.accepted and res.reply == "I am already on the ground."
+    assert rig.flight.log == []
+
+
 async def test_no_alarms_before_the_drone_first_answers() -> None:
     from dataclasses import replace
 

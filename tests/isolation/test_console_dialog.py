@@ -33,12 +33,15 @@ class _Vehicle:
         self.slow: set[str] = set()
         self.release = asyncio.Event()
         self.decisions: list[dict[str, Any]] | None = None
+        self.telemetry: dict[str, Any] = {}  # what it answers when asked for its telemetry now
         graph.advertise_service(names.control_service(name), names.CONTROL_TYPE, self.control)
 
     async def control(self, args: dict[str, Any]) -> dict[str, Any]:
         self.seen.append(args)
         if args["op"] in self.slow:
             await self.release.wait()
+        if args["op"] == "telemetry":
+            return self.telemetry
         if args["op"] == "submit":
             given = self.decisions
             ok = [{"accepted": True, "reason": "", "question": False}] * len(args["commands"])
@@ -91,6 +94,30 @@ async def test_a_sentence_is_understood_here_and_sent_as_typed_commands() -> Non
     vehicle.decisions = [{"accepted": False, "reason": "no station to go home to"}]
     result = await dialog.handle_utterance("go up 0.4 meters")
     assert not result.accepted and "no station to go home to" in result.reply
+
+
+async def test_a_refusal_is_judged_again_on_the_telemetry_of_now() -> None:
+    """The periodic telemetry still says flying, the drone has just landed: "take off" is not
+    refused with "I am already flying" but asked of the vehicle's telemetry of now, and sent."""
+    graph = Graph()
+    graph.bind_loop(asyncio.get_running_loop())
+    vehicle = _Vehicle(graph)
+    stack, dialog, _ = _rig(graph)
+    _flying(stack, dialog)
+    vehicle.telemetry = {**stack.last, "flying": False}
+    result = await dialog.handle_utterance("take off")
+    assert result.accepted, result.reply
+    assert [a["op"] for a in vehicle.seen] == ["telemetry", "submit"]
+    # it really flies: asked again, the refusal stands, and nothing is sent
+    other = Graph()
+    other.bind_loop(asyncio.get_running_loop())
+    vehicle = _Vehicle(other)
+    stack, dialog, _ = _rig(other)
+    _flying(stack, dialog)
+    vehicle.telemetry = dict(stack.last)
+    result = await dialog.handle_utterance("take off")
+    assert not result.accepted and result.reply == "I am already flying."
+    assert [a["op"] for a in vehicle.seen] == ["telemetry"]
 
 
 async def test_a_stop_goes_at_once_and_what_follows_it_waits_for_it() -> None:

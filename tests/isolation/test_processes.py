@@ -246,12 +246,6 @@ def test_killed_vehicle_process_is_reported_and_restarted(rig: tuple[SimThread, 
         lis.close()
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="known safety defect, to fix first: the adopting serve's dialog may not yet have "
-    "followed the flying drone and answers the typed 'land' with 'already on the ground', "
-    "sending nothing (a spoken or typed stop must reach the vehicle whatever the dialog believes)",
-)
 def test_web_process_crash_vehicle_keeps_flying_and_is_adopted_by_the_next_serve(
     tmp_path: Path,
 ) -> None:
