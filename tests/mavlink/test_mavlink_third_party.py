@@ -27,7 +27,7 @@ from drone.sim.world import load_world
 from tests.support.loopback import fresh_address
 from tests.support.polling import until_async
 
-SPEED = 4.0
+SPEED = 8.0  # simulated seconds per real second: the simulated PX4 runs its own loops
 
 
 @pytest.fixture(scope="module")
