@@ -399,7 +399,10 @@ async def test_no_auth_within_the_deadline_is_closed() -> None:
     async with running_door(limits) as (door, _):
         ws = await connect(door.url)  # the handshake, then nothing
         code, reason = await closed_with(ws)
-        assert code == 1008 and "no auth within" in reason
+        # "try again later" (1013), not a refusal (1008): a page reconnects at once, where a
+        # refused credential makes it wait (web/static/js/door.js), and on a busy machine the
+        # deadline passes while the door itself is slow to read the page's auth
+        assert (code, reason) == (1013, "no auth within 0.3 s of connecting")
         # a raw TCP connection that never even starts the handshake is let go as well
         reader, writer = await asyncio.open_connection(HOST, door.port)
         assert await asyncio.wait_for(reader.read(), 10) == b""
