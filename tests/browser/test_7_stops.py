@@ -130,8 +130,8 @@ STOP_UNITS = """async () => {
   out.supersedeAgain = d.sent.map((m) => [m.op, [...m.ids].sort()]);
   out.droppedIds = [kept.id, ran.id].sort();
   sender.doorSuperseded({ op: 'superseded', ids: [kept.id], too_late: [] });
-  sender.doorAck({ op: 'ack', id: ran.id, action: 'hover', accepted: true, detail: 'hover delivered',
-                   delivered: 1002, road: 'server', late_s: 2.0 });
+  sender.doorAck({ op: 'ack', id: ran.id, action: 'hover', accepted: true,
+                   detail: 'hover delivered', delivered: 1002, road: 'server', late_s: 2.0 });
   out.afterAnswers = [kept.state, ran.state, ran.text(0).text.replace(/at [0-9:]+/, 'at T')];
   d.sent = [];
   sender.doorOpened('uav1');
