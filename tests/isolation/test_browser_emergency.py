@@ -104,6 +104,8 @@ def open_page(browser: Any, srv: Served) -> tuple[Any, Any, list[str]]:
 
 
 def take_off(sim: SimThread, srv: Served) -> None:
+    if sim.truth.flying and sim.truth.z > 0.5:
+        return  # still up from a test that failed before its landing
     assert srv.command("take off")["accepted"], srv.log()
     wait_for(lambda: sim.truth.flying and sim.truth.z > 0.5, "take-off", 30)
 
@@ -115,7 +117,8 @@ def test_emergency_reaches_the_wire_through_the_door_while_the_web_process_is_st
     take_off(sim, srv)
     ctx, page, violations = open_page(browser, srv)
     try:
-        assert page.text_content("#sb-server-v") == "ok"
+        # a heartbeat the busy server was late with turns it red for a moment: waited for
+        js(page, "document.querySelector('#sb-server-v').textContent === 'ok'", "server ok")
         srv.pause()
         try:
             # the server road goes red a second after its last heartbeat; the pill stops
