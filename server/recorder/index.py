@@ -8,7 +8,8 @@
 - Disk budget: when the recordings take more than ``budget_bytes``, the oldest are deleted
   first; the current recording never is (the recorder stops it instead, with an alert).
 - Repair: a file a crash left without footer is rewritten, complete, from everything up to its
-  last finished chunk (then Foxglove and any MCAP reader open it).
+  last finished chunk (then Foxglove and any MCAP reader open it), message by message: memory
+  stays bounded whatever the file's size.
 """
 
 from __future__ import annotations
@@ -25,7 +26,13 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from server.recorder.errors import CorruptRecording, FlightNotFound, RecorderError
-from server.recorder.mcapfile import LIBRARY, PROFILE, open_private, read_recording
+from server.recorder.mcapfile import (
+    LIBRARY,
+    PROFILE,
+    open_private,
+    read_recording,
+    stream_messages,
+)
 from server.recorder.sessions import drone_of
 
 SUFFIX = ".mcap"
@@ -169,10 +176,14 @@ class FlightIndex:
     def repair(self, path: Path) -> bool:
         """Rewrite a file left without footer as a complete one; False if it was complete.
 
+        Two passes, each holding one chunk at a time (recordings reach 2 GiB): a count-only
+        scan finds the channels, the metadata and where the file stops; the rewrite then
+        streams the messages up to there.
+
         Raises:
             CorruptRecording: it is not an MCAP file at all.
         """
-        rec = read_recording(path, strict=False)
+        rec = read_recording(path, strict=False, keep_messages=False)
         if rec.complete:
             return False
         tmp = path.with_suffix(".repair")
@@ -191,7 +202,7 @@ class FlightIndex:
                 channel_ids[ch.id] = writer.register_channel(
                     ch.topic, ch.message_encoding, schema_ids[skey]
                 )
-            for seq, m in enumerate(rec.messages):
+            for seq, m in enumerate(stream_messages(path)):
                 writer.add_message(
                     channel_ids[m.channel], m.log_time_ns, m.data, m.log_time_ns, seq
                 )
@@ -200,7 +211,7 @@ class FlightIndex:
                 {
                     "ended_ns": str(rec.end_ns or _started_ns(rec.metadata) or 0),
                     "drones": ",".join(drones_of(list(rec.topics))),
-                    "messages": str(len(rec.messages)),
+                    "messages": str(rec.message_count),
                     "repaired": f"cut short at byte {rec.good_until} of {rec.size}",
                 },
             )

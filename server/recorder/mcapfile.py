@@ -279,9 +279,36 @@ def read_recording(
     return rec
 
 
+def stream_messages(path: Path | str) -> Iterator[RecordedMessage]:
+    """Every message of an MCAP file in file order, read one chunk at a time: memory stays
+    bounded whatever the file's size (a rewrite of a 2 GiB recording). Tolerant of a file cut
+    short, as ``read_recording(strict=False)``: it ends at the last complete record.
+
+    Raises:
+        CorruptRecording: not an MCAP file, or a record that does not parse (offset named).
+        OSError: the file cannot be read.
+    """
+    path = Path(path)
+    with path.open("rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if size == 0:
+            raise CorruptRecording(str(path), 0, "empty file, not an MCAP recording")
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            yield from _walk(Recording(path, size, keep_messages=False), data)
+
+
 def _parse(path: Path, data: mmap.mmap, size: int, keep_messages: bool = True) -> Recording:
     rec = Recording(path, size, keep_messages=keep_messages)
-    name = str(path)
+    for message in _walk(rec, data):
+        if keep_messages:
+            rec.messages.append(message)
+    return rec
+
+
+def _walk(rec: Recording, data: mmap.mmap) -> Iterator[RecordedMessage]:
+    """Walk the records of ``data`` into ``rec`` (channels, metadata, counts, where it stopped)
+    and yield each message as it is read: at most one chunk's records are held at a time."""
+    name, size = str(rec.path), rec.size
     if data[:8] != MAGIC:
         raise CorruptRecording(name, 0, "not an MCAP file (bad magic)")
     schemas: dict[int, Schema] = {}
@@ -289,7 +316,7 @@ def _parse(path: Path, data: mmap.mmap, size: int, keep_messages: bool = True) -
     while pos < size:
         if size - pos < _HEAD.size:
             rec.stopped = CorruptRecording(name, pos, "file truncated inside a record header")
-            return rec
+            return
         opcode, length = _HEAD.unpack_from(data, pos)
         body_at = pos + _HEAD.size
         if length > size - body_at:
@@ -297,10 +324,11 @@ def _parse(path: Path, data: mmap.mmap, size: int, keep_messages: bool = True) -
             rec.stopped = CorruptRecording(
                 name, pos, f"file truncated: {what} record of {length} bytes runs past the end"
             )
-            return rec
+            return
         body = data[body_at : body_at + length]
         try:
-            done = _record(rec, schemas, opcode, body, length)
+            messages: list[RecordedMessage] = []
+            done = _record(rec, schemas, opcode, body, length, messages)
         except (
             McapError,
             CRCValidationError,
@@ -314,13 +342,14 @@ def _parse(path: Path, data: mmap.mmap, size: int, keep_messages: bool = True) -
                 name, pos, f"{_opcode_name(opcode)} record does not parse ({exc})"
             ) from exc
         pos = rec.good_until = body_at + length
+        del body
+        yield from messages
         if done:
             if data[pos : pos + 8] != MAGIC:
                 raise CorruptRecording(name, pos, "no closing magic after the footer")
             rec.complete = True
-            return rec
+            return
     rec.stopped = CorruptRecording(name, pos, "file truncated: no footer (writer did not finish)")
-    return rec
 
 
 def _opcode_name(opcode: int) -> str:
@@ -331,9 +360,14 @@ def _opcode_name(opcode: int) -> str:
 
 
 def _record(
-    rec: Recording, schemas: dict[int, Schema], opcode: int, body: bytes, length: int
+    rec: Recording,
+    schemas: dict[int, Schema],
+    opcode: int,
+    body: bytes,
+    length: int,
+    messages: list[RecordedMessage],
 ) -> bool:
-    """Take in one top-level record; True at the footer."""
+    """Take in one top-level record, its messages into ``messages``; True at the footer."""
     stream = ReadDataStream(io.BytesIO(body))
     if opcode == Opcode.FOOTER:
         Footer.read(stream)
@@ -342,13 +376,13 @@ def _record(
         Header.read(stream)
     elif opcode == Opcode.CHUNK:
         for inner in breakup_chunk(_uncompressed(Chunk.read(stream)), validate_crc=True):
-            _inner(rec, schemas, inner)
+            _inner(rec, schemas, inner, messages)
     elif opcode == Opcode.MESSAGE:
-        _inner(rec, schemas, Message.read(stream, length))
+        _inner(rec, schemas, Message.read(stream, length), messages)
     elif opcode == Opcode.SCHEMA:
-        _inner(rec, schemas, Schema.read(stream))
+        _inner(rec, schemas, Schema.read(stream), messages)
     elif opcode == Opcode.CHANNEL:
-        _inner(rec, schemas, Channel.read(stream))
+        _inner(rec, schemas, Channel.read(stream), messages)
     elif opcode == Opcode.METADATA:
         meta = Metadata.read(stream)
         rec.metadata[meta.name] = dict(meta.metadata)
@@ -398,7 +432,9 @@ def _uncompressed(chunk: Chunk) -> Chunk:
     return dataclasses.replace(chunk, compression="", data=data)
 
 
-def _inner(rec: Recording, schemas: dict[int, Schema], record: Any) -> None:
+def _inner(
+    rec: Recording, schemas: dict[int, Schema], record: Any, messages: list[RecordedMessage]
+) -> None:
     if isinstance(record, Schema):
         schemas[record.id] = record
     elif isinstance(record, Channel):
@@ -420,5 +456,4 @@ def _inner(rec: Recording, schemas: dict[int, Schema], record: Any) -> None:
         rec.message_count += 1
         rec.first_ns = t if rec.first_ns is None else min(rec.first_ns, t)
         rec.last_ns = t if rec.last_ns is None else max(rec.last_ns, t)
-        if rec.keep_messages:
-            rec.messages.append(RecordedMessage(record.channel_id, t, record.data))
+        messages.append(RecordedMessage(record.channel_id, t, record.data))

@@ -111,6 +111,31 @@ STOP_UNITS = """async () => {
   sender.doorOpened('uav2');
   out.sentOnOpen = d.sent.map((m) => m.op + ':' + m.id === 'stop:' + stop.id);
   out.ids = /^[A-Za-z0-9_.:-]{1,64}$/.test(s.newStopId());
+
+  // 7. superseded while both roads were stalled, but the server road brought it first: the
+  // door answers "too_late" and the page says it ran (never "dropped" for a stop that ran)
+  d = door(); r = rest(); sender = make(d, r);
+  stop = sender.send('uav1', 'emergency');
+  sender.supersede();
+  sender.doorSuperseded({ op: 'superseded', ids: [], too_late: [stop.id] });
+  out.ranAnyway = [stop.state, stop.text(0).text];
+  // 8. a supersede the door did not answer (it was down) goes again when it reopens; one
+  // dropped there is forgotten, and a resent stop's ack that it ran is said
+  d = door(); r = rest(); sender = make(d, r);
+  const kept = sender.send('uav1', 'land');
+  const ran = sender.send('uav1', 'hover');
+  sender.supersede();
+  d.sent = [];
+  sender.doorOpened('uav1');
+  out.supersedeAgain = d.sent.map((m) => [m.op, [...m.ids].sort()]);
+  out.droppedIds = [kept.id, ran.id].sort();
+  sender.doorSuperseded({ op: 'superseded', ids: [kept.id], too_late: [] });
+  sender.doorAck({ op: 'ack', id: ran.id, action: 'hover', accepted: true,
+                   detail: 'hover delivered', delivered: 1002, road: 'server', late_s: 2.0 });
+  out.afterAnswers = [kept.state, ran.state, ran.text(0).text.replace(/at [0-9:]+/, 'at T')];
+  d.sent = [];
+  sender.doorOpened('uav1');
+  out.nothingAgain = d.sent.length;
   return out;
 }"""
 
@@ -132,3 +157,15 @@ def test_stop_logic_units(console: ConsolePage) -> None:
     assert out["nothingLeft"] == 0
     assert out["unsent"] == ["unsent", "Land could not be sent: observer may not command"]
     assert out["sentOnOpen"] == [True] and out["ids"]
+    assert out["ranAnyway"] == [
+        "ran",
+        "Emergency stop: not dropped, it had already reached the drone",
+    ]
+    assert out["supersedeAgain"] == [["supersede", out["droppedIds"]]]
+    assert out["afterAnswers"] == [
+        "superseded",
+        "ran",
+        "Hover: not dropped, it had already reached the drone at T 2.0 s after it was issued,"
+        " by the server",
+    ]
+    assert out["nothingAgain"] == 0

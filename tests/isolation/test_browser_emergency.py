@@ -17,6 +17,7 @@ A real ``serve --vehicles process`` flies a simulated AR.Drone that the test pro
 from __future__ import annotations
 
 import os
+import re
 import signal
 import time
 from collections.abc import Iterator
@@ -41,6 +42,14 @@ CSP_WATCH = (
     " console.error('Content Security Policy violation: ' + e.violatedDirective"
     " + ' ' + e.blockedURI))"
 )
+# Where the page's roads and stops stand, for a failed wait's message.
+PAGE_STATE = """(() => { const d = uavConsole.doors.get('uav1'); const b = document.body.dataset;
+  return JSON.stringify({door: d && {authenticated: d.authenticated, lastClose: d.lastClose,
+    sinceBeatMs: d.lastBeat === null ? null : Math.round(performance.now() - d.lastBeat)},
+    doorRoad: b.doorRoad, serverRoad: b.serverRoad, stop: b.stop, stopText: b.stopText}); })()"""
+# A busy machine (2 cores shared with other suites) starves the niced processes for seconds:
+# the waits are long, and what a stop's lateness means is checked by what the page says of it.
+START_S = 120.0
 
 
 @pytest.fixture(scope="module")
@@ -50,10 +59,10 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[SimThread, S
     tmp: Path = tmp_path_factory.mktemp("door-browser")
     with (
         SimThread(SIM_ADDR) as sim,
-        serve(tmp, SIM_ADDR, extra=("--vehicles", "process")) as srv,
+        serve(tmp, SIM_ADDR, extra=("--vehicles", "process"), start_s=START_S) as srv,
         sync_playwright() as pw,
     ):
-        srv.wait_vehicle()
+        srv.wait_vehicle(timeout=START_S)
         browser = pw.chromium.launch(
             executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
         )
@@ -63,9 +72,13 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[SimThread, S
             browser.close()
 
 
-def js(page: Any, expr: str, what: str, timeout: float = 20.0) -> Any:
-    """Poll ``expr`` in the page until truthy (evaluate runs over CDP, outside its CSP)."""
-    return wait_for(lambda: page.evaluate(expr), what, timeout)
+def js(page: Any, expr: str, what: str, timeout: float = 30.0) -> Any:
+    """Poll ``expr`` in the page until truthy (evaluate runs over CDP, outside its CSP); a
+    timeout says where the page's roads and stops stood."""
+    try:
+        return wait_for(lambda: page.evaluate(expr), what, timeout)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}; the page: {page.evaluate(PAGE_STATE)}") from None
 
 
 def open_page(browser: Any, srv: Served) -> tuple[Any, Any, list[str]]:
@@ -91,6 +104,8 @@ def open_page(browser: Any, srv: Served) -> tuple[Any, Any, list[str]]:
 
 
 def take_off(sim: SimThread, srv: Served) -> None:
+    if sim.truth.flying and sim.truth.z > 0.5:
+        return  # still up from a test that failed before its landing
     assert srv.command("take off")["accepted"], srv.log()
     wait_for(lambda: sim.truth.flying and sim.truth.z > 0.5, "take-off", 30)
 
@@ -102,20 +117,26 @@ def test_emergency_reaches_the_wire_through_the_door_while_the_web_process_is_st
     take_off(sim, srv)
     ctx, page, violations = open_page(browser, srv)
     try:
-        assert page.text_content("#sb-server-v") == "ok"
+        # a heartbeat the busy server was late with turns it red for a moment: waited for
+        js(page, "document.querySelector('#sb-server-v').textContent === 'ok'", "server ok")
         srv.pause()
         try:
-            # the server road goes red within a second; the pill stops saying "Connected"
-            js(page, "document.body.dataset.serverRoad === 'alert'", "the server road red", 10)
+            # the server road goes red a second after its last heartbeat; the pill stops
+            # saying "Connected"; the door road stays green (its heartbeats come from the
+            # vehicle: a starved vehicle may miss one, so it is waited for, not sampled)
+            js(page, "document.body.dataset.serverRoad === 'alert'", "the server road red")
             assert page.text_content("#conn") == "Server not answering"
-            assert page.evaluate("document.body.dataset.doorRoad") == "ok"
+            js(page, "document.body.dataset.doorRoad === 'ok'", "the door road green")
             t0 = time.monotonic()
             page.click("#btn-emergency")
-            wait_for(lambda: sim.sim.first_emergency_after(t0), "AT*REF emergency", 15)
-            wait_for(lambda: sim.truth.emergency, "the drone's emergency state", 10)
+            # The stop must arrive, however busy the machine; how late it was, the page says.
+            wire = wait_for(lambda: sim.sim.first_emergency_after(t0), "AT*REF emergency", 60)
+            wait_for(lambda: sim.truth.emergency, "the drone's emergency state", 30)
             js(page, "document.body.dataset.stop === 'delivered'", "the page to say delivered")
             said = page.evaluate("document.body.dataset.stopText")
-            assert "Emergency stop: stopped at" in said and "by the safety door" in said, said
+            # when and how late (issued to run, on the vehicle's clock), by which road
+            said_late = r"Emergency stop: stopped at [0-9:]+ \(delivered after \d+\.\d s, by the"
+            assert re.fullmatch(said_late + r" safety door\)", said), (said, wire - t0)
             assert "failed" not in (page.text_content("#banner") or "")
             assert srv.proc.poll() is None  # the web process is stopped, not gone
         finally:
@@ -139,7 +160,7 @@ def test_a_stop_pending_on_both_roads_is_dropped_by_a_newer_command(
     srv.pause()
     os.kill(vehicle_pid, signal.SIGSTOP)
     try:
-        js(page, "document.body.dataset.doorRoad === 'alert'", "the door road red", 10)
+        js(page, "document.body.dataset.doorRoad === 'alert'", "the door road red")
         page.click("#btn-emergency")
         js(page, "document.body.dataset.stop === 'pending'", "the stop pending")
         said = page.evaluate("document.body.dataset.stopText")
@@ -154,11 +175,11 @@ def test_a_stop_pending_on_both_roads_is_dropped_by_a_newer_command(
         os.kill(vehicle_pid, signal.SIGCONT)
         srv.resume()
     try:
-        js(page, "document.body.dataset.doorRoad === 'ok'", "the door back", 30)
-        js(page, "document.querySelector('#conn').textContent === 'Connected'", "Connected", 30)
+        js(page, "document.body.dataset.doorRoad === 'ok'", "the door back", 60)
+        js(page, "document.querySelector('#conn').textContent === 'Connected'", "Connected", 60)
         # the server has worked off what waited in its sockets (the page's REST retries of the
         # stop among them) once it answers a request sent after them
-        wait_for(lambda: srv.drone()["link_ok"], "the server to answer", 30)
+        wait_for(lambda: srv.drone()["link_ok"], "the server to answer", 60)
         assert sim.sim.first_emergency_after(t0) is None, "the dropped stop fired from the past"
         assert not sim.truth.emergency
         assert violations == []

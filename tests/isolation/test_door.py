@@ -399,12 +399,46 @@ async def test_no_auth_within_the_deadline_is_closed() -> None:
     async with running_door(limits) as (door, _):
         ws = await connect(door.url)  # the handshake, then nothing
         code, reason = await closed_with(ws)
-        assert code == 1008 and "no auth within" in reason
+        # "try again later" (1013), not a refusal (1008): a page reconnects at once, where a
+        # refused credential makes it wait (web/static/js/door.js), and on a busy machine the
+        # deadline passes while the door itself is slow to read the page's auth
+        assert (code, reason) == (1013, "no auth within 0.3 s of connecting")
         # a raw TCP connection that never even starts the handshake is let go as well
         reader, writer = await asyncio.open_connection(HOST, door.port)
         assert await asyncio.wait_for(reader.read(), 10) == b""
         writer.close()
         assert door.counts.auth_timeouts == 2 and door.counts.unauthenticated_total == 0
+
+
+async def test_an_auth_the_door_was_too_busy_to_read_in_time_is_taken() -> None:
+    """The door's own loop stalls (a busy machine) past the deadline while the page's
+    handshake waits in its socket: the page, on time, is let in (the deadline is judged by a
+    read that waited for the client in vain), not closed for the door's own lateness."""
+    limits = DoorLimits(auth_deadline_s=0.3)
+    async with running_door(limits) as (door, _):
+        reader, writer = await asyncio.open_connection(HOST, door.port)
+        await until_async(lambda: door.counts.unauthenticated_total == 1, 10, "the accept")
+        client = ClientProtocol(parse_uri(door.url))
+        client.send_request(client.connect())
+        writer.write(b"".join(client.data_to_send()))
+        await writer.drain()
+        time.sleep(0.45)  # the door's loop (this one) does not run: past the 0.3 s deadline
+
+        async def more() -> bytes:
+            data = await asyncio.wait_for(reader.read(4096), 10)
+            assert data, f"the door closed ({door.counts.auth_timeouts} auth timeouts)"
+            return data
+
+        while client.handshake_exc is None and client.state is not State.OPEN:
+            client.receive_data(await more())
+        client.send_text(encode(Auth(TOKEN)).encode())
+        writer.write(b"".join(client.data_to_send()))
+        got: list[Any] = []
+        while not got:
+            client.receive_data(await more())
+            got += [parse_door(e.data) for e in client.events_received() if isinstance(e, Frame)]
+        assert isinstance(got[0], Hello) and door.counts.auth_timeouts == 0
+        writer.close()
 
 
 @pytest.mark.parametrize(

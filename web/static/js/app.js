@@ -76,6 +76,7 @@ class Console {
       fleet: () => this.fleet,
     });
     this.doors.addEventListener("ack", (ev) => this.stops.doorAck(ev.detail.msg));
+    this.doors.addEventListener("superseded", (ev) => this.stops.doorSuperseded(ev.detail.msg));
     this.doors.addEventListener("open", (ev) => this.stops.doorOpened(ev.detail.drone));
     this.stops.addEventListener("change", (ev) => this.onStopChange(ev.detail));
 

@@ -6,13 +6,19 @@
 // each road keeps trying (REST again every second with the same id; the door on every
 // reconnect) until one acknowledges. A newer operator command (take off, a typed command, a
 // jog) supersedes a pending stop: "supersede" goes to the door, the REST request is aborted,
-// and the stop is dropped: nothing fires from the past.
+// and the stop is dropped: nothing fires from the past. A stop the vehicle had already run
+// when its supersede arrived (the server road brought it while the door was stalled) is said
+// as run, never as dropped: the door answers "too_late", or acknowledges a resent stop, and the
+// supersede is sent again each time the door reopens until the door has answered it.
 //
 // StopSender is driven by what it is given (the REST call, the doors, the clocks), so the
 // browser tests drive it with stand-ins; stopText says where a stop stands, in words.
 
 export const STOP_ACTIONS = Object.freeze(["emergency", "land", "hover"]);
 export const REST_RETRY_MS = 1000;
+// Superseded stops remembered until their door answers the supersede (a page drops a few a
+// minute); one pushed out is only no longer corrected if the vehicle had run it.
+export const DROPPED_KEPT = 32;
 
 /** A stop id (the same on both roads): random, 1-64 of [A-Za-z0-9_.:-]. */
 export function newStopId(cryptoImpl = globalThis.crypto) {
@@ -61,6 +67,17 @@ export function stopText(stop, offsetS = 0) {
       level: "warn",
     };
   }
+  if (stop.state === "ran") {
+    // superseded on the page, but the vehicle had already run it: it was not dropped
+    const ack = stop.ack || {};
+    const at = Number.isFinite(ack.delivered) ? ` at ${clock(ack.delivered, offsetS)}` : "";
+    const road = ROAD_WORDS[ack.road] ? `, by ${ROAD_WORDS[ack.road]}` : "";
+    const late = Number.isFinite(ack.late_s) ? ` ${ack.late_s.toFixed(1)} s after it was issued` : "";
+    return {
+      text: `${who}${label}: not dropped, it had already reached the drone${at}${late}${road}`,
+      level: "alert",
+    };
+  }
   if (stop.state === "refused") {
     return { text: `${who}${label} not carried out: ${stop.ack?.detail || "refused"}`, level: "alert" };
   }
@@ -89,6 +106,8 @@ export class StopSender extends EventTarget {
     this.sleep = roads.sleep ?? abortableSleep;
     /** @type {Map<string, object>} id -> stop, while pending */
     this.pending = new Map();
+    /** @type {Map<string, object>} id -> superseded stop, until its door answers */
+    this.dropped = new Map();
   }
 
   /** Send ``action`` to ``drone`` down every road now; returns the stop. ``source`` (button,
@@ -121,8 +140,11 @@ export class StopSender extends EventTarget {
     return stop;
   }
 
-  /** Send every pending stop of ``drone`` down its door (it has just opened again). */
+  /** Send every pending stop of ``drone`` down its door (it has just opened again), and the
+   *  supersedes it has not answered yet (the server road may bring those stops later). */
   doorOpened(drone) {
+    const ids = [...this.dropped.values()].filter((s) => s.drone === drone).map((s) => s.id);
+    if (ids.length) this.roads.door(drone)?.send({ op: "supersede", ids });
     for (const stop of this.pending.values()) {
       if (stop.drone === drone) {
         if (stop.road.door === "none") stop.road.door = "trying";
@@ -172,6 +194,25 @@ export class StopSender extends EventTarget {
   doorAck(msg) {
     const stop = this.pending.get(msg.id);
     if (stop) this.acked(stop, { ...msg, via: "door" });
+    const gone = this.dropped.get(msg.id);
+    if (gone && msg.accepted) this.ranAnyway(gone, { ...msg, via: "door" });
+  }
+
+  /** A door's answer ({op: "superseded", ids, too_late}) to a supersede: the stops in
+   *  ``too_late`` had run before it arrived; the others will not run. */
+  doorSuperseded(msg) {
+    for (const id of Array.isArray(msg.ids) ? msg.ids : []) this.dropped.delete(id);
+    for (const id of Array.isArray(msg.too_late) ? msg.too_late : []) {
+      const stop = this.dropped.get(id);
+      if (stop) this.ranAnyway(stop, { accepted: true, id, detail: "already run", via: "door" });
+    }
+  }
+
+  ranAnyway(stop, ack) {
+    this.dropped.delete(stop.id);
+    stop.state = "ran";
+    stop.ack = ack;
+    this.changed(stop);
   }
 
   acked(stop, ack) {
@@ -213,9 +254,11 @@ export class StopSender extends EventTarget {
     for (const stop of dropped) {
       stop.state = "superseded";
       this.pending.delete(stop.id);
+      this.dropped.set(stop.id, stop);
       stop.abort.abort();
       this.changed(stop);
     }
+    while (this.dropped.size > DROPPED_KEPT) this.dropped.delete(this.dropped.keys().next().value);
     return dropped;
   }
 
