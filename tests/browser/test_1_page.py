@@ -9,7 +9,14 @@ from typing import Any
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-from tests.browser.conftest import OBSERVER, SCREENSHOTS, ConsolePage, ServerProcess, open_console
+from tests.browser.conftest import (
+    OBSERVER,
+    SCREENSHOTS,
+    ConsolePage,
+    ServerProcess,
+    open_console,
+    wait_ready,
+)
 from tests.browser.helpers import NO_SPEECH, SPEECH_STANDIN
 
 pytestmark = pytest.mark.browser
@@ -32,10 +39,11 @@ def frames(page: Any) -> int:
 def test_page_loads_without_console_errors(console: ConsolePage) -> None:
     page = console.page
     assert page.title() == "uav-console"
-    # Give every panel time to load the world, learn its role and render; nothing may log an error.
+    # Every panel loads the world, learns its role, shows telemetry and video and checks its
+    # voice; nothing may log an error on the way.
     page.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
-    page.wait_for_function("uavConsole.map.world !== null", timeout=10_000)
-    page.wait_for_timeout(1500)
+    wait_ready(page, world=True, telemetry=True, frames=2)
+    page.wait_for_function("uavConsole.dialog.voice !== 'unknown'", timeout=10_000)
     assert console.console_errors() == []
     assert page.get_attribute("#conn", "data-state") == "open"
     assert page.text_content("#conn") == "Connected"
@@ -66,7 +74,12 @@ def test_telemetry_and_camera_update(console: ConsolePage) -> None:
     second = frames(page)
     fps = (second - first) / 2.0
     assert fps >= 5, f"only {fps} frames/s reached the page"
-    page.wait_for_timeout(600)  # the HUD refreshes twice a second
+    # the HUD refreshes twice a second
+    page.wait_for_function(
+        "/^\\d+(\\.\\d)? fps$/.test(document.querySelector('#cam-fps').textContent)"
+        " && /^\\d+ ms$/.test(document.querySelector('#cam-latency').textContent)",
+        timeout=5000,
+    )
     assert re.fullmatch(r"\d+(\.\d)? fps", page.text_content("#cam-fps") or "")
     latency = page.text_content("#cam-latency") or ""
     assert re.fullmatch(r"\d+ ms", latency), latency
@@ -76,13 +89,11 @@ def test_telemetry_and_camera_update(console: ConsolePage) -> None:
 
 
 def test_phone_viewport_four_essentials_visible(browser: Any, server: ServerProcess) -> None:
-    ctx, cp = open_console(browser, server.url(), viewport=PHONE, color_scheme="dark")
+    ctx, cp = open_console(
+        browser, server.url(), viewport=PHONE, color_scheme="dark", frames=2, telemetry=True
+    )
     try:
         page = cp.page
-        page.wait_for_function(
-            "Number(document.querySelector('#camera').dataset.frames||0) > 2", timeout=20_000
-        )
-        page.wait_for_timeout(500)
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOTS / "console-phone.png"))
         assert page.evaluate("window.scrollY") == 0
