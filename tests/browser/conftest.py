@@ -38,7 +38,7 @@ CHROMIUM_ARGS = [
 ]
 PILOT = "pilot-token-for-browser-tests"
 OBSERVER = "observer-token-for-browser-tests"
-START_TIMEOUT_S = 60.0
+START_TIMEOUT_S = 180.0  # a loaded 2-core machine: the imports alone can take a minute
 SCREENSHOTS = ROOT / "docs" / "screenshots"
 
 
@@ -293,9 +293,12 @@ def open_console(
     return ctx, cp
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def console(browser: Any, server: ServerProcess) -> Iterator[ConsolePage]:
-    ctx, cp = open_console(browser, server.url())
+    """One pilot page on the shared server for the module's tests that use it (what it logged
+    is kept for all of them). It holds the pilot lease from the first such test to the module's
+    end: a test that needs the lease on a page of its own runs before the first one."""
+    ctx, cp = open_console(browser, server.url(), lease=True)
     try:
         yield cp
     finally:

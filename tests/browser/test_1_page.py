@@ -36,6 +36,101 @@ def frames(page: Any) -> int:
     return int(page.eval_on_selector("#camera", "el => Number(el.dataset.frames || 0)"))
 
 
+# Pages of their own that need the pilot lease: before the first test on the module's shared
+# page (the ``console`` fixture), which holds the lease from then on.
+def test_mic_without_speech_recognition_says_so(browser: Any, server: ServerProcess) -> None:
+    # No Web Speech API: "auto" picks the console's own (offline) recogniser, and the page says
+    # so; with no microphone on this machine, pressing it says why and offers typing.
+    ctx, cp = open_console(browser, server.url(), init_script=NO_SPEECH)
+    try:
+        page = cp.page
+        page.wait_for_function("document.body.dataset.recognizer === 'server'", timeout=3000)
+        assert "offline" in (page.text_content("#recognizer-label") or "")
+        page.click("#mic")
+        page.wait_for_selector("#dialog .msg-system", timeout=5000)
+        text = page.text_content("#dialog") or ""
+        assert "microphone" in text.lower() and "type" in text.lower()
+    finally:
+        ctx.close()
+
+
+def test_interim_text_shown_while_speaking(browser: Any, server: ServerProcess) -> None:
+    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
+    try:
+        page = cp.page
+        # "hover" while landed is harmless; the stand-in says "please hover" with interim "please".
+        page.evaluate("window.__speech.next = {text: 'please hover', confidence: 0.95}")
+        page.click("#mic")
+        page.wait_for_function("window.__speech.interimSeen !== undefined", timeout=3000)
+        assert "please" in page.evaluate("window.__speech.interimSeen")
+        page.wait_for_selector("#dialog .msg-user", timeout=3000)
+        assert "spoken · confidence 95 %" in (page.text_content("#dialog .msg-user") or "")
+    finally:
+        ctx.close()
+
+
+def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerProcess) -> None:
+    ctx_a, first = open_console(browser, server.url())
+    ctx_b = None
+    try:
+        a = first.page
+        a.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
+        a.wait_for_function("uavConsole.haveLease === true", timeout=5000)
+        ctx_b, second = open_console(browser, server.url())
+        b = second.page
+        # The second pilot sees who holds the controls and is offered the take-over.
+        b.wait_for_selector("#takeover:not([hidden])", timeout=5000)
+        assert b.is_disabled("#btn-takeoff") and b.is_disabled("[data-jog='left']")
+        assert b.is_enabled("#btn-emergency")  # a stop is never withheld from a pilot
+        b.click("#takeover")
+        b.wait_for_function("uavConsole.haveLease === true", timeout=5000)
+        assert b.is_enabled("#btn-takeoff") and b.is_hidden("#takeover")
+        # The first pilot is told, and its controls are off until it takes over in turn.
+        a.wait_for_selector("#takeover:not([hidden])", timeout=5000)
+        assert "took over" in (a.text_content("#banner") or "")
+        assert a.is_disabled("#btn-takeoff") and a.is_disabled("#send")
+        # The server agrees: the first pilot's jog is refused (a zero twist, a hover, is not:
+        # any pilot may hover).
+        a.evaluate("""() => { window.__statuses = [];
+            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
+        a.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
+            {linear: {x: 0.2, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
+        a.wait_for_function(
+            "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))", timeout=5000
+        )
+    finally:
+        ctx_a.close()
+        if ctx_b is not None:
+            ctx_b.close()
+
+
+def test_replies_spoken_unless_muted_and_alerts_announced(
+    browser: Any, server: ServerProcess
+) -> None:
+    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
+    try:
+        page = cp.page
+        say = """t => uavConsole.dialog.onReply({text: t, level: 'info', speak: true,
+                                                utterance: '', commands: ''})"""
+        page.evaluate(say, "Battery is at 80 percent")
+        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
+        page.click("#mute")
+        assert page.get_attribute("#mute", "aria-pressed") == "true"
+        page.evaluate(say, "Climbing 1 meter")
+        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
+        assert "Climbing 1 meter" in (page.text_content("#dialog") or "")
+        # Alerts also go to the assertive live region for screen readers.
+        page.evaluate("""() => uavConsole.dialog.onReply({text: 'Battery low, returning home',
+                                                          level: 'alert', speak: true})""")
+        assert page.text_content("#alerts") == "Battery low, returning home"
+        # The mute choice is remembered.
+        page.reload()
+        page.wait_for_selector("#conn[data-state='open']")
+        assert page.get_attribute("#mute", "aria-pressed") == "true"
+    finally:
+        ctx.close()
+
+
 def test_page_loads_without_console_errors(console: ConsolePage) -> None:
     page = console.page
     assert page.title() == "uav-console"
@@ -182,37 +277,6 @@ def test_observer_controls_disabled_and_publishes_refused(
     assert server.api("GET", "/sim/uav1/truth").status_code == 200
 
 
-def test_mic_without_speech_recognition_says_so(browser: Any, server: ServerProcess) -> None:
-    # No Web Speech API: "auto" picks the console's own (offline) recogniser, and the page says
-    # so; with no microphone on this machine, pressing it says why and offers typing.
-    ctx, cp = open_console(browser, server.url(), init_script=NO_SPEECH)
-    try:
-        page = cp.page
-        page.wait_for_function("document.body.dataset.recognizer === 'server'", timeout=3000)
-        assert "offline" in (page.text_content("#recognizer-label") or "")
-        page.click("#mic")
-        page.wait_for_selector("#dialog .msg-system", timeout=5000)
-        text = page.text_content("#dialog") or ""
-        assert "microphone" in text.lower() and "type" in text.lower()
-    finally:
-        ctx.close()
-
-
-def test_interim_text_shown_while_speaking(browser: Any, server: ServerProcess) -> None:
-    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
-    try:
-        page = cp.page
-        # "hover" while landed is harmless; the stand-in says "please hover" with interim "please".
-        page.evaluate("window.__speech.next = {text: 'please hover', confidence: 0.95}")
-        page.click("#mic")
-        page.wait_for_function("window.__speech.interimSeen !== undefined", timeout=3000)
-        assert "please" in page.evaluate("window.__speech.interimSeen")
-        page.wait_for_selector("#dialog .msg-user", timeout=3000)
-        assert "spoken · confidence 95 %" in (page.text_content("#dialog .msg-user") or "")
-    finally:
-        ctx.close()
-
-
 def test_map_marker_offers_go_there(console: ConsolePage) -> None:
     page = console.page
     page.wait_for_function("uavConsole.map.world !== null", timeout=10_000)
@@ -281,42 +345,8 @@ def test_keyboard_shortcuts_drive_the_controls(console: ConsolePage) -> None:
     assert len(twists) >= 3
     assert all(t["linear"]["x"] == pytest.approx(0.3) for t in twists[:-1])
     assert twists[-1] == {"linear": {"x": 0, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}}
-    page.reload()  # restore the real hooks for later tests on this page (fresh context anyway)
-
-
-def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerProcess) -> None:
-    ctx_a, first = open_console(browser, server.url())
-    ctx_b = None
-    try:
-        a = first.page
-        a.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
-        a.wait_for_function("uavConsole.haveLease === true", timeout=5000)
-        ctx_b, second = open_console(browser, server.url())
-        b = second.page
-        # The second pilot sees who holds the controls and is offered the take-over.
-        b.wait_for_selector("#takeover:not([hidden])", timeout=5000)
-        assert b.is_disabled("#btn-takeoff") and b.is_disabled("[data-jog='left']")
-        assert b.is_enabled("#btn-emergency")  # a stop is never withheld from a pilot
-        b.click("#takeover")
-        b.wait_for_function("uavConsole.haveLease === true", timeout=5000)
-        assert b.is_enabled("#btn-takeoff") and b.is_hidden("#takeover")
-        # The first pilot is told, and its controls are off until it takes over in turn.
-        a.wait_for_selector("#takeover:not([hidden])", timeout=5000)
-        assert "took over" in (a.text_content("#banner") or "")
-        assert a.is_disabled("#btn-takeoff") and a.is_disabled("#send")
-        # The server agrees: the first pilot's jog is refused (a zero twist, a hover, is not:
-        # any pilot may hover).
-        a.evaluate("""() => { window.__statuses = [];
-            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
-        a.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
-            {linear: {x: 0.2, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
-        a.wait_for_function(
-            "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))", timeout=5000
-        )
-    finally:
-        ctx_a.close()
-        if ctx_b is not None:
-            ctx_b.close()
+    page.reload()  # the real hooks again for the later tests on this shared page
+    wait_ready(page, lease=True)
 
 
 def test_page_logic_units(console: ConsolePage) -> None:
@@ -364,33 +394,6 @@ def test_page_logic_units(console: ConsolePage) -> None:
     assert result["topic"] == ["/uav2/cmd_vel", "/cmd_vel"]
     assert result["yaw"] == pytest.approx(1.0)
     assert result["stamp"] == pytest.approx(10.5)
-
-
-def test_replies_spoken_unless_muted_and_alerts_announced(
-    browser: Any, server: ServerProcess
-) -> None:
-    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
-    try:
-        page = cp.page
-        say = """t => uavConsole.dialog.onReply({text: t, level: 'info', speak: true,
-                                                utterance: '', commands: ''})"""
-        page.evaluate(say, "Battery is at 80 percent")
-        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
-        page.click("#mute")
-        assert page.get_attribute("#mute", "aria-pressed") == "true"
-        page.evaluate(say, "Climbing 1 meter")
-        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
-        assert "Climbing 1 meter" in (page.text_content("#dialog") or "")
-        # Alerts also go to the assertive live region for screen readers.
-        page.evaluate("""() => uavConsole.dialog.onReply({text: 'Battery low, returning home',
-                                                          level: 'alert', speak: true})""")
-        assert page.text_content("#alerts") == "Battery low, returning home"
-        # The mute choice is remembered.
-        page.reload()
-        page.wait_for_selector("#conn[data-state='open']")
-        assert page.get_attribute("#mute", "aria-pressed") == "true"
-    finally:
-        ctx.close()
 
 
 def test_map_draws_the_outdoor_gps_field(console: ConsolePage) -> None:
