@@ -36,8 +36,8 @@ def frames(page: Any) -> int:
     return int(page.eval_on_selector("#camera", "el => Number(el.dataset.frames || 0)"))
 
 
-# Pages of their own that need the pilot lease: before the first test on the module's shared
-# page (the ``console`` fixture), which holds the lease from then on.
+# Pages of their own first: the module's shared page (the ``console`` fixture) holds the pilot
+# lease from its first test on, and no other page draws beside it meanwhile.
 def test_mic_without_speech_recognition_says_so(browser: Any, server: ServerProcess) -> None:
     # No Web Speech API: "auto" picks the console's own (offline) recogniser, and the page says
     # so; with no microphone on this machine, pressing it says why and offers typing.
@@ -131,6 +131,93 @@ def test_replies_spoken_unless_muted_and_alerts_announced(
         ctx.close()
 
 
+def test_phone_viewport_four_essentials_visible(browser: Any, server: ServerProcess) -> None:
+    ctx, cp = open_console(
+        browser, server.url(), viewport=PHONE, color_scheme="dark", frames=2, telemetry=True
+    )
+    try:
+        page = cp.page
+        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(SCREENSHOTS / "console-phone.png"))
+        assert page.evaluate("window.scrollY") == 0
+        for sel in (".camera-frame", "#btn-emergency", "#mic", "#text-input"):
+            box = page.locator(sel).bounding_box()
+            assert box is not None, sel
+            assert box["y"] >= 0 and box["y"] + box["height"] <= PHONE["height"], (sel, box)
+            assert box["x"] >= 0 and box["x"] + box["width"] <= PHONE["width"], (sel, box)
+            # Not covered by anything else: the element itself is what a tap at its centre hits.
+            hit = page.evaluate(
+                """([sel, x, y]) => { const el = document.elementFromPoint(x, y);
+                     return !!el && document.querySelector(sel).contains(el); }""",
+                [sel, box["x"] + box["width"] / 2, box["y"] + box["height"] / 2],
+            )
+            assert hit, f"{sel} is covered"
+        # Big enough for a thumb (WCAG 2.5.5 target size 44 px).
+        assert page.locator("#btn-emergency").bounding_box()["height"] >= 44  # type: ignore[index]
+        assert cp.console_errors() == []
+    finally:
+        ctx.close()
+
+
+def test_observer_controls_disabled_and_publishes_refused(
+    browser: Any, server: ServerProcess
+) -> None:
+    ctx, cp = open_console(browser, server.url(OBSERVER))
+    try:
+        page = cp.page
+        page.evaluate("""() => { window.__statuses = [];
+            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
+        # The server refuses what an observer publishes, with a status naming the role.
+        page.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
+            {linear: {x: 0.5, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
+        page.wait_for_function(
+            "window.__statuses.some(s => s.level === 'error' && /observer/i.test(s.msg))",
+            timeout=5000,
+        )
+        # The page knows it is an observer and disables every control.
+        page.wait_for_selector("#role[data-role='observer']", timeout=5000)
+        for sel in (
+            "#btn-takeoff",
+            "#btn-land",
+            "#btn-hover",
+            "#btn-emergency",
+            "#send",
+            "#mic",
+            "#handsfree",
+            "#text-input",
+            "[data-jog='forward']",
+            "#map-go",
+        ):
+            assert page.is_disabled(sel), f"{sel} is enabled for an observer"
+        # REST refuses too.
+        status = page.evaluate(
+            "() => uavConsole.api.action('uav1', 'takeoff').then(() => 200, e => e.status)"
+        )
+        assert status == 403
+    finally:
+        ctx.close()
+    assert server.api("GET", "/sim/uav1/truth").status_code == 200
+
+
+@pytest.mark.parametrize(
+    ("query", "expect"),
+    [("", "No token in the address"), ("?token=wrong", "refused this page's token")],
+)
+def test_missing_or_bad_token_is_explained(
+    browser: Any, server: ServerProcess, query: str, expect: str
+) -> None:
+    ctx = browser.new_context(bypass_csp=True)  # (string predicates need eval; see test_5)
+    try:
+        page = ctx.new_page()
+        page.goto(f"{server.base}/{query}")
+        page.wait_for_selector("#banner:not([hidden])", timeout=5000)
+        assert expect in (page.text_content("#banner") or "")
+        page.wait_for_timeout(500)
+        assert page.get_attribute("#conn", "data-state") != "open"  # the server refuses it
+    finally:
+        ctx.close()
+
+
 def test_page_loads_without_console_errors(console: ConsolePage) -> None:
     page = console.page
     assert page.title() == "uav-console"
@@ -183,34 +270,6 @@ def test_telemetry_and_camera_update(console: ConsolePage) -> None:
     assert page.get_attribute("#m-link", "data-level") in {"ok", "warn"}
 
 
-def test_phone_viewport_four_essentials_visible(browser: Any, server: ServerProcess) -> None:
-    ctx, cp = open_console(
-        browser, server.url(), viewport=PHONE, color_scheme="dark", frames=2, telemetry=True
-    )
-    try:
-        page = cp.page
-        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(SCREENSHOTS / "console-phone.png"))
-        assert page.evaluate("window.scrollY") == 0
-        for sel in (".camera-frame", "#btn-emergency", "#mic", "#text-input"):
-            box = page.locator(sel).bounding_box()
-            assert box is not None, sel
-            assert box["y"] >= 0 and box["y"] + box["height"] <= PHONE["height"], (sel, box)
-            assert box["x"] >= 0 and box["x"] + box["width"] <= PHONE["width"], (sel, box)
-            # Not covered by anything else: the element itself is what a tap at its centre hits.
-            hit = page.evaluate(
-                """([sel, x, y]) => { const el = document.elementFromPoint(x, y);
-                     return !!el && document.querySelector(sel).contains(el); }""",
-                [sel, box["x"] + box["width"] / 2, box["y"] + box["height"] / 2],
-            )
-            assert hit, f"{sel} is covered"
-        # Big enough for a thumb (WCAG 2.5.5 target size 44 px).
-        assert page.locator("#btn-emergency").bounding_box()["height"] >= 44  # type: ignore[index]
-        assert cp.console_errors() == []
-    finally:
-        ctx.close()
-
-
 def test_desktop_layout_everything_on_one_screen(console: ConsolePage) -> None:
     """At 1440 × 900 every panel is on screen at once, no scrolling."""
     page = console.page
@@ -235,46 +294,6 @@ def test_desktop_layout_everything_on_one_screen(console: ConsolePage) -> None:
         wait_for_video(page)
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(path))
-
-
-def test_observer_controls_disabled_and_publishes_refused(
-    browser: Any, server: ServerProcess
-) -> None:
-    ctx, cp = open_console(browser, server.url(OBSERVER))
-    try:
-        page = cp.page
-        page.evaluate("""() => { window.__statuses = [];
-            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
-        # The server refuses what an observer publishes, with a status naming the role.
-        page.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
-            {linear: {x: 0.5, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
-        page.wait_for_function(
-            "window.__statuses.some(s => s.level === 'error' && /observer/i.test(s.msg))",
-            timeout=5000,
-        )
-        # The page knows it is an observer and disables every control.
-        page.wait_for_selector("#role[data-role='observer']", timeout=5000)
-        for sel in (
-            "#btn-takeoff",
-            "#btn-land",
-            "#btn-hover",
-            "#btn-emergency",
-            "#send",
-            "#mic",
-            "#handsfree",
-            "#text-input",
-            "[data-jog='forward']",
-            "#map-go",
-        ):
-            assert page.is_disabled(sel), f"{sel} is enabled for an observer"
-        # REST refuses too.
-        status = page.evaluate(
-            "() => uavConsole.api.action('uav1', 'takeoff').then(() => 200, e => e.status)"
-        )
-        assert status == 403
-    finally:
-        ctx.close()
-    assert server.api("GET", "/sim/uav1/truth").status_code == 200
 
 
 def test_map_marker_offers_go_there(console: ConsolePage) -> None:
@@ -427,22 +446,3 @@ def test_map_draws_the_outdoor_gps_field(console: ConsolePage) -> None:
     assert where[4] == "geo"
     assert page.locator(".map-label[data-drone='uav1']").text_content().startswith("uav1")
     assert console.console_errors() == []
-
-
-@pytest.mark.parametrize(
-    ("query", "expect"),
-    [("", "No token in the address"), ("?token=wrong", "refused this page's token")],
-)
-def test_missing_or_bad_token_is_explained(
-    browser: Any, server: ServerProcess, query: str, expect: str
-) -> None:
-    ctx = browser.new_context(bypass_csp=True)  # (string predicates need eval; see test_5)
-    try:
-        page = ctx.new_page()
-        page.goto(f"{server.base}/{query}")
-        page.wait_for_selector("#banner:not([hidden])", timeout=5000)
-        assert expect in (page.text_content("#banner") or "")
-        page.wait_for_timeout(500)
-        assert page.get_attribute("#conn", "data-state") != "open"  # the server refuses it
-    finally:
-        ctx.close()
