@@ -61,9 +61,9 @@ def test_interim_text_shown_while_speaking(browser: Any, server: ServerProcess) 
         # "hover" while landed is harmless; the stand-in says "please hover" with interim "please".
         page.evaluate("window.__speech.next = {text: 'please hover', confidence: 0.95}")
         page.click("#mic")
-        page.wait_for_function("window.__speech.interimSeen !== undefined", timeout=3000)
+        page.wait_for_function("window.__speech.interimSeen !== undefined", timeout=10_000)
         assert "please" in page.evaluate("window.__speech.interimSeen")
-        page.wait_for_selector("#dialog .msg-user", timeout=3000)
+        page.wait_for_selector("#dialog .msg-user", timeout=10_000)
         assert "spoken · confidence 95 %" in (page.text_content("#dialog .msg-user") or "")
     finally:
         ctx.close()
@@ -75,18 +75,18 @@ def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerP
     try:
         a = first.page
         a.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
-        a.wait_for_function("uavConsole.haveLease === true", timeout=5000)
+        a.wait_for_function("uavConsole.haveLease === true", timeout=20_000)
         ctx_b, second = open_console(browser, server.url())
         b = second.page
         # The second pilot sees who holds the controls and is offered the take-over.
-        b.wait_for_selector("#takeover:not([hidden])", timeout=5000)
+        b.wait_for_selector("#takeover:not([hidden])", timeout=20_000)
         assert b.is_disabled("#btn-takeoff") and b.is_disabled("[data-jog='left']")
         assert b.is_enabled("#btn-emergency")  # a stop is never withheld from a pilot
         b.click("#takeover")
-        b.wait_for_function("uavConsole.haveLease === true", timeout=5000)
+        b.wait_for_function("uavConsole.haveLease === true", timeout=20_000)
         assert b.is_enabled("#btn-takeoff") and b.is_hidden("#takeover")
         # The first pilot is told, and its controls are off until it takes over in turn.
-        a.wait_for_selector("#takeover:not([hidden])", timeout=5000)
+        a.wait_for_selector("#takeover:not([hidden])", timeout=20_000)
         assert "took over" in (a.text_content("#banner") or "")
         assert a.is_disabled("#btn-takeoff") and a.is_disabled("#send")
         # The server agrees: the first pilot's jog is refused (a zero twist, a hover, is not:
@@ -96,7 +96,8 @@ def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerP
         a.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
             {linear: {x: 0.2, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
         a.wait_for_function(
-            "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))", timeout=5000
+            "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))",
+            timeout=20_000,
         )
     finally:
         ctx_a.close()
