@@ -38,7 +38,7 @@ CHROMIUM_ARGS = [
 ]
 PILOT = "pilot-token-for-browser-tests"
 OBSERVER = "observer-token-for-browser-tests"
-START_TIMEOUT_S = 60.0
+START_TIMEOUT_S = 180.0  # a loaded 2-core machine: the imports alone can take a minute
 SCREENSHOTS = ROOT / "docs" / "screenshots"
 
 
@@ -59,6 +59,8 @@ class ServerProcess:
     data_dir: Path
     sim_addr: str
     extra_args: tuple[str, ...] = ()
+    # Settings of this server as UAVC_* variables (a shorter timeout than the default, say).
+    env: dict[str, str] = field(default_factory=dict)
     port: int = field(default_factory=free_port)
     proc: subprocess.Popen[bytes] | None = None
     log_path: Path | None = None
@@ -77,6 +79,7 @@ class ServerProcess:
             UAVC_DATA_DIR=str(self.data_dir),
             PYTHONUNBUFFERED="1",
         )
+        env.update(self.env)
         # Console behaviour, not isolation: flight stacks inline unless UAVC_VEHICLES says
         # otherwise (serve defaults to process mode; tests/isolation covers it).
         env.setdefault("UAVC_VEHICLES", "inline")
@@ -160,11 +163,16 @@ class ServerProcess:
 
 
 def _server(
-    tmp_path_factory: pytest.TempPathFactory, name: str, addr: str, *extra: str
+    tmp_path_factory: pytest.TempPathFactory,
+    name: str,
+    addr: str,
+    *extra: str,
+    env: dict[str, str] | None = None,
 ) -> Iterator[ServerProcess]:
+    """A started server with ``extra`` arguments and ``env`` settings, stopped after."""
     if os.environ.get("UAVC_SKIP_BROWSER") == "1":
         pytest.skip("UAVC_SKIP_BROWSER=1")
-    server = ServerProcess(tmp_path_factory.mktemp(name), addr, tuple(extra))
+    server = ServerProcess(tmp_path_factory.mktemp(name), addr, tuple(extra), dict(env or {}))
     server.start()
     try:
         yield server
@@ -184,9 +192,10 @@ def own_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProce
     yield from _server(tmp_path_factory, "uavc-browser-own", fresh_address())
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def fleet_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    """Two simulated drones: topics prefixed /uav1, /uav2."""
+    """Two simulated drones: topics prefixed /uav1, /uav2; one per module (its tests leave both
+    drones landed)."""
     yield from _server(tmp_path_factory, "uavc-browser-fleet", fresh_address(2), "--fleet", "2")
 
 
@@ -218,6 +227,32 @@ class ConsolePage:
         return list(self.errors)
 
 
+def wait_ready(
+    page: Any,
+    *,
+    lease: bool = False,
+    frames: int = 0,
+    world: bool = False,
+    telemetry: bool = False,
+    timeout_ms: int = 20_000,
+) -> None:
+    """Wait until the console page is ready for a test, in one condition: connected, and where
+    asked holding the pilot lease, past ``frames`` camera frames, its map's world loaded and the
+    drone's telemetry shown (the battery reads a percentage)."""
+    conditions = ["document.querySelector('#conn')?.dataset.state === 'open'"]
+    if lease:
+        conditions.append("window.uavConsole?.haveLease === true")
+    if frames:
+        conditions.append(
+            f"Number(document.querySelector('#camera').dataset.frames || 0) > {frames}"
+        )
+    if world:
+        conditions.append("(window.uavConsole?.map?.world ?? null) !== null")
+    if telemetry:
+        conditions.append("(document.querySelector('#battery')?.textContent ?? '').includes('%')")
+    page.wait_for_function(" && ".join(f"({c})" for c in conditions), timeout=timeout_ms)
+
+
 def open_console(
     browser: Any,
     url: str,
@@ -225,8 +260,12 @@ def open_console(
     viewport: dict[str, int] | None = None,
     color_scheme: str = "light",
     init_script: str | None = None,
+    lease: bool = False,
+    frames: int = 0,
+    world: bool = False,
+    telemetry: bool = False,
 ) -> tuple[Any, ConsolePage]:
-    """A fresh context (own storage) with the console loaded and connected."""
+    """A fresh context (own storage) with the console loaded and ready (``wait_ready``)."""
     ctx = browser.new_context(
         viewport=viewport or {"width": 1440, "height": 900},
         color_scheme=color_scheme,
@@ -250,13 +289,16 @@ def open_console(
     page.on("pageerror", lambda e: cp.errors.append(f"pageerror: {e}"))
     page.on("requestfailed", lambda r: cp.failed_requests.append(f"{r.url} {r.failure}"))
     page.goto(url)
-    page.wait_for_selector("#conn[data-state='open']", timeout=20_000)
+    wait_ready(page, lease=lease, frames=frames, world=world, telemetry=telemetry)
     return ctx, cp
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def console(browser: Any, server: ServerProcess) -> Iterator[ConsolePage]:
-    ctx, cp = open_console(browser, server.url())
+    """One pilot page on the shared server for the module's tests that use it (what it logged
+    is kept for all of them). It holds the pilot lease from the first such test to the module's
+    end: a test that needs the lease on a page of its own runs before the first one."""
+    ctx, cp = open_console(browser, server.url(), lease=True)
     try:
         yield cp
     finally:

@@ -9,7 +9,14 @@ from typing import Any
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-from tests.browser.conftest import OBSERVER, SCREENSHOTS, ConsolePage, ServerProcess, open_console
+from tests.browser.conftest import (
+    OBSERVER,
+    SCREENSHOTS,
+    ConsolePage,
+    ServerProcess,
+    open_console,
+    wait_ready,
+)
 from tests.browser.helpers import NO_SPEECH, SPEECH_STANDIN
 
 pytestmark = pytest.mark.browser
@@ -29,60 +36,108 @@ def frames(page: Any) -> int:
     return int(page.eval_on_selector("#camera", "el => Number(el.dataset.frames || 0)"))
 
 
-def test_page_loads_without_console_errors(console: ConsolePage) -> None:
-    page = console.page
-    assert page.title() == "uav-console"
-    # Give every panel time to load the world, learn its role and render; nothing may log an error.
-    page.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
-    page.wait_for_function("uavConsole.map.world !== null", timeout=10_000)
-    page.wait_for_timeout(1500)
-    assert console.console_errors() == []
-    assert page.get_attribute("#conn", "data-state") == "open"
-    assert page.text_content("#conn") == "Connected"
+# Pages of their own first: the module's shared page (the ``console`` fixture) holds the pilot
+# lease from its first test on, and no other page draws beside it meanwhile.
+def test_mic_without_speech_recognition_says_so(browser: Any, server: ServerProcess) -> None:
+    # No Web Speech API: "auto" picks the console's own (offline) recogniser, and the page says
+    # so; with no microphone on this machine, pressing it says why and offers typing.
+    ctx, cp = open_console(browser, server.url(), init_script=NO_SPEECH)
+    try:
+        page = cp.page
+        page.wait_for_function("document.body.dataset.recognizer === 'server'", timeout=3000)
+        assert "offline" in (page.text_content("#recognizer-label") or "")
+        page.click("#mic")
+        page.wait_for_selector("#dialog .msg-system", timeout=5000)
+        text = page.text_content("#dialog") or ""
+        assert "microphone" in text.lower() and "type" in text.lower()
+    finally:
+        ctx.close()
 
 
-def test_telemetry_and_camera_update(console: ConsolePage) -> None:
-    page = console.page
-    page.wait_for_function(
-        "document.querySelector('#battery').textContent.includes('%')", timeout=15_000
-    )
-    battery = page.text_content("#battery") or ""
-    assert re.fullmatch(r"\d{1,3} %", battery), battery
-    assert re.fullmatch(r"-?\d+\.\d\d m", page.text_content("#altitude") or ""), "altitude"
-    assert page.text_content("#ctrl-state") in {"Landed", "Inited", "Flying", "Hovering"}
-    # the barometer (navdata option 21, issue 13 §12): read 0 / "–" before
-    page.wait_for_function(
-        "document.querySelector('#pressure').textContent.includes('hPa')", timeout=5000
-    )
-    hpa = page.text_content("#pressure") or ""
-    assert re.fullmatch(r"\d{3,4}\.\d hPa", hpa) and 1000 < float(hpa.split()[0]) < 1030, hpa
-    assert re.fullmatch(r"-?\d+\.\d °C", page.text_content("#temperature") or "")
-    page.wait_for_function(
-        "/^\\d+ Hz$/.test(document.querySelector('#link').textContent)", timeout=5000
-    )
-    # Camera: frames keep coming (the video stream, not one stale picture), fps and latency shown.
-    first = frames(page)
-    page.wait_for_timeout(2000)
-    second = frames(page)
-    fps = (second - first) / 2.0
-    assert fps >= 5, f"only {fps} frames/s reached the page"
-    page.wait_for_timeout(600)  # the HUD refreshes twice a second
-    assert re.fullmatch(r"\d+(\.\d)? fps", page.text_content("#cam-fps") or "")
-    latency = page.text_content("#cam-latency") or ""
-    assert re.fullmatch(r"\d+ ms", latency), latency
-    assert int(latency.split()[0]) < 2000
-    # Link quality and the drone's status from REST reached the telemetry panel.
-    assert page.get_attribute("#m-link", "data-level") in {"ok", "warn"}
+def test_interim_text_shown_while_speaking(browser: Any, server: ServerProcess) -> None:
+    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
+    try:
+        page = cp.page
+        # "hover" while landed is harmless; the stand-in says "please hover" with interim "please".
+        page.evaluate("window.__speech.next = {text: 'please hover', confidence: 0.95}")
+        page.click("#mic")
+        page.wait_for_function("window.__speech.interimSeen !== undefined", timeout=10_000)
+        assert "please" in page.evaluate("window.__speech.interimSeen")
+        page.wait_for_selector("#dialog .msg-user", timeout=10_000)
+        assert "spoken · confidence 95 %" in (page.text_content("#dialog .msg-user") or "")
+    finally:
+        ctx.close()
+
+
+def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerProcess) -> None:
+    ctx_a, first = open_console(browser, server.url())
+    ctx_b = None
+    try:
+        a = first.page
+        a.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
+        a.wait_for_function("uavConsole.haveLease === true", timeout=20_000)
+        ctx_b, second = open_console(browser, server.url())
+        b = second.page
+        # The second pilot sees who holds the controls and is offered the take-over.
+        b.wait_for_selector("#takeover:not([hidden])", timeout=20_000)
+        assert b.is_disabled("#btn-takeoff") and b.is_disabled("[data-jog='left']")
+        assert b.is_enabled("#btn-emergency")  # a stop is never withheld from a pilot
+        b.click("#takeover")
+        b.wait_for_function("uavConsole.haveLease === true", timeout=20_000)
+        assert b.is_enabled("#btn-takeoff") and b.is_hidden("#takeover")
+        # The first pilot is told, and its controls are off until it takes over in turn.
+        a.wait_for_selector("#takeover:not([hidden])", timeout=20_000)
+        assert "took over" in (a.text_content("#banner") or "")
+        assert a.is_disabled("#btn-takeoff") and a.is_disabled("#send")
+        # The server agrees: the first pilot's jog is refused (a zero twist, a hover, is not:
+        # any pilot may hover).
+        a.evaluate("""() => { window.__statuses = [];
+            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
+        a.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
+            {linear: {x: 0.2, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
+        a.wait_for_function(
+            "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))",
+            timeout=20_000,
+        )
+    finally:
+        ctx_a.close()
+        if ctx_b is not None:
+            ctx_b.close()
+
+
+def test_replies_spoken_unless_muted_and_alerts_announced(
+    browser: Any, server: ServerProcess
+) -> None:
+    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
+    try:
+        page = cp.page
+        say = """t => uavConsole.dialog.onReply({text: t, level: 'info', speak: true,
+                                                utterance: '', commands: ''})"""
+        page.evaluate(say, "Battery is at 80 percent")
+        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
+        page.click("#mute")
+        assert page.get_attribute("#mute", "aria-pressed") == "true"
+        page.evaluate(say, "Climbing 1 meter")
+        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
+        assert "Climbing 1 meter" in (page.text_content("#dialog") or "")
+        # Alerts also go to the assertive live region for screen readers.
+        page.evaluate("""() => uavConsole.dialog.onReply({text: 'Battery low, returning home',
+                                                          level: 'alert', speak: true})""")
+        assert page.text_content("#alerts") == "Battery low, returning home"
+        # The mute choice is remembered.
+        page.reload()
+        page.wait_for_selector("#conn[data-state='open']")
+        assert page.get_attribute("#mute", "aria-pressed") == "true"
+    finally:
+        ctx.close()
 
 
 def test_phone_viewport_four_essentials_visible(browser: Any, server: ServerProcess) -> None:
-    ctx, cp = open_console(browser, server.url(), viewport=PHONE, color_scheme="dark")
+    ctx, cp = open_console(
+        browser, server.url(), viewport=PHONE, color_scheme="dark", frames=2, telemetry=True
+    )
     try:
         page = cp.page
-        page.wait_for_function(
-            "Number(document.querySelector('#camera').dataset.frames||0) > 2", timeout=20_000
-        )
-        page.wait_for_timeout(500)
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOTS / "console-phone.png"))
         assert page.evaluate("window.scrollY") == 0
@@ -103,32 +158,6 @@ def test_phone_viewport_four_essentials_visible(browser: Any, server: ServerProc
         assert cp.console_errors() == []
     finally:
         ctx.close()
-
-
-def test_desktop_layout_everything_on_one_screen(console: ConsolePage) -> None:
-    """At 1440 × 900 every panel is on screen at once, no scrolling."""
-    page = console.page
-    page.wait_for_function("uavConsole.map.world !== null", timeout=10_000)
-    for sel in (
-        "#camera-panel",
-        "#telemetry-panel",
-        "#controls-panel",
-        "#map-panel",
-        "#dialog-panel",
-        "#btn-emergency",
-        "#text-input",
-        "#mic",
-        "[data-jog='forward']",
-    ):
-        box = page.locator(sel).bounding_box()
-        assert box is not None, sel
-        assert box["y"] >= 0 and box["y"] + box["height"] <= 900, (sel, box)
-    assert page.evaluate("document.documentElement.scrollHeight") <= 900
-    path = SCREENSHOTS / "console-desktop.png"
-    if not path.exists():  # the flight test writes a livelier one (flying, with a dialog) over it
-        wait_for_video(page)
-        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(path))
 
 
 def test_observer_controls_disabled_and_publishes_refused(
@@ -171,35 +200,101 @@ def test_observer_controls_disabled_and_publishes_refused(
     assert server.api("GET", "/sim/uav1/truth").status_code == 200
 
 
-def test_mic_without_speech_recognition_says_so(browser: Any, server: ServerProcess) -> None:
-    # No Web Speech API: "auto" picks the console's own (offline) recogniser, and the page says
-    # so; with no microphone on this machine, pressing it says why and offers typing.
-    ctx, cp = open_console(browser, server.url(), init_script=NO_SPEECH)
+@pytest.mark.parametrize(
+    ("query", "expect"),
+    [("", "No token in the address"), ("?token=wrong", "refused this page's token")],
+)
+def test_missing_or_bad_token_is_explained(
+    browser: Any, server: ServerProcess, query: str, expect: str
+) -> None:
+    ctx = browser.new_context(bypass_csp=True)  # (string predicates need eval; see test_5)
     try:
-        page = cp.page
-        page.wait_for_function("document.body.dataset.recognizer === 'server'", timeout=3000)
-        assert "offline" in (page.text_content("#recognizer-label") or "")
-        page.click("#mic")
-        page.wait_for_selector("#dialog .msg-system", timeout=5000)
-        text = page.text_content("#dialog") or ""
-        assert "microphone" in text.lower() and "type" in text.lower()
+        page = ctx.new_page()
+        page.goto(f"{server.base}/{query}")
+        page.wait_for_selector("#banner:not([hidden])", timeout=5000)
+        assert expect in (page.text_content("#banner") or "")
+        page.wait_for_timeout(500)
+        assert page.get_attribute("#conn", "data-state") != "open"  # the server refuses it
     finally:
         ctx.close()
 
 
-def test_interim_text_shown_while_speaking(browser: Any, server: ServerProcess) -> None:
-    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
-    try:
-        page = cp.page
-        # "hover" while landed is harmless; the stand-in says "please hover" with interim "please".
-        page.evaluate("window.__speech.next = {text: 'please hover', confidence: 0.95}")
-        page.click("#mic")
-        page.wait_for_function("window.__speech.interimSeen !== undefined", timeout=3000)
-        assert "please" in page.evaluate("window.__speech.interimSeen")
-        page.wait_for_selector("#dialog .msg-user", timeout=3000)
-        assert "spoken · confidence 95 %" in (page.text_content("#dialog .msg-user") or "")
-    finally:
-        ctx.close()
+def test_page_loads_without_console_errors(console: ConsolePage) -> None:
+    page = console.page
+    assert page.title() == "uav-console"
+    # Every panel loads the world, learns its role, shows telemetry and video and checks its
+    # voice; nothing may log an error on the way.
+    page.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
+    wait_ready(page, world=True, telemetry=True, frames=2)
+    page.wait_for_function("uavConsole.dialog.voice !== 'unknown'", timeout=10_000)
+    assert console.console_errors() == []
+    assert page.get_attribute("#conn", "data-state") == "open"
+    assert page.text_content("#conn") == "Connected"
+
+
+def test_telemetry_and_camera_update(console: ConsolePage) -> None:
+    page = console.page
+    page.wait_for_function(
+        "document.querySelector('#battery').textContent.includes('%')", timeout=15_000
+    )
+    battery = page.text_content("#battery") or ""
+    assert re.fullmatch(r"\d{1,3} %", battery), battery
+    assert re.fullmatch(r"-?\d+\.\d\d m", page.text_content("#altitude") or ""), "altitude"
+    assert page.text_content("#ctrl-state") in {"Landed", "Inited", "Flying", "Hovering"}
+    # the barometer (navdata option 21, issue 13 §12): read 0 / "–" before
+    page.wait_for_function(
+        "document.querySelector('#pressure').textContent.includes('hPa')", timeout=5000
+    )
+    hpa = page.text_content("#pressure") or ""
+    assert re.fullmatch(r"\d{3,4}\.\d hPa", hpa) and 1000 < float(hpa.split()[0]) < 1030, hpa
+    assert re.fullmatch(r"-?\d+\.\d °C", page.text_content("#temperature") or "")
+    page.wait_for_function(
+        "/^\\d+ Hz$/.test(document.querySelector('#link').textContent)", timeout=5000
+    )
+    # Camera: frames keep coming (the video stream, not one stale picture), fps and latency shown.
+    first = frames(page)
+    page.wait_for_timeout(2000)
+    second = frames(page)
+    fps = (second - first) / 2.0
+    assert fps >= 5, f"only {fps} frames/s reached the page"
+    # the HUD refreshes twice a second
+    page.wait_for_function(
+        "/^\\d+(\\.\\d)? fps$/.test(document.querySelector('#cam-fps').textContent)"
+        " && /^\\d+ ms$/.test(document.querySelector('#cam-latency').textContent)",
+        timeout=5000,
+    )
+    assert re.fullmatch(r"\d+(\.\d)? fps", page.text_content("#cam-fps") or "")
+    latency = page.text_content("#cam-latency") or ""
+    assert re.fullmatch(r"\d+ ms", latency), latency
+    assert int(latency.split()[0]) < 2000
+    # Link quality and the drone's status from REST reached the telemetry panel.
+    assert page.get_attribute("#m-link", "data-level") in {"ok", "warn"}
+
+
+def test_desktop_layout_everything_on_one_screen(console: ConsolePage) -> None:
+    """At 1440 × 900 every panel is on screen at once, no scrolling."""
+    page = console.page
+    page.wait_for_function("uavConsole.map.world !== null", timeout=10_000)
+    for sel in (
+        "#camera-panel",
+        "#telemetry-panel",
+        "#controls-panel",
+        "#map-panel",
+        "#dialog-panel",
+        "#btn-emergency",
+        "#text-input",
+        "#mic",
+        "[data-jog='forward']",
+    ):
+        box = page.locator(sel).bounding_box()
+        assert box is not None, sel
+        assert box["y"] >= 0 and box["y"] + box["height"] <= 900, (sel, box)
+    assert page.evaluate("document.documentElement.scrollHeight") <= 900
+    path = SCREENSHOTS / "console-desktop.png"
+    if not path.exists():  # the flight test writes a livelier one (flying, with a dialog) over it
+        wait_for_video(page)
+        SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(path))
 
 
 def test_map_marker_offers_go_there(console: ConsolePage) -> None:
@@ -270,42 +365,8 @@ def test_keyboard_shortcuts_drive_the_controls(console: ConsolePage) -> None:
     assert len(twists) >= 3
     assert all(t["linear"]["x"] == pytest.approx(0.3) for t in twists[:-1])
     assert twists[-1] == {"linear": {"x": 0, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}}
-    page.reload()  # restore the real hooks for later tests on this page (fresh context anyway)
-
-
-def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerProcess) -> None:
-    ctx_a, first = open_console(browser, server.url())
-    ctx_b = None
-    try:
-        a = first.page
-        a.wait_for_selector("#role[data-role='pilot']", timeout=10_000)
-        a.wait_for_function("uavConsole.haveLease === true", timeout=5000)
-        ctx_b, second = open_console(browser, server.url())
-        b = second.page
-        # The second pilot sees who holds the controls and is offered the take-over.
-        b.wait_for_selector("#takeover:not([hidden])", timeout=5000)
-        assert b.is_disabled("#btn-takeoff") and b.is_disabled("[data-jog='left']")
-        assert b.is_enabled("#btn-emergency")  # a stop is never withheld from a pilot
-        b.click("#takeover")
-        b.wait_for_function("uavConsole.haveLease === true", timeout=5000)
-        assert b.is_enabled("#btn-takeoff") and b.is_hidden("#takeover")
-        # The first pilot is told, and its controls are off until it takes over in turn.
-        a.wait_for_selector("#takeover:not([hidden])", timeout=5000)
-        assert "took over" in (a.text_content("#banner") or "")
-        assert a.is_disabled("#btn-takeoff") and a.is_disabled("#send")
-        # The server agrees: the first pilot's jog is refused (a zero twist, a hover, is not:
-        # any pilot may hover).
-        a.evaluate("""() => { window.__statuses = [];
-            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
-        a.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
-            {linear: {x: 0.2, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
-        a.wait_for_function(
-            "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))", timeout=5000
-        )
-    finally:
-        ctx_a.close()
-        if ctx_b is not None:
-            ctx_b.close()
+    page.reload()  # the real hooks again for the later tests on this shared page
+    wait_ready(page, lease=True)
 
 
 def test_page_logic_units(console: ConsolePage) -> None:
@@ -355,33 +416,6 @@ def test_page_logic_units(console: ConsolePage) -> None:
     assert result["stamp"] == pytest.approx(10.5)
 
 
-def test_replies_spoken_unless_muted_and_alerts_announced(
-    browser: Any, server: ServerProcess
-) -> None:
-    ctx, cp = open_console(browser, server.url(), init_script=SPEECH_STANDIN)
-    try:
-        page = cp.page
-        say = """t => uavConsole.dialog.onReply({text: t, level: 'info', speak: true,
-                                                utterance: '', commands: ''})"""
-        page.evaluate(say, "Battery is at 80 percent")
-        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
-        page.click("#mute")
-        assert page.get_attribute("#mute", "aria-pressed") == "true"
-        page.evaluate(say, "Climbing 1 meter")
-        assert page.evaluate("window.__speech.spoken") == ["Battery is at 80 percent"]
-        assert "Climbing 1 meter" in (page.text_content("#dialog") or "")
-        # Alerts also go to the assertive live region for screen readers.
-        page.evaluate("""() => uavConsole.dialog.onReply({text: 'Battery low, returning home',
-                                                          level: 'alert', speak: true})""")
-        assert page.text_content("#alerts") == "Battery low, returning home"
-        # The mute choice is remembered.
-        page.reload()
-        page.wait_for_selector("#conn[data-state='open']")
-        assert page.get_attribute("#mute", "aria-pressed") == "true"
-    finally:
-        ctx.close()
-
-
 def test_map_draws_the_outdoor_gps_field(console: ConsolePage) -> None:
     from drone.sim.world import load_world
 
@@ -413,22 +447,3 @@ def test_map_draws_the_outdoor_gps_field(console: ConsolePage) -> None:
     assert where[4] == "geo"
     assert page.locator(".map-label[data-drone='uav1']").text_content().startswith("uav1")
     assert console.console_errors() == []
-
-
-@pytest.mark.parametrize(
-    ("query", "expect"),
-    [("", "No token in the address"), ("?token=wrong", "refused this page's token")],
-)
-def test_missing_or_bad_token_is_explained(
-    browser: Any, server: ServerProcess, query: str, expect: str
-) -> None:
-    ctx = browser.new_context(bypass_csp=True)  # (string predicates need eval; see test_5)
-    try:
-        page = ctx.new_page()
-        page.goto(f"{server.base}/{query}")
-        page.wait_for_selector("#banner:not([hidden])", timeout=5000)
-        assert expect in (page.text_content("#banner") or "")
-        page.wait_for_timeout(500)
-        assert page.get_attribute("#conn", "data-state") != "open"  # the server refuses it
-    finally:
-        ctx.close()

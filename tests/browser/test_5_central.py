@@ -33,7 +33,7 @@ def test_central_button_and_voice(browser: Any, central_server: ServerProcess) -
         page = cp.page
         page.wait_for_function(  # both drones have joined the fleet and are ready
             "document.querySelectorAll('#central-drones li[data-role=\"idle\"]').length === 2",
-            timeout=20_000,
+            timeout=60_000,
         )
         assert page.text_content("#central-state") == "not running"
         assert page.get_attribute("#central", "open") is None  # folded: the map keeps its room

@@ -23,6 +23,7 @@ from tests.browser.conftest import (
     ServerProcess,
     _server,
     open_console,
+    wait_ready,
 )
 from tests.browser.helpers import is_flying, position, type_command, wait_until
 from tests.support.loopback import fresh_address
@@ -46,9 +47,8 @@ def srv(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
 
 @pytest.fixture
 def pilot(browser: Any, srv: ServerProcess) -> Iterator[ConsolePage]:
-    ctx, cp = open_console(browser, srv.url(), viewport={"width": 1280, "height": 800})
+    ctx, cp = open_console(browser, srv.url(), viewport={"width": 1280, "height": 800}, lease=True)
     try:
-        cp.page.wait_for_function("uavConsole.haveLease === true", timeout=10_000)
         yield cp
     finally:
         ctx.close()
@@ -76,6 +76,19 @@ def ensure_landed_and_reset(page: Any, srv: ServerProcess) -> None:
     if srv.truth().get("emergency"):
         page.click("#btn-reset")
         wait_until(srv.truth, lambda t: not t.get("emergency"), timeout_s=10)
+
+
+def settled(page: Any) -> None:
+    """The page's telemetry, map and voice check in (what a layout or an axe check reads)."""
+    wait_ready(page, telemetry=True, world=True)
+    page.wait_for_function("uavConsole.dialog.voice !== 'unknown'", timeout=10_000)
+
+
+def next_frames(page: Any) -> None:
+    """Two animation frames: styles and layout follow a resize, a scroll or a theme."""
+    page.evaluate(
+        "() => new Promise((ok) => requestAnimationFrame(() => requestAnimationFrame(ok)))"
+    )
 
 
 def audit_rows(srv: ServerProcess) -> list[Any]:
@@ -246,11 +259,11 @@ def test_stop_stays_put_and_visible_at_every_size(browser: Any, srv: ServerProce
     ctx, cp = open_console(browser, srv.url(), viewport={"width": w, "height": h})
     try:
         page = cp.page
-        page.wait_for_timeout(1500)  # telemetry, map and voice check settle
+        settled(page)
         for name, (w, h) in SIZES.items():
             page.set_viewport_size({"width": w, "height": h})
             page.evaluate("window.scrollTo(0, 0)")
-            page.wait_for_timeout(300)
+            next_frames(page)
             _check_the_stop_at(page, name, w, h)
         assert cp.console_errors() == []
     finally:
@@ -277,7 +290,7 @@ def _check_the_stop_at(page: Any, name: str, w: int, h: int) -> None:
             uavConsole.dialog.onReply({text: `Reply ${i}`, level: 'info', speak: false}); }"""
     )
     page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
-    page.wait_for_timeout(200)
+    next_frames(page)
     assert page.evaluate(rect) == before, name
     # The command box and the state are on screen too (a phone held landscape hid them).
     for sel in ("#text-input", "#sb-flight"):
@@ -298,7 +311,7 @@ def test_phone_upright_layout(browser: Any, srv: ServerProcess) -> None:
     ctx, cp = open_console(browser, srv.url(), viewport={"width": 390, "height": 844})
     try:
         page = cp.page
-        page.wait_for_timeout(1000)
+        settled(page)
         # Touch targets of at least 44 × 44 px, for everything visible that can be pressed.
         small = page.evaluate(
             """() => [...document.querySelectorAll(
@@ -343,7 +356,7 @@ def test_axe_finds_no_serious_or_critical_violation(browser: Any, srv: ServerPro
     ctx, cp = open_console(browser, srv.url(), viewport={"width": w, "height": h})
     try:
         page = cp.page
-        page.wait_for_timeout(1500)
+        settled(page)
         page.evaluate("uavConsole.dialog.addSystem('Reconnected.')")
         page.evaluate(
             """uavConsole.dialog.onReply(
@@ -356,7 +369,7 @@ def test_axe_finds_no_serious_or_critical_violation(browser: Any, srv: ServerPro
             w, h = SIZES[size]
             page.set_viewport_size({"width": w, "height": h})
             page.emulate_media(color_scheme=scheme)
-            page.wait_for_timeout(300)  # transitions of the theme's colours end
+            next_frames(page)  # the theme's colours applied
             result = page.evaluate("axe.run(document, {resultTypes: ['violations']})")
             bad = [
                 f"{v['id']} ({v['impact']}): {[n['target'] for n in v['nodes']][:4]}"

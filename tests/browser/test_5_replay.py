@@ -11,7 +11,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.browser.conftest import ROOT, SCREENSHOTS, open_console
+from tests.browser.conftest import ROOT, SCREENSHOTS, START_TIMEOUT_S, open_console
 from tests.recorder.synthetic import write_flight
 from tests.support.loopback import free_port
 
@@ -41,7 +41,7 @@ def test_replay_shows_the_recorded_flight_with_a_timeline(browser: Any, tmp_path
     )
     try:
         base = f"http://127.0.0.1:{port}"
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + START_TIMEOUT_S
         while True:
             assert proc.poll() is None, (tmp_path / "replay.log").read_text()
             assert time.monotonic() < deadline, "replay did not start"
@@ -114,7 +114,7 @@ def test_replay_shows_every_input_in_order_with_its_door(browser: Any, tmp_path:
     auth = {"Authorization": f"Bearer {TOKEN}"}
     try:
         base = f"http://127.0.0.1:{port}"
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + START_TIMEOUT_S
         while True:
             assert proc.poll() is None, (tmp_path / "replay.log").read_text()
             assert time.monotonic() < deadline, "replay did not start"

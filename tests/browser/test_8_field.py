@@ -83,16 +83,25 @@ MEASURE = """async () => {
 }"""
 
 
+# Landed with no command this long, a flight's recording ends (Settings.recorder_idle_s, 30 s
+# by default): the recordings and replay tests wait for a flight that ended.
+RECORDER_IDLE_S = "3"
+
+
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServerProcess]:
-    yield from _server(tmp_path_factory, "uavc-field", fresh_address())
+    yield from _server(
+        tmp_path_factory,
+        "uavc-field",
+        fresh_address(),
+        env={"UAVC_RECORDER_IDLE_S": RECORDER_IDLE_S},
+    )
 
 
 @pytest.fixture
 def pilot(browser: Any, srv: ServerProcess) -> Iterator[ConsolePage]:
-    ctx, cp = open_console(browser, srv.url(), viewport={"width": 1280, "height": 800})
+    ctx, cp = open_console(browser, srv.url(), viewport={"width": 1280, "height": 800}, lease=True)
     try:
-        cp.page.wait_for_function("uavConsole.haveLease === true", timeout=10_000)
         yield cp
     finally:
         ctx.close()
@@ -185,13 +194,10 @@ def test_a_layout_made_for_flying_at_five_sizes(
     phone is turned): landed and idle; flying a patrol (● REC, a running task); with an alarm.
     Nothing moves from one to the next. It leaves the battery low (the last flight here)."""
     key = pilot.page.evaluate("uavConsole.api.leaseHolder")
-    ctx, cp = open_console(browser, srv.url(), viewport={"width": 1280, "height": 800})
+    ctx, cp = open_console(browser, srv.url(), viewport={"width": 1280, "height": 800}, frames=2)
     try:
         page = cp.page
         page.wait_for_selector("#banner[data-source='lease']", timeout=10_000)
-        page.wait_for_function(
-            "Number(document.querySelector('#camera').dataset.frames || 0) > 2", timeout=20_000
-        )
         assert (page.text_content("#sb-task-v") or "").startswith("idle")
         # Before: landed, idle, no alarm, nothing recording (the recorder may already hold a
         # session open for the pilot's first command: its pill is hidden as when none runs).
@@ -286,7 +292,7 @@ def test_recordings_download_without_a_token_in_the_link(
         return [f for f in srv.api("GET", "/flights").json()["flights"] if f["ended"]]
 
     if not srv.api("GET", "/flights").json()["flights"]:  # alone: fly once (the session ends
-        # after its idle time; after the flights above, the last one's end is waited for)
+        # after RECORDER_IDLE_S; after the flights above, the last one's end is waited for)
         page.click("#btn-takeoff")
         ok, truth, _ = wait_until(srv.truth, lambda t: position(t)[2] > 0.5, timeout_s=30)
         assert ok, truth
