@@ -107,7 +107,7 @@ class RemoteDroneStack(DroneStack):
         self.info: dict[str, Any] = {}
         self.last: dict[str, Any] = {}
         self.last_t: float | None = None
-        self._jpeg_b64: str | bytes | bytearray | None = None
+        self._jpeg_data: str | bytes | bytearray | None = None
         self._jpeg: tuple[int, bytes | None] = (-1, None)
         self._jpeg_count = 0
         self._pending: set[asyncio.Task[Any]] = set()
@@ -150,7 +150,7 @@ class RemoteDroneStack(DroneStack):
     def _on_image(self, msg: dict[str, Any]) -> None:
         data = msg.get("data")
         if isinstance(data, str | bytes | bytearray):  # the bridge may hand decoded bytes
-            self._jpeg_b64 = data
+            self._jpeg_data = data
             self._jpeg_count += 1
 
     # ------------------------------------------------------------------ DroneStack
@@ -318,8 +318,8 @@ class RemoteDroneStack(DroneStack):
         return out
 
     def latest_jpeg(self) -> tuple[int, bytes | None]:
-        if self._jpeg[0] != self._jpeg_count and self._jpeg_b64 is not None:
-            raw = self._jpeg_b64
+        if self._jpeg[0] != self._jpeg_count and self._jpeg_data is not None:
+            raw = self._jpeg_data
             jpeg = base64.b64decode(raw) if isinstance(raw, str) else bytes(raw)
             self._jpeg = (self._jpeg_count, jpeg)
         return self._jpeg
