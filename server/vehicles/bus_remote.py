@@ -171,21 +171,29 @@ class BusDroneStack(RemoteDroneStack):
             self._advertised.add(spec.name)
         self.graph.publish(spec.name, msg)
 
-    def _on_camera(self, count: int, jpeg: bytes) -> None:
+    def _on_camera(self, count: int, jpeg: bytes, stamp: float | None) -> None:
         """A camera frame (Zenoh thread): the drone's image topic here, as its node sends it,
-        with the JPEG's bytes as they came (base64 is made only for the rosbridge clients
-        subscribed, once per frame: server/rosbridge/context.py ``JsonCache``); nothing while
-        the vehicle link carries the drone's graph, its own image topic with it."""
-        if self.linked:
-            return
+        stamped when the vehicle made it (else now), with the JPEG's bytes as they came (base64
+        is made only for the rosbridge clients subscribed, once per frame:
+        server/rosbridge/context.py ``JsonCache``). Shown whether or not a vehicle link carries
+        the rest of its graph: a vehicle on the bus sends its camera only here, where a frame
+        is dropped rather than queued behind others."""
         msg = {
-            "header": header("ardrone_base_frontcam", time.time()),
+            "header": header("ardrone_base_frontcam", time.time() if stamp is None else stamp),
             "format": "jpeg",
             "data": jpeg,
         }
-        spec = TopicSpec(f"{self.prefix}{CAMERA_TOPIC}", IMAGE)
         if self.graph.loop is not None:
-            self.graph.loop.call_soon_threadsafe(self._show, spec, msg)
+            self.graph.loop.call_soon_threadsafe(self._show_camera, msg)
+
+    def _show_camera(self, msg: dict[str, Any]) -> None:
+        if self._closed:  # a frame handed over as it closed
+            return
+        topic = f"{self.prefix}{CAMERA_TOPIC}"
+        if topic not in self._advertised:
+            self.graph.advertise(topic, IMAGE, owner=self._owner)
+            self._advertised.add(topic)
+        self.graph.publish(topic, msg)
 
     def _spawn_command(self, op: str, args: dict[str, Any]) -> None:
         task = asyncio.get_running_loop().create_task(self._topic_command(op, args))

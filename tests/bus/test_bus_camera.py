@@ -9,7 +9,8 @@ import asyncio
 import base64
 import json
 from collections.abc import Iterator
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -21,9 +22,16 @@ from drone.bus.commander import BusCommander
 from drone.bus.config import client_config
 from drone.bus.console import ConsoleBus
 from drone.bus.session import open_session
+from drone.bus.vehicle import VehicleBus
+from drone.deadline import ClockOffset
 from server.graph import Graph
+from server.msgs import header
+from server.nodes.vehicle_node import IMAGE
 from server.rosbridge.context import JsonCache
+from server.vehicles import names
 from server.vehicles.bus_remote import BusDroneStack
+from server.vehicles.bus_vehicle import BusVehicleSide
+from server.vehicles.link_core import LinkSpec, TopicSpec
 from tests.support.loopback import free_port
 from tests.support.polling import until_async
 
@@ -120,6 +128,56 @@ def test_a_bus_frame_reaches_the_graph_as_its_jpeg_and_json_as_its_base64(
         finally:
             pub.undeclare()  # type: ignore[no-untyped-call]
             session.close()
+            side.close()
+
+    asyncio.run(main())
+
+
+def test_a_vehicle_sends_each_frame_as_made_and_the_console_shows_its_stamp(
+    console: ConsoleBus,
+) -> None:
+    """The vehicle side (:class:`BusVehicleSide`) puts each frame of its node's camera topic on
+    the bus as it is published, stamped; the console's graph shows the same JPEG with that
+    stamp, and while a vehicle link carries the rest of the drone's graph too."""
+
+    async def main() -> None:
+        side = Console(console)
+
+        async def control(_: dict[str, Any]) -> dict[str, Any]:
+            return {}
+
+        # a vehicle link carries the drone's graph here: its control service is on the graph
+        side.graph.advertise_service(names.control_service(NAME), names.CONTROL_TYPE, control)
+        assert side.stack.linked
+        cred = console.vehicle_credential(NAME)
+        bus = VehicleBus(list(cred.connect), cred.user, cred.password, "default", NAME)
+        bus.start()
+        host = SimpleNamespace(
+            name=NAME, graph=Graph(), clock_offset=ClockOffset(), recording_id=""
+        )
+        host.graph.bind_loop(asyncio.get_running_loop())
+        host.graph.advertise(TOPIC, IMAGE)
+        vehicle = BusVehicleSide(
+            cast(Any, host), bus, LinkSpec(out_topics=(TopicSpec(TOPIC, IMAGE),))
+        )
+        try:
+            frame, made = jpeg(200), 1_700_000_000.25
+
+            async def shown() -> bool:
+                if any(m["data"] == frame for m in side.seen):
+                    return True
+                host.graph.publish(
+                    TOPIC, {"header": header("cam", made), "format": "jpeg", "data": frame}
+                )
+                return False
+
+            await until_async(shown, 20, "the vehicle's frame on the console's graph")
+            msg = next(m for m in side.seen if m["data"] == frame)
+            assert msg["header"]["stamp"] == {"sec": 1_700_000_000, "nanosec": 250_000_000}
+            assert side.commander.camera(NAME)[1] == frame
+        finally:
+            vehicle.close()
+            bus.close()
             side.close()
 
     asyncio.run(main())
