@@ -262,3 +262,17 @@ def test_serve_refuses_an_unknown_vehicles_mode(tmp_path: Path) -> None:
     out = subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 2
     assert "inline or process" in out.stderr
+
+
+def test_a_remote_drone_serves_the_jpeg_its_camera_topic_carries() -> None:
+    """The MJPEG route's frame of a vehicle-process drone: the bytes on the graph, as they are."""
+    from server.vehicles.remote import RemoteDroneStack
+
+    g = Graph()
+    stack = RemoteDroneStack(g, "uav1", "/uav1")
+    assert stack.latest_jpeg() == (-1, None)
+    frame = b"\xff\xd8 a jpeg \xff\xd9"
+    image = {"header": {"frame_id": "cam"}, "format": "jpeg", "data": frame}
+    g.publish("/uav1/ardrone/image_raw/compressed", image)
+    assert stack.latest_jpeg() == (1, frame)
+    stack.close()
