@@ -103,6 +103,7 @@ SEND_LOG = """
       let s = "";
       for (let i = 0; i < bytes.length; i += 1) s += String.fromCharCode(bytes[i]);
       log.push([performance.timeOrigin + performance.now(), btoa(s)]);
+      window.__pcmSamples = (window.__pcmSamples || 0) + bytes.length / 2;
     }
     return send.call(this, data);
   };
@@ -321,11 +322,19 @@ def spoken_run(
         )
         page.check("#handsfree")
         wait_for(lambda: page.evaluate("document.body.dataset.listening") == "server", "mic", 120)
-        t_start = time.monotonic()
-        total_s = utts[-1].end / SAMPLE_RATE + GAP_S
-        # The whole WAV plays; the last command then has GAP_S to reach the drone.
-        while time.monotonic() - t_start < total_s + 2:
+        # The whole WAV plays (a loaded machine's fake microphone may run slower than real
+        # time: its samples are counted, not the wall clock); the last command then has GAP_S
+        # to reach the drone.
+        samples = utts[-1].end + int(GAP_S * SAMPLE_RATE)
+        t_start, wall_s = time.monotonic(), samples / SAMPLE_RATE
+        while time.monotonic() - t_start < 3 * wall_s + 60:
+            sent = page.evaluate("window.__pcmSamples || 0")
+            if sent >= samples or (time.monotonic() - t_start > wall_s + 10 and sent == 0):
+                break
             time.sleep(0.5)
+        else:
+            print(f"the page sent {sent} of {samples} samples; scoring what it sent", flush=True)
+        time.sleep(2)
         page.uncheck("#handsfree")
         offset = clock_offset(page)
         pcm, sent, ends = stream_of(page, offset)
