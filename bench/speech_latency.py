@@ -5,9 +5,10 @@ A real ``serve`` (the vehicle in its own process) flies the simulated AR.Drone o
 take-off bit rises (a take-off) or falls (a landing)). Headless Chromium opens the console with
 a fake microphone that plays one WAV (``--use-fake-device-for-media-stream
 --use-file-for-fake-audio-capture``): spoken "take off" and "land" commands (several wordings),
-each followed by several seconds of silence, synthesised with hibari-tts's neural voice and/or
-espeak-ng. The page listens hands-free with the console's default recogniser (``auto``: the
-offline one here), exactly as an operator's page does.
+each followed by several seconds of silence, synthesised with espeak-ng (four of its voices)
+and, with ``--tts hibari,espeak-ng``, hibari-tts's neural voice too. The page listens
+hands-free with the console's default recogniser (``auto``: the offline one here), exactly as
+an operator's page does.
 
 The time is taken from the **real end of speech** to the AT command:
 
@@ -23,8 +24,10 @@ The time is taken from the **real end of speech** to the AT command:
 Baseline, same run: the same commands typed into the command box (Enter -> AT*REF). Also shown:
 end of speech -> the final recognition reaching the page (the decode's share) and final -> AT.
 
-Usage: ``python bench/speech_latency.py [--tts hibari,espeak-ng] [--repeats 2] [--json F]``.
-The machine is shared: the load average is printed beside the figures.
+Usage: ``python bench/speech_latency.py [--tts espeak-ng] [--repeats 1] [--json F]
+[--before CHECKOUT]``. The defaults (8 spoken commands, 8 typed) take about 2.5 minutes on an
+idle 2-core machine; each further set or repeat adds about a minute. The load average is
+printed beside the figures: they are only worth reporting from a quiet machine.
 
 ``--offline``: no page, no server: the same utterances through the stream's end-pointer with
 Silero and the shipped recogniser in this process, each speculation decoded when it is asked
@@ -83,6 +86,7 @@ TAKEOFFS = ["take off", "please take off", "take off now", "could you take off"]
 LANDINGS = ["land", "please land", "land now", "land the drone"]
 LEAD_S = 2.0  # silence before the first utterance (the microphone starting)
 GAP_S = 6.0  # silence after each: the take-off or landing completes, the reply is spoken
+TARGET_P50_MS = 600.0  # issue 29: end of speech -> the drone acting, median, in the browser
 SILENT = 2.0**-10  # -60 dBFS: below this a sample is silence (the end-of-speech threshold)
 SEND_LOG = """
 (() => {
@@ -99,6 +103,7 @@ SEND_LOG = """
       let s = "";
       for (let i = 0; i < bytes.length; i += 1) s += String.fromCharCode(bytes[i]);
       log.push([performance.timeOrigin + performance.now(), btoa(s)]);
+      window.__pcmSamples = (window.__pcmSamples || 0) + bytes.length / 2;
     }
     return send.call(this, data);
   };
@@ -317,11 +322,19 @@ def spoken_run(
         )
         page.check("#handsfree")
         wait_for(lambda: page.evaluate("document.body.dataset.listening") == "server", "mic", 120)
-        t_start = time.monotonic()
-        total_s = utts[-1].end / SAMPLE_RATE + GAP_S
-        # The whole WAV plays; the last command then has GAP_S to reach the drone.
-        while time.monotonic() - t_start < total_s + 2:
+        # The whole WAV plays (a loaded machine's fake microphone may run slower than real
+        # time: its samples are counted, not the wall clock); the last command then has GAP_S
+        # to reach the drone.
+        samples = utts[-1].end + int(GAP_S * SAMPLE_RATE)
+        t_start, wall_s = time.monotonic(), samples / SAMPLE_RATE
+        while time.monotonic() - t_start < 3 * wall_s + 60:
+            sent = page.evaluate("window.__pcmSamples || 0")
+            if sent >= samples or (time.monotonic() - t_start > wall_s + 10 and sent == 0):
+                break
             time.sleep(0.5)
+        else:
+            print(f"the page sent {sent} of {samples} samples; scoring what it sent", flush=True)
+        time.sleep(2)
         page.uncheck("#handsfree")
         offset = clock_offset(page)
         pcm, sent, ends = stream_of(page, offset)
@@ -527,8 +540,10 @@ def main(argv: list[str] | None = None) -> int:
     from playwright.sync_api import sync_playwright
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--tts", default="hibari,espeak-ng", help="voice sets, comma-separated")
-    ap.add_argument("--repeats", type=int, default=2, help="each wording this many times")
+    ap.add_argument(
+        "--tts", default="espeak-ng", help="voice sets, comma-separated (hibari, espeak-ng)"
+    )
+    ap.add_argument("--repeats", type=int, default=1, help="each wording this many times")
     ap.add_argument("--typed", type=int, default=1, help="typed baseline repeats (0: none)")
     ap.add_argument("--json", type=Path)
     ap.add_argument(
@@ -604,6 +619,9 @@ def main(argv: list[str] | None = None) -> int:
     if allms and old:
         ratio = statistics.median(old) / statistics.median(allms)
         print(f"spoken p50, before / now: {ratio:.1f}x")
+    if allms:
+        met = "met" if statistics.median(allms) <= TARGET_P50_MS else "NOT met"
+        print(f"target (issue 29): spoken p50 <= {TARGET_P50_MS:.0f} ms: {met}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0

@@ -41,7 +41,7 @@ from drone.bus.commands import (
 )
 from drone.bus.errors import PayloadError
 from drone.bus.lease import VehicleLease
-from drone.bus.payloads import Status, encode
+from drone.bus.payloads import Status, encode, encode_camera_stamp
 
 log = logging.getLogger(__name__)
 
@@ -121,9 +121,11 @@ class CommandedVehicle:
         if self._status is not None:
             self._status.put(encode(status))
 
-    def publish_camera(self, jpeg: bytes) -> None:
+    def publish_camera(self, jpeg: bytes, stamp: float | None = None) -> None:
+        """One JPEG frame; ``stamp``: when it was made (Unix seconds), as its attachment."""
         if self._camera is not None:
-            self._camera.put(jpeg)
+            attachment = encode_camera_stamp(stamp) if stamp is not None else None
+            self._camera.put(jpeg, attachment=attachment)
 
     # ------------------------------------------------------------------ queries (Zenoh thread)
     def _on_query(self, query: zenoh.Query) -> None:

@@ -22,7 +22,13 @@ import zenoh.handlers
 from drone.bus import keys
 from drone.bus.commands import Command, CommandReply, decode_reply, encode_command
 from drone.bus.errors import NoReply, PayloadError
-from drone.bus.payloads import Status, Telemetry, decode_status, decode_telemetry
+from drone.bus.payloads import (
+    Status,
+    Telemetry,
+    decode_camera_stamp,
+    decode_status,
+    decode_telemetry,
+)
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +36,7 @@ COMMAND_TIMEOUT_S = 10.0
 
 StatusCallback = Callable[[Status], None]
 TelemetryCallback = Callable[[Telemetry], None]
-CameraCallback = Callable[[int, bytes], None]
+CameraCallback = Callable[[int, bytes, float | None], None]  # counter, JPEG, stamp
 
 
 class BusCommander:
@@ -171,7 +177,8 @@ class BusCommander:
         on_camera: CameraCallback,
     ) -> None:
         """Call these (on a Zenoh thread) with each status, telemetry and camera frame (its
-        counter and JPEG) ``drone`` publishes."""
+        counter, JPEG and stamp: when the vehicle made it, None if it did not say) ``drone``
+        publishes."""
         with self._lock:
             self._watchers[drone] = (on_status, on_telemetry, on_camera)
 
@@ -230,7 +237,9 @@ class BusCommander:
             self._camera[drone] = (count, jpeg)
             watcher = self._watchers.get(drone)
         if watcher is not None:
-            watcher[2](count, jpeg)
+            attachment = sample.attachment
+            stamp = decode_camera_stamp(attachment.to_bytes() if attachment is not None else None)
+            watcher[2](count, jpeg, stamp)
 
     def close(self) -> None:
         self._beat.undeclare()  # type: ignore[no-untyped-call]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -105,3 +106,22 @@ def decode_status(data: bytes) -> Status:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "payload"
         raise PayloadError(f"status {where}: {first['msg']}") from exc
+
+
+# A camera frame's attachment: when the vehicle made the JPEG, Unix seconds on the vehicle's
+# clock, as one little-endian IEEE 754 double (the frame itself stays the bare JPEG).
+_STAMP = struct.Struct("<d")
+
+
+def encode_camera_stamp(stamp: float) -> bytes:
+    """The attachment of a camera frame made at ``stamp`` (Unix seconds)."""
+    return _STAMP.pack(stamp)
+
+
+def decode_camera_stamp(data: bytes | None) -> float | None:
+    """The stamp of a camera frame's attachment; None when there is none or it is not one
+    (a frame without a stamp is shown with the time it arrived)."""
+    if data is None or len(data) != _STAMP.size:
+        return None
+    (stamp,) = _STAMP.unpack(data)
+    return stamp if math.isfinite(stamp) and stamp > 0 else None

@@ -9,8 +9,9 @@ Publishes (a fleet prefixes ``/NAME``, e.g. ``/uav2/ardrone/navdata``):
   navdata's GPS option field for field, once per new fix and at least every second while the
   option comes (the option repeats the receiver's last fix in every navdata packet);
 - ``/ardrone/image_raw/compressed`` (sensor_msgs/CompressedImage): JPEG of the camera with the
-  tracking overlay, at most ``image_hz`` (15); ``data`` is base64 text (rosbridge's JSON form of
-  ``uint8[]``);
+  tracking overlay, at most ``image_hz`` (15); ``data`` is the JPEG's ``bytes``, as the graph
+  carries ``uint8[]`` (a rosbridge client's JSON gets it as base64, encoded for the clients
+  subscribed: server/rosbridge/values.py);
 - ``/uav/pose`` (geometry_msgs/PoseStamped, frame ``map``): the EKF estimate, per navdata;
 - ``/uav/markers`` (uav_console/MarkerArray): per processed frame, each detected marker's map
   pose and its distance from the drone;
@@ -37,7 +38,6 @@ encodes the image when one is due.
 from __future__ import annotations
 
 import asyncio
-import base64
 import contextlib
 import logging
 import math
@@ -404,7 +404,7 @@ class VehicleNode:
         return {
             "header": header("ardrone_base_frontcam", self.stamp()),
             "format": "jpeg",
-            "data": base64.b64encode(jpeg).decode("ascii"),
+            "data": jpeg,
         }
 
     def _publish_image(self, msg: dict[str, Any] | None) -> None:

@@ -13,7 +13,6 @@ deadline passed) comes back as the op's answer: ``accepted`` false and the vehic
 from __future__ import annotations
 
 import asyncio
-import base64
 import json
 import logging
 import time
@@ -71,6 +70,7 @@ class BusDroneStack(RemoteDroneStack):
         self.refused_topics: set[str] = set()
         self._advertised: set[str] = set()
         self._owner = f"bus:{name}"
+        self._closed = False
         commander.watch(name, self._on_status, self._on_bus_telemetry, self._on_camera)
         self._mirror_sub = commander.session.declare_subscriber(
             keys.all_graph(commander.fleet, name), self._on_graph
@@ -164,23 +164,36 @@ class BusDroneStack(RemoteDroneStack):
             self.graph.loop.call_soon_threadsafe(self._show, spec, msg)
 
     def _show(self, spec: TopicSpec, msg: dict[str, Any]) -> None:
-        if self.linked:
+        if self._closed or self.linked:  # closed: a message handed over as it closed
             return
         if spec.name not in self._advertised:
             self.graph.advertise(spec.name, spec.type, latch=spec.latch, owner=self._owner)
             self._advertised.add(spec.name)
         self.graph.publish(spec.name, msg)
 
-    def _on_camera(self, count: int, jpeg: bytes) -> None:
-        """A camera frame (Zenoh thread): the drone's image topic here, as its node sends it."""
+    def _on_camera(self, count: int, jpeg: bytes, stamp: float | None) -> None:
+        """A camera frame (Zenoh thread): the drone's image topic here, as its node sends it,
+        stamped when the vehicle made it (else now), with the JPEG's bytes as they came (base64
+        is made only for the rosbridge clients subscribed, once per frame:
+        server/rosbridge/context.py ``JsonCache``). Shown whether or not a vehicle link carries
+        the rest of its graph: a vehicle on the bus sends its camera only here, where a frame
+        is dropped rather than queued behind others."""
         msg = {
-            "header": header("ardrone_base_frontcam", time.time()),
+            "header": header("ardrone_base_frontcam", time.time() if stamp is None else stamp),
             "format": "jpeg",
-            "data": base64.b64encode(jpeg).decode("ascii"),
+            "data": jpeg,
         }
-        spec = TopicSpec(f"{self.prefix}{CAMERA_TOPIC}", IMAGE)
         if self.graph.loop is not None:
-            self.graph.loop.call_soon_threadsafe(self._show, spec, msg)
+            self.graph.loop.call_soon_threadsafe(self._show_camera, msg)
+
+    def _show_camera(self, msg: dict[str, Any]) -> None:
+        if self._closed:  # a frame handed over as it closed
+            return
+        topic = f"{self.prefix}{CAMERA_TOPIC}"
+        if topic not in self._advertised:
+            self.graph.advertise(topic, IMAGE, owner=self._owner)
+            self._advertised.add(topic)
+        self.graph.publish(topic, msg)
 
     def _spawn_command(self, op: str, args: dict[str, Any]) -> None:
         task = asyncio.get_running_loop().create_task(self._topic_command(op, args))
@@ -266,6 +279,7 @@ class BusDroneStack(RemoteDroneStack):
         return await self._unless_silent(coro, silent_s)
 
     def close(self) -> None:
+        self._closed = True
         self._mirror_sub.undeclare()  # type: ignore[no-untyped-call]
         for sub in self._topic_subs:
             sub.close()

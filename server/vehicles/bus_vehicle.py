@@ -1,6 +1,10 @@
 """A vehicle process's commanded side on the bus (docs/bus.md): its ``cmd`` queryable answered by
 the vehicle's own control ops, its status at 1 Hz and its camera, and the consoles it hears.
 
+The camera goes out frame by frame as the vehicle node publishes it (up to its ``image_hz``),
+the JPEG's bytes with its stamp as the attachment; a vehicle on the bus leaves it out of its
+vehicle link (:meth:`VehicleHost.start`), whose queue would hold frames back behind others.
+
 The ops are those of the vehicle's control service (:meth:`VehicleHost._control`): ``direct``,
 the task ops ``submit``, ``preempt`` and ``cancel`` (what a console's dialog understood, as
 typed commands), ``telemetry``, ``truth``, ``fault``, and ``jog`` (its ``/cmd_vel``); each
@@ -80,8 +84,12 @@ class BusVehicleSide:
         )
         self._next_status = 0.0
         self._next_latched = 0.0
-        self._camera_sent = -1
         self.commanded.start()
+        self.camera_topics = [t for t in spec.out_topics if t.name.endswith(CAMERA_TOPIC)]
+        self._camera_subs = [
+            host.graph.subscribe(t.name, self._on_image, type=t.type, owner="bus")
+            for t in self.camera_topics
+        ]
         # the vehicle's own topics, for the consoles' graphs (the camera has its own key)
         self._mirrored = [t for t in spec.out_topics if not t.name.endswith(CAMERA_TOPIC)]
         self._graph_pubs: dict[str, zenoh.Publisher] = {}
@@ -104,6 +112,18 @@ class BusVehicleSide:
             pub.put(to_json_text(msg))
 
         return put
+
+    def _on_image(self, msg: dict[str, Any]) -> None:
+        """A frame of the vehicle node's camera topic: on the bus at once, as it was encoded."""
+        data = msg.get("data")
+        if not isinstance(data, bytes | bytearray):
+            return
+        stamp = msg.get("header", {}).get("stamp", {})
+        try:
+            made = float(stamp["sec"]) + float(stamp["nanosec"]) / 1e9
+        except (KeyError, TypeError, ValueError):
+            made = time.time()
+        self.commanded.publish_camera(bytes(data), made)
 
     def _on_beat(self, sample: zenoh.Sample, loop: asyncio.AbstractEventLoop) -> None:
         """A console's beat (Zenoh thread): the recording id it carries, if any, as the link's
@@ -152,12 +172,8 @@ class BusVehicleSide:
         return {"accepted": True, "detail": "jog sent"}
 
     def step(self, now: float) -> None:
-        """Publish the status when due, the camera's newest frame if new, and the latched
-        topics again every few seconds (a console that joined since has them too)."""
-        count, jpeg = self.host.stack.latest_jpeg()
-        if jpeg is not None and count != self._camera_sent:
-            self._camera_sent = count
-            self.commanded.publish_camera(jpeg)
+        """Publish the status when due, and the latched topics again every few seconds (a
+        console that joined since has them too)."""
         if now >= self._next_status:
             self._next_status = now + STATUS_PERIOD_S
             self.commanded.publish_status(self.status(now))
@@ -187,7 +203,7 @@ class BusVehicleSide:
         )
 
     def close(self) -> None:
-        for sub in self._graph_subs:
+        for sub in [*self._graph_subs, *self._camera_subs]:
             sub.close()
         for pub in self._graph_pubs.values():
             pub.undeclare()  # type: ignore[no-untyped-call]

@@ -319,6 +319,8 @@ class VehicleHost:
         self.bus = join_bus(s, self.name, self.key)
         if self.bus is not None:
             self.bus_side = BusVehicleSide(self, self.bus, spec)
+            # the camera on the bus only: dropped there rather than queued on the link
+            self.core.leave_out({t.name for t in self.bus_side.camera_topics})
             if self.bus.session is not None:  # plans from any central
                 self.ltm.join_bus(self.bus.session, s.fleet_name)
         elif self.link is None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import dataclasses
 import itertools
 import json
 import logging
@@ -78,14 +79,24 @@ class GraphLinkCore:
         self._ids = itertools.count(1)
         self._calls: dict[str, asyncio.Future[Any]] = {}
         self._tasks: set[asyncio.Task[None]] = set()
-        self._subs = [
-            graph.subscribe(t.name, self._forwarder(t.name), type=t.type, owner=spec.owner)
+        self._subs = {
+            t.name: graph.subscribe(t.name, self._forwarder(t.name), type=t.type, owner=spec.owner)
             for t in spec.out_topics
-        ]
+        }
         for t in spec.in_topics:
             graph.advertise(t.name, t.type, latch=t.latch, owner=spec.owner)
 
     # ------------------------------------------------------------------ out
+    def leave_out(self, topics: set[str]) -> None:
+        """Stop carrying these out-topics (another road carries them: the bus, the camera);
+        from the next :meth:`hello` they are not advertised either."""
+        keep = tuple(t for t in self.spec.out_topics if t.name not in topics)
+        for name in topics:
+            sub = self._subs.pop(name, None)
+            if sub is not None:
+                sub.close()
+        self.spec = dataclasses.replace(self.spec, out_topics=keep)
+
     def _push(self, frame: str) -> None:
         if len(self._out) >= self._max_queue:
             self._out.popleft()
@@ -229,9 +240,9 @@ class GraphLinkCore:
             self._calls.pop(call_id, None)
 
     def close(self) -> None:
-        for s in self._subs:
+        for s in self._subs.values():
             s.close()
-        self._subs = []
+        self._subs = {}
         for t in self.spec.in_topics:
             self.graph.unadvertise(t.name, self.spec.owner)
         self.disconnected()

@@ -21,7 +21,6 @@ is being answered is not waited for either: 503 with ``Retry-After`` at once, th
 from __future__ import annotations
 
 import asyncio
-import base64
 import concurrent.futures
 import json
 import logging
@@ -107,7 +106,7 @@ class RemoteDroneStack(DroneStack):
         self.info: dict[str, Any] = {}
         self.last: dict[str, Any] = {}
         self.last_t: float | None = None
-        self._jpeg_b64: str | bytes | bytearray | None = None
+        self._jpeg_data: bytes | bytearray | None = None
         self._jpeg: tuple[int, bytes | None] = (-1, None)
         self._jpeg_count = 0
         self._pending: set[asyncio.Task[Any]] = set()
@@ -148,9 +147,11 @@ class RemoteDroneStack(DroneStack):
                 self.sim = None
 
     def _on_image(self, msg: dict[str, Any]) -> None:
+        """A frame of the drone's camera topic: its JPEG's bytes, as the graph carries
+        ``uint8[]`` (the link's base64 was decoded by the rosbridge endpoint it came in by)."""
         data = msg.get("data")
-        if isinstance(data, str | bytes | bytearray):  # the bridge may hand decoded bytes
-            self._jpeg_b64 = data
+        if isinstance(data, bytes | bytearray):
+            self._jpeg_data = data
             self._jpeg_count += 1
 
     # ------------------------------------------------------------------ DroneStack
@@ -318,10 +319,8 @@ class RemoteDroneStack(DroneStack):
         return out
 
     def latest_jpeg(self) -> tuple[int, bytes | None]:
-        if self._jpeg[0] != self._jpeg_count and self._jpeg_b64 is not None:
-            raw = self._jpeg_b64
-            jpeg = base64.b64decode(raw) if isinstance(raw, str) else bytes(raw)
-            self._jpeg = (self._jpeg_count, jpeg)
+        if self._jpeg[0] != self._jpeg_count and self._jpeg_data is not None:
+            self._jpeg = (self._jpeg_count, bytes(self._jpeg_data))
         return self._jpeg
 
     def truth(self) -> dict[str, Any]:

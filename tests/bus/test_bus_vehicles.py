@@ -4,6 +4,7 @@ and rosbridge over the bus; bad parties refused, nothing flies; one lease across
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import json
 import os
@@ -221,7 +222,8 @@ def test_a_bus_vehicle_flies_by_rest_text_and_rosbridge(rig: Rig) -> None:
         ros.subscribe("/console/reply", "uav_console/Reply")
         ros.wait_topic(f"/{NAME}/ardrone/navdata", "navdata", lambda seen: len(seen) >= 3)
         [image, *_] = ros.wait_topic(f"/{NAME}/ardrone/image_raw/compressed", "the camera")
-        assert image["format"] == "jpeg" and image["data"]
+        assert image["format"] == "jpeg"
+        assert base64.b64decode(image["data"], validate=True).startswith(b"\xff\xd8")  # a JPEG
         # a sentence typed in a page (rosbridge): the vehicle's dialog hears and answers it
         ros.publish("/console/utterance", {"text": f"{NAME} go up 0.3 meters", "source": "text"})
         ros.wait_topic(

@@ -16,7 +16,13 @@ from drone.bus import keys
 from drone.bus.config import access_control, client_config, router_id, vehicle_user
 from drone.bus.credentials import Credentials
 from drone.bus.errors import BusConfigError, KeySegmentError, PayloadError
-from drone.bus.payloads import Telemetry, decode_telemetry, encode
+from drone.bus.payloads import (
+    Telemetry,
+    decode_camera_stamp,
+    decode_telemetry,
+    encode,
+    encode_camera_stamp,
+)
 from drone.bus.session import DEFAULT_LISTEN
 
 
@@ -154,3 +160,19 @@ def test_a_console_takes_another_consoles_bus_credentials_but_keeps_its_vehicle_
     (tmp_path / "bad.txt").write_text("console\n")
     with pytest.raises(BusConfigError, match=r"bad\.txt:1: not user:password"):
         Credentials.load_or_create(tmp_path / "b", [], shared=tmp_path / "bad.txt")
+
+
+@given(st.binary(max_size=16))
+def test_any_camera_attachment_is_a_stamp_or_none(data: bytes) -> None:
+    stamp = decode_camera_stamp(data)
+    assert stamp is None or (math.isfinite(stamp) and stamp > 0)
+
+
+@given(st.floats(min_value=1e-3, max_value=1e12))
+def test_a_camera_stamp_comes_back_as_it_went(stamp: float) -> None:
+    assert decode_camera_stamp(encode_camera_stamp(stamp)) == stamp
+
+
+def test_a_camera_frame_without_a_stamp_has_none() -> None:
+    assert decode_camera_stamp(None) is None
+    assert decode_camera_stamp(encode_camera_stamp(math.nan)) is None

@@ -108,6 +108,27 @@ def test_link_hello_declares_everything_and_resends_latched() -> None:
     assert json.loads(frame)["msg"] == {"data": "flying"}
 
 
+def test_a_topic_left_out_of_the_link_is_neither_sent_nor_advertised() -> None:
+    """The camera of a vehicle on the bus: the link carries the rest, not its frames."""
+    g = Graph()
+    image = "/uav1/ardrone/image_raw/compressed"
+    spec = LinkSpec(
+        out_topics=(
+            TopicSpec("/uav/task", "std_msgs/String"),
+            TopicSpec(image, "sensor_msgs/CompressedImage"),
+        )
+    )
+    for t in spec.out_topics:
+        g.advertise(t.name, t.type)
+    core = GraphLinkCore(g, spec)
+    core.leave_out({image})
+    assert ops(core.hello()) == [("advertise", "/uav/task")]
+    g.publish(image, {"format": "jpeg", "data": b"\xff\xd8"})
+    g.publish("/uav/task", {"data": "idle"})
+    assert ops(core.drain()) == [("publish", "/uav/task")]
+    core.close()
+
+
 def test_link_delivers_server_messages_and_counts_bad_frames() -> None:
     g, core = make_core()
     got: list[dict[str, Any]] = []
@@ -241,3 +262,17 @@ def test_serve_refuses_an_unknown_vehicles_mode(tmp_path: Path) -> None:
     out = subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 2
     assert "inline or process" in out.stderr
+
+
+def test_a_remote_drone_serves_the_jpeg_its_camera_topic_carries() -> None:
+    """The MJPEG route's frame of a vehicle-process drone: the bytes on the graph, as they are."""
+    from server.vehicles.remote import RemoteDroneStack
+
+    g = Graph()
+    stack = RemoteDroneStack(g, "uav1", "/uav1")
+    assert stack.latest_jpeg() == (-1, None)
+    frame = b"\xff\xd8 a jpeg \xff\xd9"
+    image = {"header": {"frame_id": "cam"}, "format": "jpeg", "data": frame}
+    g.publish("/uav1/ardrone/image_raw/compressed", image)
+    assert stack.latest_jpeg() == (1, frame)
+    stack.close()
