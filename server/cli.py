@@ -11,6 +11,7 @@ import contextlib
 import functools
 import os
 import re
+import socket
 import subprocess
 import sys
 from collections.abc import Callable, Mapping, Sequence
@@ -330,9 +331,19 @@ def _serve(args: argparse.Namespace, settings: Settings) -> int:
         # a faster clock (server/timewarp.py) scales asyncio's selector loop, not uvloop's
         loop="asyncio" if settings.clock_speed != 1.0 else "auto",
     )
+    # The pilot's URL is printed when the lifespan has started, which uvicorn does before it
+    # binds: the socket listens first, so the printed URL answers the moment it is printed
+    # (and a port already taken is refused before any drone starts).
+    family = socket.AF_INET6 if ":" in settings.host else socket.AF_INET
+    try:
+        sock = socket.create_server(
+            (settings.host, settings.port), family=family, backlog=config.backlog
+        )
+    except OSError as exc:
+        raise SettingsError(f"cannot listen on {settings.host}:{settings.port}: {exc}") from exc
     # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
-    with contextlib.suppress(KeyboardInterrupt):
-        uvicorn.Server(config).run()
+    with sock, contextlib.suppress(KeyboardInterrupt):
+        uvicorn.Server(config).run(sockets=[sock])
     return 0
 
 

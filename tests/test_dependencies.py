@@ -51,6 +51,22 @@ def test_uvicorn_is_bounded_to_the_versions_its_guards_were_tested_on() -> None:
     assert version("uvicorn") in uvicorn.specifier
 
 
+def test_ci_runs_the_suite_on_the_lower_bounds_after_lint_and_test() -> None:
+    """.ci/run: `make lint`, the README's `make test`, then `make test-lower`, each run even if
+    the one before it failed (``|| status=$?``)."""
+    steps = [
+        line.split("||")[0].strip()
+        for line in (ROOT / ".ci" / "run").read_text().splitlines()
+        if line.startswith("make ")
+    ]
+    assert steps == ["make lint", "make test", "make test-lower"]
+    assert all(
+        line.endswith("|| status=$?")
+        for line in (ROOT / ".ci" / "run").read_text().splitlines()
+        if line.startswith("make ")
+    )
+
+
 @pytest.mark.skipif(
     os.environ.get("UAV_CONSOLE_LOWER_BOUNDS") != "1",
     reason="checks the lower-bounds install of `make test-lower` (UAV_CONSOLE_LOWER_BOUNDS=1)",

@@ -182,6 +182,10 @@ class MarkerLocaliser:
         # (reprojection error, |yaw − prior|, rvec, tvec, R_cm, pose) of the plausible solutions
         cands: list[tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         for rv, tv, err in zip(rvecs, tvecs, np.ravel(errs), strict=False):
+            if not (
+                math.isfinite(float(err)) and np.all(np.isfinite(rv)) and np.all(np.isfinite(tv))
+            ):
+                continue  # IPPE_SQUARE gives a NaN solution for some corner sets (OpenCV 4.9-5.0)
             R_cm, _ = cv2.Rodrigues(rv)
             R_map_cam = M @ R_cm.T
             R_mb = R_map_cam @ self.B

@@ -108,6 +108,20 @@ def test_far_head_on_marker_without_yaw_prior_gives_no_fix_rather_than_a_flipped
     assert made >= 1
 
 
+def test_a_nan_pnp_solution_is_dropped_never_fused(world) -> None:  # type: ignore[no-untyped-def]
+    """OpenCV's IPPE_SQUARE (4.9 to 5.0) returns a NaN rotation and error as one of its two
+    solutions for these corners of marker 7, seen in a seeded closed-loop flight: the fix
+    comes from the finite solution or there is none, never a NaN the EKF refuses."""
+    loc = MarkerLocaliser(world, CameraModel())
+    corners = np.array([[577.0, 133.0], [632.0, 130.0], [635.0, 185.0], [580.0, 188.0]])
+    for yaw_prior in (None, math.radians(90.0)):
+        det = loc._solve(world.marker(7), corners, 6.47, (0.0, 0.0), yaw_prior)
+        if det is not None:
+            f = det.fix
+            assert np.all(np.isfinite([f.x, f.y, f.z, f.yaw_rad])), f
+            assert np.all(np.isfinite(f.R)) and np.all(np.isfinite(det.rvec)), det
+
+
 def test_unknown_ids_are_reported_not_fused(renderer) -> None:  # type: ignore[no-untyped-def]
     small = parse_world(
         {

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -14,7 +15,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.support.loopback import free_port
+from tests.support.loopback import bound_socket, free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -58,6 +59,13 @@ def test_serve_prints_one_clickable_pilot_url_and_stores_tokens_0600(
     assert proc.stdout is not None
     line = proc.stdout.readline().strip()
     assert line.startswith(f"http://127.0.0.1:{port}/?token=")
+    # The URL answers the moment it is printed: with the server frozen right after printing it,
+    # the kernel still accepts the connection, so the socket was listening before the print.
+    proc.send_signal(signal.SIGSTOP)
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=10).close()
+    finally:
+        proc.send_signal(signal.SIGCONT)
     token = line.split("token=", 1)[1]
     token_files = [p for p in data_dir.iterdir() if p.is_file()]
     assert token_files, "no token file written"
@@ -101,6 +109,20 @@ def test_serve_runs_flight_stacks_in_their_own_processes_unless_told_inline() ->
     assert vehicles([], {"UAVC_VEHICLES": "inline"}) == "inline"
     assert vehicles(["--vehicles", "inline"], {"UAVC_VEHICLES": "process"}) == "inline"
     assert vehicles(["--vehicles", "process"], {"UAVC_VEHICLES": "inline"}) == "process"
+
+
+def test_a_port_already_taken_is_a_clear_error(tmp_path: Path) -> None:
+    with bound_socket() as taken:
+        taken.listen()
+        port = taken.getsockname()[1]
+        out = subprocess.run(
+            [sys.executable, "-m", "server", "serve", "--port", str(port), "--drone", "none",
+             "--data-dir", str(tmp_path)],
+            cwd=ROOT, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    assert out.returncode == 2, out.stderr
+    assert f"cannot listen on 127.0.0.1:{port}" in out.stderr and "Traceback" not in out.stderr
+    assert "token=" not in out.stdout  # nothing announced: no URL that does not answer
 
 
 def test_bad_environment_setting_is_a_clear_error(tmp_path: Path) -> None:
