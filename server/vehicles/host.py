@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any
 from drone.bus.config import vehicle_user
 from drone.bus.errors import BusError
 from drone.bus.vehicle import VehicleBus
-from drone.deadline import BadIssued, ClockOffset, parse_issued
+from drone.deadline import BadIssued, ClockOffset, Deadline, parse_issued
 from drone.sim.errors import AddressInUse
 from server.fleet.planner import FlightModel
 from server.http.tls import TLSError, server_context
@@ -490,9 +490,16 @@ class VehicleHost:
             if self.stack.sim is None:
                 raise VehicleError(f"{self.name} is a real drone: no ground truth")
             return dict(self.stack.truth())
-        if op in TASK_OPS:
+        if op in TASK_OPS:  # judged again here: a sentence held up on the way is not flown
             assert self.stack.tasks is not None
-            return run_task_op(self.stack.tasks, str(op), args)
+            return run_task_op(
+                self.stack.tasks,
+                str(op),
+                args,
+                issued=self._issued_arg(args),
+                now=time.time(),
+                deadline=Deadline(self.settings.command_deadline_s),
+            )
         if op == "utterance":
             raise VehicleError(
                 "this vehicle runs no dialog: its console understands sentences and sends "
