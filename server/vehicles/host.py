@@ -16,9 +16,10 @@ never the pilot token; the central server lets it publish only this drone's topi
 The drone stays safe without the central server: :class:`CentralWatch` hovers it after
 ``heartbeat_timeout_s`` of silence and lands it after ``central_loss_land_s``; the link
 reconnects on its own, and a bus whose router is not up when the vehicle starts is joined when
-it is (:meth:`VehicleBus.join_later <drone.bus.vehicle.VehicleBus.join_later>`). ``emergency``, ``land`` and ``hover`` also reach the drone through the
-safety door (:mod:`server.vehicles.door`), the page's standing connection that no web traffic
-can delay; each stop id runs once, whichever road brings it first (:meth:`deliver_stop`).
+it is (:meth:`drone.bus.vehicle.VehicleBus.join_later`). ``emergency``, ``land`` and
+``hover`` also reach the drone through the safety door (:mod:`server.vehicles.door`), the
+page's standing connection that no web traffic can delay; each stop id runs once, whichever
+road brings it first (:meth:`deliver_stop`).
 
 Deadlines (drone/deadline.py): a command from the central server carries when the operator
 gave it, on the console's clock; the vehicle moves it onto its own clock with the offset it
