@@ -46,10 +46,9 @@ START_S = 120.0  # a serve's start on a loaded 2-core machine took 34 s
 
 
 @contextlib.contextmanager
-def serve(tmp: Path, name: str, extra: tuple[str, ...], *, wait: bool = True) -> Iterator[Served]:
+def serve(tmp: Path, name: str, extra: tuple[str, ...]) -> Iterator[Served]:
     """``uav-console serve`` named ``name`` on the bus, its data directory shared (one fleet's
-    credentials and vehicle keys); ``wait=False`` yields it while it starts (:func:`up`), so
-    that other processes start beside it."""
+    credentials and vehicle keys)."""
     port = free_port(HOST)
     log_path = tmp / f"{name}.log"
     env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "UAVC_CONSOLE_NAME": name}
@@ -64,8 +63,7 @@ def serve(tmp: Path, name: str, extra: tuple[str, ...], *, wait: bool = True) ->
     )
     served = Served(port, proc, http, log_path, HOST)
     try:
-        if wait:
-            up(served, name)
+        wait_for(lambda: http.get("/api/v1/health").status_code == 200, f"{name} up", START_S)
         yield served
     finally:
         if proc.poll() is None:
@@ -76,11 +74,6 @@ def serve(tmp: Path, name: str, extra: tuple[str, ...], *, wait: bool = True) ->
                 proc.kill()
                 proc.wait()
         http.close()
-
-
-def up(served: Served, name: str) -> None:
-    """Wait until ``served`` answers its health check."""
-    wait_for(lambda: served.http.get("/api/v1/health").status_code == 200, f"{name} up", START_S)
 
 
 @contextlib.contextmanager
@@ -158,11 +151,7 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
     with contextlib.ExitStack() as stack:
         a = stack.enter_context(serve(tmp_path, "console-a", extra_a))
         wait_for(lambda: central_of(a)["role"] == "central", "console-a central", 30)
-        # console-b and the vehicles start side by side (each a process importing the stack)
-        b = stack.enter_context(serve(tmp_path, "console-b", extra_b, wait=False))
-        for i, name in enumerate(("uav1", "uav2")):
-            stack.enter_context(vehicle(tmp_path, name, i, a, [bus_a, bus_b]))
-        up(b, "console-b")
+        b = stack.enter_context(serve(tmp_path, "console-b", extra_b))
         seen = wait_for(
             lambda: (c := central_of(b))["consoles"] == ["console-a", "console-b"] and c,
             "console-b sees both consoles",
@@ -170,6 +159,8 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
         )
         assert seen["role"] == "standby" and seen["central"] == "console-a"
         assert central_of(a)["role"] == "central"  # the incumbent keeps it
+        for i, name in enumerate(("uav1", "uav2")):
+            stack.enter_context(vehicle(tmp_path, name, i, a, [bus_a, bus_b]))
         wait_for(
             lambda: (
                 sorted(central_of(a)["on_bus"]) == ["uav1", "uav2"]
