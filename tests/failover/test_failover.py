@@ -38,7 +38,7 @@ TAKEOVER_BOUND_S = 3.0  # the issue's bound for the standby to hold the central 
 # A waypoint's wait across the takeover against the median revisit before it: the patrolling
 # drone never stops, so only the loaded machine's jitter makes it longer than one revisit.
 REVISIT_RATIO_BOUND = 1.5
-LAPS_BEFORE = 1  # revisits measured before the kill (the "normal revisit", one per waypoint)
+LAPS_BEFORE = 2  # revisits measured before the kill (the "normal revisit")
 LAPS_AFTER = 2
 
 
