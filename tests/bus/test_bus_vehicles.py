@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import dataclasses
 import json
 import os
 import re
@@ -39,6 +40,7 @@ class Rig:
     data: Path
     vehicle: subprocess.Popen[bytes]
     vehicle_log: Path
+    log_from: int = 0  # the vehicle's log as one test sees it: from this byte on
 
     def wait_joined(self, srv: Served | None = None) -> dict[str, Any]:
         srv = srv or self.srv
@@ -65,7 +67,7 @@ class Rig:
         return dict(r.json())
 
     def vlog(self) -> str:
-        return self.vehicle_log.read_text(errors="replace")
+        return self.vehicle_log.read_bytes()[self.log_from :].decode(errors="replace")
 
 
 @contextlib.contextmanager
@@ -116,17 +118,32 @@ def bus_vehicle(
             proc.wait()
 
 
-@pytest.fixture
-def rig(tmp_path: Path) -> Iterator[Rig]:
-    data = tmp_path / "data"
+@pytest.fixture(scope="module")
+def shared_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rig]:
+    """One console and one bus vehicle for the module's tests that fly it and land it again
+    (a console and a vehicle process start in seconds of CPU each)."""
+    tmp = tmp_path_factory.mktemp("rig")
+    data = tmp / "data"
     key = vehicle_key(data, NAME)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     extra = ("--fleet", "0", "--bus-listen", endpoint)
     with (
-        serve(tmp_path, "sim", extra=extra) as srv,
-        bus_vehicle(tmp_path, endpoint, key) as (proc, log_path),
+        serve(tmp, "sim", extra=extra) as srv,
+        bus_vehicle(tmp, endpoint, key) as (proc, log_path),
     ):
         yield Rig(srv, endpoint, data, proc, log_path)
+
+
+@pytest.fixture
+def rig(shared_rig: Rig) -> Rig:
+    """The module's rig for one test: its drone on the ground (landed if a test before left it
+    flying), the vehicle's log read from this test's start."""
+    shared_rig.wait_joined()
+    if shared_rig.flying():
+        shared_rig.act("land")
+        wait_for(lambda: not shared_rig.flying(), "the rig's drone landed", 40)
+    assert shared_rig.vehicle.poll() is None, shared_rig.vlog()
+    return dataclasses.replace(shared_rig, log_from=shared_rig.vehicle_log.stat().st_size)
 
 
 def run_script(script: str, *args: str) -> dict[str, Any]:

@@ -53,6 +53,7 @@ def serve(tmp: Path, name: str, extra: tuple[str, ...]) -> Iterator[Served]:
     log_path = tmp / f"{name}.log"
     env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "UAVC_CONSOLE_NAME": name}
     env["UAVC_RECORDER"] = "false"
+    env["UAVC_ASR_PRELOAD"] = "false"  # nobody speaks: no speech model loaded beside the start
     argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
     argv += ["--drone", "sim", "--token", PILOT, *extra]
     with open(log_path, "wb") as log:

@@ -27,9 +27,9 @@ from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
 SPEED = 3.0
-# A four-minute battery (the AR.Drone's is 12, drone/sim/battery.py): the first handoff comes
-# ~146 s into the mission, so with the minute after it the run takes about a minute of wall time.
-FLIGHT_TIME_S = 240.0
+# A 2.5-minute battery (the AR.Drone's is 12, drone/sim/battery.py): the first handoff comes
+# ~83 s into the mission, so with the minute after it the run takes under a minute of wall time.
+FLIGHT_TIME_S = 150.0
 COVERAGE_PP = 1.0
 GAP_S = 5.0
 TOKEN = "live-clock-pilot-token"
@@ -109,6 +109,7 @@ def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path:
     args = ["--fleet", "2", "--world", "outdoor", "--seed", "1", "--no-camera"]
     args += ["--clock-speed", f"{SPEED:g}", "--sim-addr", fresh_address(2)]
     env = {"UAVC_VEHICLES": "process", "UAVC_FLIGHT_TIME_S": f"{FLIGHT_TIME_S:g}"}
+    env["UAVC_ASR_PRELOAD"] = "false"  # nobody speaks: no speech model loaded beside the start
     with serve(args, tmp_path, token=TOKEN, env=env, drones=("uav1", "uav2"), timeout_s=120) as srv:
         assert "each in its own process" in srv.log()
         # both drones have joined the fleet (as the page waits for them before Start)

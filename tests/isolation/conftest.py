@@ -103,6 +103,7 @@ def serve(
     port = port or free_port(host)
     log_path = tmp / f"serve-{port}.log"
     full_env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "UAVC_BUS_LISTEN": bus_endpoint()}
+    full_env["UAVC_ASR_PRELOAD"] = "false"  # no test here speaks: no model loaded beside the start
     full_env.update(env or {})
     argv = [sys.executable, "-m", "server", "serve", "--host", host, "--port", str(port)]
     argv += ["--drone", drone, "--token", PILOT, *extra]

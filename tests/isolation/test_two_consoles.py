@@ -40,6 +40,7 @@ def test_two_consoles_fly_their_own_drones(tmp_path: Path) -> None:
     data = tmp_path / "data"  # one user's data directory, shared by both consoles
     data.mkdir()
     env = {"UAVC_SIM_BASE_ADDR": BASE, "UAVC_VEHICLES": "process"}
+    env["UAVC_ASR_PRELOAD"] = "false"  # typed commands only: no speech model loaded at start
     assert not listening(BASE) and not listening(NEXT)
     with serve([], data, token="first-pilot", env=env) as first:
         assert listening(BASE)
