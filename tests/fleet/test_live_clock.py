@@ -27,9 +27,9 @@ from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
 SPEED = 3.0
-# A 2.5-minute battery (the AR.Drone's is 12, drone/sim/battery.py): the first handoff comes
-# ~83 s into the mission, so with the minute after it the run takes under a minute of wall time.
-FLIGHT_TIME_S = 150.0
+# A four-minute battery (the AR.Drone's is 12, drone/sim/battery.py): the first handoff comes
+# ~146 s into the mission, so with the minute after it the run takes about a minute of wall time.
+FLIGHT_TIME_S = 240.0
 COVERAGE_PP = 1.0
 GAP_S = 5.0
 TOKEN = "live-clock-pilot-token"
