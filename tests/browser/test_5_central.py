@@ -12,6 +12,7 @@ import pytest
 
 from tests.browser.conftest import OBSERVER, ServerProcess, _server, open_console
 from tests.support.loopback import fresh_address
+from tests.support.polling import until
 
 pytestmark = pytest.mark.browser
 
@@ -153,6 +154,13 @@ def test_land_pauses_the_patrol_and_the_panel_resumes_and_ends_it(
         )
         page.wait_for_selector("#central[data-state='running']", timeout=45_000)
         assert not page.is_visible("#central-resume") and page.is_visible("#central-start")
+        # the mission has a drone on its way again (it is "running" before the central has
+        # sent one, and an End then rightly says its drones are on the ground)
+        until(
+            lambda: paused_server.api("GET", "/patrol").json()["mission"].get("active"),
+            45,
+            "a drone sent again after Resume",
+        )
 
         page.click("#central-stop")
         page.wait_for_selector("#central[data-state='none']", timeout=5000)

@@ -19,8 +19,10 @@ pytestmark = pytest.mark.browser
 BEHIND = "(() => { const now = Date.now; Date.now = () => now.call(Date) - 5000; })();"
 
 
-def test_a_page_whose_commands_are_late_does_not_fly(browser: Any, server: ServerProcess) -> None:
-    ctx, cp = open_console(browser, server.url(), init_script=BEHIND)
+def test_a_page_whose_commands_are_late_does_not_fly(
+    browser: Any, own_server: ServerProcess
+) -> None:
+    ctx, cp = open_console(browser, own_server.url(), init_script=BEHIND)
     page = cp.page
     try:
         page.wait_for_selector("#btn-takeoff:not([disabled])", timeout=20_000)
@@ -45,7 +47,7 @@ def test_a_page_whose_commands_are_late_does_not_fly(browser: Any, server: Serve
             ".filter(e => e.textContent.startsWith(\"Not flown: 'take off'\")).length >= 2",
             timeout=10_000,
         )
-        assert not is_flying(server.truth())
+        assert not is_flying(own_server.truth())
         assert cp.console_errors() == []
     finally:
         ctx.close()

@@ -17,7 +17,8 @@ from tests.browser.helpers import is_flying, position, wait_until
 pytestmark = pytest.mark.browser
 
 
-def test_training_panel_link_loss_and_wind_gust(browser: Any, server: ServerProcess) -> None:
+def test_training_panel_link_loss_and_wind_gust(browser: Any, own_server: ServerProcess) -> None:
+    server = own_server
     ctx, cp = open_console(browser, server.url())
     octx, observer = open_console(browser, server.url("observer-token-for-browser-tests"))
     page = cp.page
