@@ -118,6 +118,7 @@ export class Freshness {
     s.saidBack = false;
     s.staleSince = from;
     this.alarms.raise(this.alarmKey(name), s.spec.alarm(ageWords(silentS), why));
+    if (!stillSilent) this.judge(name, s, now); // the new one already spoke: back, at once
   }
 
   /** How often ``name`` speaks when well (a drone whose navdata flows, or REST only). */
