@@ -268,12 +268,8 @@ def read_recording(
         OSError: the file cannot be read.
     """
     path = Path(path)
-    with path.open("rb") as f:
-        size = os.fstat(f.fileno()).st_size
-        if size == 0:
-            raise CorruptRecording(str(path), 0, "empty file, not an MCAP recording")
-        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
-            rec = _parse(path, data, size, keep_messages)
+    with _mapped(path) as (data, size):
+        rec = _parse(path, data, size, keep_messages)
     if strict and rec.stopped is not None:
         raise rec.stopped
     return rec
@@ -289,12 +285,24 @@ def stream_messages(path: Path | str) -> Iterator[RecordedMessage]:
         OSError: the file cannot be read.
     """
     path = Path(path)
+    with _mapped(path) as (data, size):
+        yield from _walk(Recording(path, size, keep_messages=False), data)
+
+
+@contextlib.contextmanager
+def _mapped(path: Path) -> Iterator[tuple[mmap.mmap, int]]:
+    """The file mapped read-only, with its size.
+
+    Raises:
+        CorruptRecording: the file is empty.
+        OSError: the file cannot be read.
+    """
     with path.open("rb") as f:
         size = os.fstat(f.fileno()).st_size
         if size == 0:
             raise CorruptRecording(str(path), 0, "empty file, not an MCAP recording")
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
-            yield from _walk(Recording(path, size, keep_messages=False), data)
+            yield data, size
 
 
 def _parse(path: Path, data: mmap.mmap, size: int, keep_messages: bool = True) -> Recording:
