@@ -141,7 +141,9 @@ class LegsTask(Task):
             if not self.loop:
                 self.progress = 1.0
                 return Outcome(True, self.done_text())
-            self._i = 0
+            # the next lap starts at the task's own first leg: detours before it went round
+            # people on the way from where the task started, which a lap does not fly
+            self._i = self._own.index(0) if 0 in self._own else 0
             self.lap += 1
         self._begin_leg(ctx, s, now)
         return None

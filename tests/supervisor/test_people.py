@@ -160,3 +160,31 @@ def test_the_monitor_backs_off_a_hovering_drone_and_holds_once_where_there_is_no
     held = boxed.check(snap(x=4.0, y=3.2), Phase.AIRBORNE, 0.0)
     assert held is not None and cmd(held) == {"action": "hover"} and "no room" in held.text
     assert boxed.check(snap(x=4.0, y=3.2), Phase.AIRBORNE, 0.25) is None  # told once
+
+
+def test_a_looping_patrol_flies_the_detour_from_its_start_once_not_every_lap() -> None:
+    """The way from where the task started to its first waypoint went round a person; each
+    lap after the first goes from the last waypoint straight back to the first (the route),
+    not by that detour again (the live patrol left its route every lap for it)."""
+    field = replace(load_world("outdoor"), objects=(_person(5.0, 0.0),))  # GPS: no markers
+    r = dialog_rig(seed=5, start=(0.0, 0.0, 0.0), world=field, people=True)
+    assert r.rig.takeoff_all()
+    route = [{"x": 10.0, "y": 0.0, "z": 2.5}, {"x": 10.0, "y": 6.0, "z": 2.5}]
+    route.append({"x": 6.0, "y": 6.0, "z": 2.5})
+    d = r.tm.submit([{"action": "waypoints", "waypoints": route, "loop": True}])
+    assert d[0].accepted, d
+    details: dict[int, set[str]] = {}
+    west_after_lap_1 = math.inf
+    for _ in range(20000):
+        r.rig.step()
+        task = r.tm.current
+        assert task is not None, r.tm.history[-1]
+        details.setdefault(task.lap, set()).add(task.detail)
+        if task.lap >= 1:
+            west_after_lap_1 = min(west_after_lap_1, r.rig.sim.truth.x)
+        if task.lap >= 3:
+            break
+    assert task.lap >= 3, details
+    assert "going round person1" in details[0]  # the first way went round
+    assert all(not any(d.startswith("going round") for d in details[lap]) for lap in (1, 2))
+    assert west_after_lap_1 > 5.0, west_after_lap_1  # never back by the person's side
