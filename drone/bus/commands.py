@@ -8,7 +8,9 @@ Command: ``v`` (1), ``id`` (the sender's id, echoed), ``op`` (:data:`OPS`), ``ar
 console's name), ``pilot`` (who commands at that console; with ``console`` the lease holder).
 
 The task ops (``submit``, ``preempt``, ``cancel``) carry typed commands
-(:mod:`drone.commands`): what a console's dialog understood, for the vehicle's task executor.
+(:mod:`drone.commands`): what a console's dialog understood, for the vehicle's task executor,
+and ``issued`` of the sentence, from which the vehicle judges its deadline again
+(drone/deadline.py: a motion past it is refused with ``result.expired``; stops never expire).
 
 Reply: ``v``, ``id``, ``accepted`` (bool), ``reason`` (why not; empty when accepted),
 ``result`` (the op's answer, an object), ``drone`` (who answered).

@@ -156,8 +156,8 @@ class BusVehicleSide:
             out = await self.host._control(args)
         except VehicleError as exc:
             raise CommandRefused(str(exc)) from exc
-        if command.op == "direct" and isinstance(out.get("expired"), dict):
-            raise CommandRefused(str(out.get("detail") or f"{command.action} expired"), out)
+        if isinstance(out.get("expired"), dict):  # a direct action or task op past its deadline
+            raise CommandRefused(str(out.get("detail") or f"{command.op} expired"), out)
         return out
 
     def _jog(self, command: Command) -> dict[str, Any]:

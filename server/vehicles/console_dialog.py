@@ -8,7 +8,10 @@ or the bus, where the vehicle's own executor decides again (:mod:`server.vehicle
 - :class:`RemoteTaskPort`: the dialog's :class:`~server.dialog.ports.TaskPort` as the control ops
   ``submit`` (awaited: the executor's decisions are the answer), ``preempt`` and ``cancel``, sent
   in the order the dialog gave them (a stop never waits for what went before it), and the
-  executor's notices from ``/NAME/vehicle/task_event``;
+  executor's notices from ``/NAME/vehicle/task_event``. ``submit`` and ``preempt`` carry when
+  the operator gave the sentence (``issued``, the console's Unix seconds): the vehicle judges
+  the deadline again as it receives them (drone/deadline.py) and answers ``expired`` rather
+  than fly a sentence late, which the dialog says as "Not flown" (audited ``expired``);
 - :class:`RemoteVehicleView`: the dialog's :class:`~server.dialog.ports.VehiclePort` from the
   vehicle's telemetry;
 - :class:`RemoteDialog`: a :class:`~server.dialog.manager.DialogManager` over those two that
@@ -20,6 +23,7 @@ or the bus, where the vehicle's own executor decides again (:mod:`server.vehicle
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import json
 import logging
 import math
@@ -27,6 +31,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from drone.deadline import Expired, not_flown
 from drone.supervisor.alarms import Alarm, BadAlarm
 from server.dialog.adapters import task_events
 from server.dialog.manager import DialogManager, DialogResult
@@ -34,12 +39,15 @@ from server.dialog.ports import DescribePort, DroneView, FleetPort, TaskDecision
 from server.graph import Graph, GraphError
 from server.language.nlu import NLU
 from server.vehicles import names, remote
-from server.vehicles.errors import RemoteCallError, VehicleUnavailable
+from server.vehicles.errors import CommandExpired, RemoteCallError, VehicleUnavailable
 from server.vehicles.remote import RemoteDroneStack
 
 log = logging.getLogger("uav_console.vehicle")
 
 STOPS = frozenset({"land", "hover", "emergency"})
+# When the operator gave the sentence the dialog is handling (Unix seconds, None: no deadline),
+# set by :meth:`RemoteDialog._handle` for the task ops that sentence sends.
+ISSUED: contextvars.ContextVar[float | None] = contextvars.ContextVar("issued", default=None)
 
 
 class RemoteTaskPort:
@@ -57,8 +65,12 @@ class RemoteTaskPort:
 
     # ------------------------------------------------------------------ ops, in order
     def _then(self, args: dict[str, Any], *, stop: bool = False) -> asyncio.Future[Any]:
-        """Send ``args`` after the op sent before it (a stop at once); its answer."""
+        """Send ``args`` after the op sent before it (a stop at once), with when the sentence
+        was issued if it was said; its answer."""
         before = None if stop else self._tail
+        issued = ISSUED.get()
+        if issued is not None:
+            args = {**args, "issued": issued}
 
         async def send() -> Any:
             if before is not None:
@@ -78,14 +90,24 @@ class RemoteTaskPort:
 
         Raises:
             VehicleUnavailable: the vehicle is not there or fell silent (REST: 503).
+            CommandExpired: the vehicle received them past their deadline and ran none.
         """
+        sent = [dict(c) for c in commands]
         try:
-            out = await self._then({"op": "submit", "commands": [dict(c) for c in commands]})
+            out = await self._then({"op": "submit", "commands": sent})
         except VehicleUnavailable:
             raise
         except (GraphError, RemoteCallError) as exc:
             why = f"{self.stack.name} cannot be reached now ({exc})"
             return [TaskDecision(False, why) for _ in commands]
+        late = expiry(out)
+        if late is not None:
+            raise CommandExpired(
+                str(out.get("detail", "")),
+                age_s=late.age_s,
+                deadline_s=late.deadline_s,
+                commands=sent,
+            )
         decisions = out.get("decisions") if isinstance(out, dict) else None
         if not isinstance(decisions, list) or len(decisions) != len(commands):
             why = str(out.get("detail", "")) if isinstance(out, dict) else ""
@@ -118,7 +140,8 @@ class RemoteTaskPort:
                 return
             why = str(exc) if exc is not None else str(out.get("detail", ""))  # type: ignore[union-attr]
             log.warning("%s: %s not done: %s", self.stack.name, what, why)
-            self.on_failure(f"{what} did not reach {self.stack.name}: {why}")
+            late = expiry(out) is not None
+            self.on_failure(why if late else f"{what} did not reach {self.stack.name}: {why}")
 
         fut.add_done_callback(done)
 
@@ -178,6 +201,19 @@ class RemoteVehicleView:
 
     def marker_ids(self) -> frozenset[int]:
         return self._markers
+
+
+def expiry(out: Any) -> Expired | None:
+    """The vehicle's ``expired`` in an op's answer (a command it received past its deadline
+    and did not run), or None."""
+    late = out.get("expired") if isinstance(out, dict) else None
+    if not isinstance(late, dict):
+        return None
+    try:
+        return Expired(float(late["age_s"]), float(late["deadline_s"]))
+    except (KeyError, TypeError, ValueError):
+        log.warning("an expiry that cannot be read in a vehicle's answer: %r", late)
+        return None
 
 
 def _num(value: Any, default: float) -> float:
@@ -257,6 +293,21 @@ class RemoteDialog(DialogManager):
             )
         return await super().handle_utterance(text, confidence, source, role, issued)
 
+    async def _handle(
+        self, text: str, confidence: float, source: str, role: str, issued: float | None = None
+    ) -> tuple[DialogResult, str]:
+        """As :meth:`DialogManager._handle`; the task ops it sends carry ``issued``, and a
+        sentence the vehicle received past its deadline is answered "Not flown" (``expired``)."""
+        token = ISSUED.set(issued)
+        try:
+            return await super()._handle(text, confidence, source, role, issued)
+        except CommandExpired as exc:
+            late = Expired(exc.age_s, exc.deadline_s)
+            reply = not_flown(text, late)
+            return DialogResult(reply, exc.commands, False, expired=late), "expired"
+        finally:
+            ISSUED.reset(token)
+
     async def _refreshed(self) -> bool:
         return await self.stack.refresh()
 
@@ -265,4 +316,4 @@ class RemoteDialog(DialogManager):
         self.task_port.close()
 
 
-__all__ = ["RemoteDialog", "RemoteTaskPort", "RemoteVehicleView"]
+__all__ = ["ISSUED", "RemoteDialog", "RemoteTaskPort", "RemoteVehicleView", "expiry"]

@@ -9,12 +9,15 @@
     ├── VehicleKeyError       a vehicle key or its name is missing, unreadable or malformed
     ├── RemoteCallError       a call over the link was refused or not answered
     │   └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
+    ├── CommandExpired        the vehicle did not run a sentence: it came past its deadline
     └── DoorError             the safety door (server.vehicles.door)
         ├── DoorProtocolError     a frame the door protocol refuses (bad JSON, op, field)
         └── TicketError           a door ticket that is malformed, forged, expired or not ours
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 
 class VehicleError(Exception):
@@ -46,6 +49,19 @@ class VehicleUnavailable(RemoteCallError):
         super().__init__(message)
         self.drone = drone
         self.retry_after_s = retry_after_s
+
+
+class CommandExpired(VehicleError):
+    """The vehicle judged a sentence's commands past their deadline as it received them and ran
+    none of them; ``age_s`` and ``deadline_s`` as it judged, ``commands`` what was not run."""
+
+    def __init__(
+        self, message: str, *, age_s: float, deadline_s: float, commands: list[dict[str, Any]]
+    ) -> None:
+        super().__init__(message)
+        self.age_s = age_s
+        self.deadline_s = deadline_s
+        self.commands = commands
 
 
 class DoorError(VehicleError):

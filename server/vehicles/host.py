@@ -15,9 +15,11 @@ never the pilot token; the central server lets it publish only this drone's topi
 
 The drone stays safe without the central server: :class:`CentralWatch` hovers it after
 ``heartbeat_timeout_s`` of silence and lands it after ``central_loss_land_s``; the link
-reconnects on its own. ``emergency``, ``land`` and ``hover`` also reach the drone through the
-safety door (:mod:`server.vehicles.door`), the page's standing connection that no web traffic
-can delay; each stop id runs once, whichever road brings it first (:meth:`deliver_stop`).
+reconnects on its own, and a bus whose router is not up when the vehicle starts is joined when
+it is (:meth:`drone.bus.vehicle.VehicleBus.join_later`). ``emergency``, ``land`` and
+``hover`` also reach the drone through the safety door (:mod:`server.vehicles.door`), the
+page's standing connection that no web traffic can delay; each stop id runs once, whichever
+road brings it first (:meth:`deliver_stop`).
 
 Deadlines (drone/deadline.py): a command from the central server carries when the operator
 gave it, on the console's clock; the vehicle moves it onto its own clock with the offset it
@@ -46,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 from drone.bus.config import vehicle_user
 from drone.bus.errors import BusError
 from drone.bus.vehicle import VehicleBus
-from drone.deadline import BadIssued, ClockOffset, parse_issued
+from drone.deadline import BadIssued, ClockOffset, Deadline, parse_issued
 from drone.sim.errors import AddressInUse
 from server.fleet.planner import FlightModel
 from server.http.tls import TLSError, server_context
@@ -316,15 +318,11 @@ class VehicleHost:
             )
             self.door.port = 0
             await self.door.start()
-        self.bus = join_bus(s, self.name, self.key)
+        self.bus = bus_for(s, self.name, self.key)
         if self.bus is not None:
-            self.bus_side = BusVehicleSide(self, self.bus, spec)
-            # the camera on the bus only: dropped there rather than queued on the link
-            self.core.leave_out({t.name for t in self.bus_side.camera_topics})
-            if self.bus.session is not None:  # plans from any central
-                self.ltm.join_bus(self.bus.session, s.fleet_name)
+            self._join_bus(self.bus, spec)
         elif self.link is None:
-            raise VehicleError(f"{self.name}: the bus cannot be reached and there is no --central")
+            raise VehicleError(f"{self.name}: no bus to join and no --central")
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         supervisor = self.stack.supervisor
         assert supervisor is not None
@@ -334,6 +332,34 @@ class VehicleHost:
             asyncio.create_task(supervisor.run(vehicle.clock.now), name=f"ans:{self.name}"),
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]
+
+    def _join_bus(self, bus: VehicleBus, spec: LinkSpec) -> None:
+        """Join the bus now, or, when its router is not up (yet: the vehicle may start first),
+        as soon as it is; said in the log either way."""
+        where = ", ".join(self.settings.bus_connect)
+        try:
+            bus.start()
+        except BusError as exc:
+            log.warning(
+                "%s: the bus at %s is not up (%s); joining it when it is", self.name, where, exc
+            )
+            loop = asyncio.get_running_loop()
+            bus.join_later(
+                lambda: loop.call_soon_threadsafe(self._on_bus, bus, spec),
+                lambda why: log.warning("%s: the bus at %s: %s", self.name, where, why),
+            )
+            return
+        self._on_bus(bus, spec)
+
+    def _on_bus(self, bus: VehicleBus, spec: LinkSpec) -> None:
+        """Joined: answer commands, publish status, take plans from any central."""
+        if bus.session is None or self.bus_side is not None:  # stopped meanwhile
+            return
+        log.info("%s: on the bus at %s", self.name, ", ".join(self.settings.bus_connect))
+        self.bus_side = BusVehicleSide(self, bus, spec)
+        # the camera on the bus only: dropped there rather than queued on the link
+        self.core.leave_out({t.name for t in self.bus_side.camera_topics})
+        self.ltm.join_bus(bus.session, self.settings.fleet_name)
 
     def _publish_alarm(self, alarm: Alarm) -> None:
         """Every alarm on ``/NAME/vehicle/alarm``: the console's dialog says it, and its
@@ -492,9 +518,16 @@ class VehicleHost:
             if self.stack.sim is None:
                 raise VehicleError(f"{self.name} is a real drone: no ground truth")
             return dict(self.stack.truth())
-        if op in TASK_OPS:
+        if op in TASK_OPS:  # judged again here: a sentence held up on the way is not flown
             assert self.stack.tasks is not None
-            return run_task_op(self.stack.tasks, str(op), args)
+            return run_task_op(
+                self.stack.tasks,
+                str(op),
+                args,
+                issued=self._issued_arg(args),
+                now=time.time(),
+                deadline=Deadline(self.settings.command_deadline_s),
+            )
         if op == "utterance":
             raise VehicleError(
                 "this vehicle runs no dialog: its console understands sentences and sends "
@@ -640,7 +673,22 @@ def raise_priority(nice: int, rt_priority: int = 0) -> str:
 def join_bus(settings: Settings, name: str, key: str) -> VehicleBus | None:
     """This vehicle on the fleet's bus (docs/bus.md) as ``vehicle-NAME`` with its own vehicle
     key, when told where the bus is; None when not, or when the router cannot be reached or
-    refuses (said in the log: the vehicle flies on, its console link carries everything)."""
+    refuses (said in the log)."""
+    bus = bus_for(settings, name, key)
+    if bus is None:
+        return None
+    try:
+        bus.start()
+    except BusError as exc:
+        log.error("%s: not on the bus: %s", name, exc)
+        return None
+    log.info("%s: on the bus at %s", name, ", ".join(settings.bus_connect))
+    return bus
+
+
+def bus_for(settings: Settings, name: str, key: str) -> VehicleBus | None:
+    """This vehicle's bus (not joined yet) as ``vehicle-NAME`` with its own vehicle key; None
+    when not told where the bus is, or when a ``tls/`` router's CA is missing (logged)."""
     if not settings.bus_connect:
         return None
     ca = bus_ca(settings)
@@ -652,7 +700,7 @@ def join_bus(settings: Settings, name: str, key: str) -> VehicleBus | None:
             ca,
         )
         return None
-    bus = VehicleBus(
+    return VehicleBus(
         settings.bus_connect,
         vehicle_user(name),
         key,
@@ -660,13 +708,6 @@ def join_bus(settings: Settings, name: str, key: str) -> VehicleBus | None:
         name,
         ca=str(ca) if ca is not None else None,
     )
-    try:
-        bus.start()
-    except BusError as exc:
-        log.error("%s: not on the bus: %s", name, exc)
-        return None
-    log.info("%s: on the bus at %s", name, ", ".join(settings.bus_connect))
-    return bus
 
 
 def bus_ca(settings: Settings) -> Path | None:

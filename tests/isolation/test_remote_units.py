@@ -279,7 +279,10 @@ async def test_rest_command_and_speech_answer_503_with_retry_after(
         await until_async(
             lambda: sent, 5.0, "the stop sent to uav2"
         )  # uav2's dialog sent the stop as a typed command
-        assert sent == [{"op": "preempt", "command": {"action": "land"}, "by": ""}]
+        # with when the operator gave it (REST: its arrival), for the vehicle's deadline check
+        [stop] = sent
+        assert isinstance(stop.pop("issued"), float)
+        assert stop == {"op": "preempt", "command": {"action": "land"}, "by": ""}
 
 
 async def test_rest_advertises_the_safety_door_at_the_host_the_caller_used(
