@@ -43,7 +43,6 @@ import multiprocessing as mp
 import os
 import resource
 import secrets
-import socket
 import statistics
 import subprocess
 import sys
@@ -56,6 +55,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from bench.loopback import free_port  # noqa: E402
 
 FLEET = "bench"
 PHYSICS_HZ = 50
@@ -440,12 +441,6 @@ def source_address(index: int) -> str:
     return f"127.1.{index // 250}.{index % 250 + 1}"
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind((HOST, 0))
-        return int(s.getsockname()[1])
-
-
 @contextlib.contextmanager
 def serve(data: Path, names: list[str]) -> Iterator[tuple[subprocess.Popen[bytes], int, str]]:
     """Vehicle keys for ``names``, then a real ``serve --fleet 0 --drone none`` on loopback."""
@@ -458,7 +453,7 @@ def serve(data: Path, names: list[str]) -> Iterator[tuple[subprocess.Popen[bytes
         check=True,
         stdout=subprocess.DEVNULL,
     )
-    port, token = free_port(), secrets.token_urlsafe(16)
+    port, token = free_port(HOST), secrets.token_urlsafe(16)
     argv = [*cli, "serve", "--host", HOST, "--port", str(port), "--drone", "none"]
     argv += ["--fleet", "0", "--vehicles", "process", "--token", token]
     log_path = data / "serve.log"

@@ -35,7 +35,6 @@ import json
 import multiprocessing as mp
 import os
 import signal
-import socket
 import statistics
 import struct
 import subprocess
@@ -54,6 +53,8 @@ sys.path.insert(0, str(ROOT))
 import httpx  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
+from bench.loopback import free_port  # noqa: E402
+from bench.polling import wait_for  # noqa: E402
 from drone.sim.probe import SimThread  # noqa: E402
 from tests.speech.conftest import synthesise  # noqa: E402
 
@@ -63,26 +64,9 @@ TOKEN = "bench-isolation-token"
 SIM_ADDRS = {"inline": "127.0.13.30", "process": "127.0.13.31"}
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind((HOST, 0))
-        return int(s.getsockname()[1])
-
-
-def wait_for(fn: Callable[[], Any], what: str, timeout: float = 30.0, period: float = 0.05) -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        with contextlib.suppress(httpx.HTTPError, KeyError, ValueError, TypeError):
-            out = fn()
-            if out:
-                return out
-        time.sleep(period)
-    raise RuntimeError(f"timed out waiting for {what}")
-
-
 @contextlib.contextmanager
 def serve(mode: str, sim_addr: str, tmp: Path) -> Iterator[tuple[int, httpx.Client]]:
-    port = free_port()
+    port = free_port(HOST)
     env = {**os.environ, "UAVC_DATA_DIR": str(tmp / mode)}
     argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
     argv += ["--drone", sim_addr, "--token", TOKEN, "--vehicles", mode]

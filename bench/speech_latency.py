@@ -45,14 +45,13 @@ import contextlib
 import json
 import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 import wave
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -63,6 +62,8 @@ sys.path.insert(0, str(ROOT))
 import httpx  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bench.loopback import free_port  # noqa: E402
+from bench.polling import wait_for  # noqa: E402
 from drone.sim.probe import ProbeSim, SimThread  # noqa: E402
 from server.language.nlu import default_nlu  # noqa: E402
 from server.speech.audio import SAMPLE_RATE, read_wav, to_wav  # noqa: E402
@@ -187,27 +188,10 @@ def build_wav(out: Path, tts: str, repeats: int, work: Path) -> list[Utterance]:
     return utterances
 
 
-def wait_for(fn: Callable[[], Any], what: str, timeout: float = 30.0, period: float = 0.05) -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        with contextlib.suppress(httpx.HTTPError, KeyError, ValueError, TypeError):
-            out = fn()
-            if out:
-                return out
-        time.sleep(period)
-    raise RuntimeError(f"timed out waiting for {what}")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind((HOST, 0))
-        return int(s.getsockname()[1])
-
-
 @contextlib.contextmanager
 def serve(tmp: Path, root: Path = ROOT) -> Iterator[tuple[int, httpx.Client]]:
     """``serve`` (of the checkout at ``root``) on the probe simulator, the drone linked."""
-    port = free_port()
+    port = free_port(HOST)
     env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "PYTHONPATH": str(root)}
     argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
     argv += ["--drone", SIM_ADDR, "--token", TOKEN, "--vehicles", "process"]

@@ -51,6 +51,8 @@ sys.path.insert(0, str(ROOT))
 
 import httpx  # noqa: E402
 
+from bench.loopback import free_port  # noqa: E402
+from bench.polling import wait_for  # noqa: E402
 from drone.sim.probe import SimThread  # noqa: E402
 
 HOST = "127.0.26.1"
@@ -66,26 +68,9 @@ FLOOD_CONNS = 16
 FLOOD_REFRESH_S = 1.5
 
 
-def wait_for(fn: Callable[[], Any], what: str, timeout: float = 30.0, period: float = 0.05) -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        with contextlib.suppress(httpx.HTTPError, KeyError, ValueError, TypeError):
-            out = fn()
-            if out:
-                return out
-        time.sleep(period)
-    raise RuntimeError(f"timed out waiting for {what}")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind((HOST, 0))
-        return int(s.getsockname()[1])
-
-
 @contextlib.contextmanager
 def serve(tmp: Path) -> Iterator[tuple[subprocess.Popen[bytes], int, httpx.Client]]:
-    port = free_port()
+    port = free_port(HOST)
     env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "PYTHONPATH": str(ROOT)}
     argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
     argv += ["--drone", SIM_ADDR, "--token", TOKEN, "--vehicles", "process"]
