@@ -40,6 +40,15 @@ PILOT = "pilot-token-for-browser-tests"
 OBSERVER = "observer-token-for-browser-tests"
 START_TIMEOUT_S = 180.0  # a loaded 2-core machine: the imports alone can take a minute
 SCREENSHOTS = ROOT / "docs" / "screenshots"
+AXE = ROOT / "tests" / "node" / "node_modules" / "axe-core" / "axe.min.js"  # make node-deps
+# The viewports the layout is checked at (CSS pixels): desktops, a tablet, a phone both ways.
+SIZES = {
+    "desktop": (1280, 800),
+    "desktop-hd": (1920, 1080),
+    "tablet": (820, 1180),
+    "phone": (390, 844),
+    "phone-landscape": (844, 390),
+}
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -17,8 +17,9 @@ import pytest
 
 from server.store import AuditLog
 from tests.browser.conftest import (
+    AXE,
     PILOT,
-    ROOT,
+    SIZES,
     ConsolePage,
     ServerProcess,
     _server,
@@ -29,15 +30,6 @@ from tests.browser.helpers import is_flying, position, type_command, wait_until
 from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.browser
-
-AXE = ROOT / "tests" / "node" / "node_modules" / "axe-core" / "axe.min.js"
-SIZES = {
-    "desktop": (1280, 800),
-    "desktop-hd": (1920, 1080),
-    "tablet": (820, 1180),
-    "phone": (390, 844),
-    "phone-landscape": (844, 390),
-}
 
 
 @pytest.fixture(scope="module")

@@ -23,9 +23,10 @@ import httpx
 import pytest
 
 from tests.browser.conftest import (
+    AXE,
     PILOT,
-    ROOT,
     SCREENSHOTS,
+    SIZES,
     ConsolePage,
     ServerProcess,
     _server,
@@ -36,14 +37,6 @@ from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.browser
 
-AXE = ROOT / "tests" / "node" / "node_modules" / "axe-core" / "axe.min.js"
-SIZES = {
-    "desktop": (1280, 800),
-    "desktop-hd": (1920, 1080),
-    "tablet": (820, 1180),
-    "phone": (390, 844),
-    "phone-landscape": (844, 390),
-}
 STOPS = ("#btn-emergency", "#btn-land", "#btn-hover")
 
 # Where things are, after the layout settled (two animation frames).
