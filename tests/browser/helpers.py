@@ -113,3 +113,20 @@ def wait_until(
         time.sleep(period_s)
         value = probe()
     return True, value, time.monotonic() - start
+
+
+def refused_jog(page: Any, reason: str, speed: float, timeout_ms: int) -> None:
+    """Publish a jog (``/cmd_vel`` at ``speed`` m/s forward) from the page and wait for the
+    server's error status whose message matches the regular expression ``reason``."""
+    page.evaluate("""() => { window.__statuses = [];
+        uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
+    page.evaluate(
+        """(x) => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
+        {linear: {x, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""",
+        speed,
+    )
+    page.wait_for_function(
+        "(r) => window.__statuses.some(s => s.level === 'error' && new RegExp(r, 'i').test(s.msg))",
+        arg=reason,
+        timeout=timeout_ms,
+    )

@@ -17,7 +17,7 @@ from tests.browser.conftest import (
     open_console,
     wait_ready,
 )
-from tests.browser.helpers import NO_SPEECH, SPEECH_STANDIN
+from tests.browser.helpers import NO_SPEECH, SPEECH_STANDIN, refused_jog
 
 pytestmark = pytest.mark.browser
 
@@ -91,14 +91,7 @@ def test_second_pilot_takes_over_and_first_is_told(browser: Any, server: ServerP
         assert a.is_disabled("#btn-takeoff") and a.is_disabled("#send")
         # The server agrees: the first pilot's jog is refused (a zero twist, a hover, is not:
         # any pilot may hover).
-        a.evaluate("""() => { window.__statuses = [];
-            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
-        a.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
-            {linear: {x: 0.2, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
-        a.wait_for_function(
-            "window.__statuses.some(s => s.level === 'error' && /lease/.test(s.msg))",
-            timeout=20_000,
-        )
+        refused_jog(a, "lease", 0.2, 20_000)
     finally:
         ctx_a.close()
         if ctx_b is not None:
@@ -166,15 +159,8 @@ def test_observer_controls_disabled_and_publishes_refused(
     ctx, cp = open_console(browser, server.url(OBSERVER))
     try:
         page = cp.page
-        page.evaluate("""() => { window.__statuses = [];
-            uavConsole.ros.addEventListener('status', e => window.__statuses.push(e.detail)); }""")
         # The server refuses what an observer publishes, with a status naming the role.
-        page.evaluate("""() => uavConsole.ros.publish('/cmd_vel', 'geometry_msgs/Twist',
-            {linear: {x: 0.5, y: 0, z: 0}, angular: {x: 0, y: 0, z: 0}})""")
-        page.wait_for_function(
-            "window.__statuses.some(s => s.level === 'error' && /observer/i.test(s.msg))",
-            timeout=5000,
-        )
+        refused_jog(page, "observer", 0.5, 5000)
         # The page knows it is an observer and disables every control.
         page.wait_for_selector("#role[data-role='observer']", timeout=5000)
         for sel in (
