@@ -441,6 +441,11 @@ class Renderer:
         self._noise_key = (int(seed), float(noise_sigma), float(vignette), w, h)
         sky = np.asarray(world.surfaces.sky if not world.indoor else world.surfaces.walls, np.uint8)
         self._background = np.broadcast_to(sky, (h, w, 3)).copy()
+        # frames of a camera that stands still, by (brightness, noise pattern): the render is a
+        # pure function of pose, brightness and pattern, so a repeat is a copy, not a redraw
+        self._last_pose: tuple[float, ...] | None = None
+        self._still_pose: tuple[float, ...] | None = None
+        self._still: dict[tuple[float, int], np.ndarray] = {}
 
     # -- public ---------------------------------------------------------------------------
 
@@ -460,15 +465,27 @@ class Renderer:
         """
         b = self.brightness if brightness is None else brightness
         _check_non_negative("brightness", b)
+        pose6 = pose_tuple(pose)
+        key = (b, frame % self._N_NOISE)
+        if pose6 == self._still_pose:
+            kept = self._still.get(key)
+            if kept is not None:
+                return kept.copy()
         cam = self.camera
         img = self._background.copy()
-        self._draw(img, pose, cam, ids=False)
+        self._draw(img, pose6, cam, ids=False)
         seed, sigma, vig, w, h = self._noise_key
-        pos, neg = _noise_pattern(seed, frame % self._N_NOISE, sigma, vig, w, h)
+        pos, neg = _noise_pattern(seed, key[1], sigma, vig, w, h)
         cv2.add(img, pos, dst=img)
         cv2.subtract(img, neg, dst=img)
         if b != 1.0:
             cv2.convertScaleAbs(img, dst=img, alpha=b)
+        if pose6 == self._last_pose:
+            # the camera stands still (a landed drone): keep its frames, one per noise pattern
+            if pose6 != self._still_pose:
+                self._still_pose, self._still = pose6, {}
+            self._still[key] = img.copy()
+        self._last_pose = pose6
         return img
 
     def render_ids(self, pose: PoseLike, scale: float = 0.5) -> np.ndarray:
