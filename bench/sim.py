@@ -11,10 +11,11 @@ Rows:
   AT encode / parse          µs per AT*PCMD; baseline: pyardrone's ATCommand._pack.
   H.264 encode+decode        ms per 640×360 frame (drone.ardrone.video); budget 66.7 ms (15 fps).
 
-``--before REV`` adds the camera table: the same camera rows, plus a ``LockstepRig`` flight with
-the vehicle's perception (render + ArUco + PnP + EKF: a camera test's workload), run for this
-tree and for git revision REV's tree (``git archive``) alternately in subprocesses, ``--repeats``
-times each; medians, and after/before ratios from the same run.
+``--before REV`` adds the camera table: the same camera rows, a ``LockstepRig`` flight with the
+vehicle's perception (render + ArUco + PnP + EKF: a camera test's workload) and 10 s of that
+drone standing on its station, run for this tree and for git revision REV's tree (``git
+archive``) alternately in subprocesses, ``--repeats`` times each; medians, and after/before
+ratios from the same run. CPU rows are the steadier ones on a loaded machine.
 
 Usage: ``python bench/sim.py [--repeats N] [--seconds S] [--before REV] [--camera-only]``.
 """
@@ -173,6 +174,18 @@ def rig_flight(world: object, seconds: float) -> tuple[float, float]:
     return sim_s / (time.perf_counter() - t0), (time.process_time() - c0) / sim_s * 1e3
 
 
+def rig_landed(world: object, seconds: float = 10.0) -> float:
+    """CPU ms per simulated second of a ``LockstepRig`` drone standing on its station with the
+    camera and perception on (a test's wait before take-off or after landing)."""
+    from drone.lockstep import LockstepRig
+
+    rig = LockstepRig(world, seed=1, camera=True)
+    rig.wait_link()
+    c0 = time.process_time()
+    rig.run(seconds)
+    return (time.process_time() - c0) / seconds * 1e3
+
+
 def camera_rows(seconds: float, world: object) -> dict[str, float]:
     """One run of every camera row (``--camera-only`` prints these as JSON)."""
     rtf_cam = rtf(seconds / 4, True, world)
@@ -184,6 +197,7 @@ def camera_rows(seconds: float, world: object) -> dict[str, float]:
         "render_cpu_ms": cpu_ms,
         "rig_rtf": rig_rtf,
         "rig_cpu_ms_per_s": rig_cpu,
+        "landed_cpu_ms_per_s": rig_landed(world),
     }
 
 
@@ -216,6 +230,7 @@ def before_table(rev: str, repeats: int, seconds: float) -> None:
         ("render_cpu_ms", "  CPU", "ms/frame"),
         ("rig_rtf", "LockstepRig + perception RTF", "x"),
         ("rig_cpu_ms_per_s", "  CPU per simulated s", "ms"),
+        ("landed_cpu_ms_per_s", "  landed: CPU per simulated s", "ms"),
     ]
     print(
         f"\ncamera rows, medians of {repeats} alternating runs: this tree vs {rev} (load "
