@@ -482,8 +482,8 @@ class Renderer:
             cv2.convertScaleAbs(img, dst=img, alpha=b)
         if pose6 == self._last_pose:
             # the camera stands still (a landed drone): keep its frames, one per noise pattern
-            if pose6 != self._still_pose:
-                self._still_pose, self._still = pose6, {}
+            if pose6 != self._still_pose or len(self._still) >= 2 * self._N_NOISE:
+                self._still_pose, self._still = pose6, {}  # bounded: brightness may vary
             self._still[key] = img.copy()
         self._last_pose = pose6
         return img
