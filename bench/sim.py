@@ -5,24 +5,37 @@ Rows:
                              SimDrone at 100 Hz with navdata at 15 Hz; baseline: physics alone
                              (SimDrone.step without the wire) in the same run. Target ≥ 100×.
   lockstep RTF (camera)      the same plus a 640×360 render every 1/15 s. Target ≥ 10×.
-  camera                     ms per rendered frame (drone.sim.camera); budget 5 ms.
+  camera                     ms per rendered frame (drone.sim.camera) over a moving pose;
+                             budget 5 ms.
   navdata decode / encode    µs per demo packet; baseline: pyardrone's ctypes parser.
   AT encode / parse          µs per AT*PCMD; baseline: pyardrone's ATCommand._pack.
   H.264 encode+decode        ms per 640×360 frame (drone.ardrone.video); budget 66.7 ms (15 fps).
 
-Usage: ``python bench/sim.py [--repeats N] [--seconds S]``.
+``--before REV`` adds the camera table: the same camera rows, a ``LockstepRig`` flight with the
+vehicle's perception (render + ArUco + PnP + EKF: a camera test's workload) and 10 s of that
+drone standing on its station, run for this tree and for git revision REV's tree (``git
+archive``) alternately in subprocesses, ``--repeats`` times each; medians, and after/before
+ratios from the same run. CPU rows are the steadier ones on a loaded machine.
+
+Usage: ``python bench/sim.py [--repeats N] [--seconds S] [--before REV] [--camera-only]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# ``--before``: the tree under test comes first on the path (a subprocess per tree)
+sys.path.insert(0, os.environ.get("UAVC_BENCH_TREE") or str(Path(__file__).resolve().parents[1]))
 
 from drone.ardrone import at
 from drone.ardrone.navdata import (
@@ -37,6 +50,7 @@ from drone.ardrone.protocol import DriverProtocol
 from drone.sim.drone import SimDrone
 from drone.sim.link import InMemoryLink
 
+ROOT = Path(__file__).resolve().parents[1]
 DT = 0.01
 CAMERA_PERIOD_S = 1.0 / 15.0
 
@@ -102,6 +116,133 @@ def physics_only_rtf(seconds: float) -> float:
     return seconds / (time.perf_counter() - t0)
 
 
+def _path_pose(k: int) -> tuple[float, float, float, float, float, float]:
+    """Pose ``k`` of a lap of the indoor room at 1-1.6 m, turning: a new view every frame."""
+    a = 2.0 * math.pi * k / 120.0
+    return (
+        4.0 + 2.5 * math.cos(a),
+        3.0 + 1.8 * math.sin(a),
+        1.3 + 0.3 * math.sin(3 * a),
+        0.05 * math.sin(5 * a),
+        0.05 * math.cos(4 * a),
+        a + 1.2 * math.sin(2 * a),
+    )
+
+
+def render_ms(world: object, frames: int = 120) -> tuple[float, float]:
+    """(ms per rendered frame along the lap, CPU ms per frame) with ``SimDrone``'s renderer."""
+    from drone.sim.camera import Renderer
+
+    r = Renderer(world, seed=1)  # type: ignore[arg-type]
+    r.render(_path_pose(0))  # build the noise patterns
+    t0, c0 = time.perf_counter(), time.process_time()
+    for k in range(frames):
+        r.render(_path_pose(k), frame=k)
+    n = frames / 1e3
+    return (time.perf_counter() - t0) / n, (time.process_time() - c0) / n
+
+
+def rig_flight(world: object, seconds: float) -> tuple[float, float]:
+    """A ``LockstepRig`` flight with the camera and the vehicle's perception: 2 s landed on the
+    station, take off, fly a box with turns, land, 2 s landed; (simulated s per wall s, CPU ms
+    per simulated s)."""
+    from drone.lockstep import LockstepRig
+
+    rig = LockstepRig(world, seed=1, camera=True)
+    rig.wait_link()
+    v = rig.vehicle
+    # /cmd_vel fractions (x forward, y left, z up, yaw left): forward, turn, left and up, back
+    legs = [
+        (0.25, 0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.0, 0.6),
+        (0.0, 0.25, 0.1, 0.0),
+        (-0.2, 0.0, -0.1, -0.4),
+    ]
+    t0, c0, s0 = time.perf_counter(), time.process_time(), rig.clock.now()
+    rig.run(2.0)
+    v.takeoff()
+    rig.run(5.0)
+    leg_s = max(1.0, (seconds - 13.0) / len(legs))
+    for leg in legs:
+        v.jog(*leg)
+        rig.run(leg_s)
+        v.hover()
+    v.land()
+    rig.run(4.0)
+    rig.run(2.0)
+    sim_s = rig.clock.now() - s0
+    return sim_s / (time.perf_counter() - t0), (time.process_time() - c0) / sim_s * 1e3
+
+
+def rig_landed(world: object, seconds: float = 10.0) -> float:
+    """CPU ms per simulated second of a ``LockstepRig`` drone standing on its station with the
+    camera and perception on (a test's wait before take-off or after landing)."""
+    from drone.lockstep import LockstepRig
+
+    rig = LockstepRig(world, seed=1, camera=True)
+    rig.wait_link()
+    c0 = time.process_time()
+    rig.run(seconds)
+    return (time.process_time() - c0) / seconds * 1e3
+
+
+def camera_rows(seconds: float, world: object) -> dict[str, float]:
+    """One run of every camera row (``--camera-only`` prints these as JSON)."""
+    rtf_cam = rtf(seconds / 4, True, world)
+    wall_ms, cpu_ms = render_ms(world)
+    rig_rtf, rig_cpu = rig_flight(world, seconds)
+    return {
+        "rtf_camera": rtf_cam,
+        "render_ms": wall_ms,
+        "render_cpu_ms": cpu_ms,
+        "rig_rtf": rig_rtf,
+        "rig_cpu_ms_per_s": rig_cpu,
+        "landed_cpu_ms_per_s": rig_landed(world),
+    }
+
+
+def before_table(rev: str, repeats: int, seconds: float) -> None:
+    """Camera rows for this tree and for ``rev``'s, alternately in subprocesses; medians, ratios."""
+    with tempfile.TemporaryDirectory(prefix="bench-sim-before-") as tmp:
+        archive = subprocess.run(
+            ["git", "-C", str(ROOT), "archive", rev], capture_output=True, check=True
+        )
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive.stdout, check=True)
+        trees = {"before": tmp, "after": str(ROOT)}
+        got: dict[str, list[dict[str, float]]] = {"before": [], "after": []}
+        for _ in range(repeats):
+            for name, tree in trees.items():
+                env = {**os.environ, "UAVC_BENCH_TREE": tree, "PYTHONPATH": tree}
+                out = subprocess.run(
+                    [sys.executable, __file__, "--camera-only", "--seconds", str(seconds)],
+                    env=env,
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                )
+                got[name].append(json.loads(out.stdout.strip().splitlines()[-1]))
+    med = {
+        n: {k: statistics.median(d[k] for d in runs) for k in runs[0]} for n, runs in got.items()
+    }
+    labels = [
+        ("rtf_camera", "lockstep RTF, camera 15 fps", "x"),
+        ("render_ms", "camera render (moving)", "ms/frame"),
+        ("render_cpu_ms", "  CPU", "ms/frame"),
+        ("rig_rtf", "LockstepRig + perception RTF", "x"),
+        ("rig_cpu_ms_per_s", "  CPU per simulated s", "ms"),
+        ("landed_cpu_ms_per_s", "  landed: CPU per simulated s", "ms"),
+    ]
+    print(
+        f"\ncamera rows, medians of {repeats} alternating runs: this tree vs {rev} (load "
+        f"{os.getloadavg()[0]:.1f})"
+    )
+    print(f"{'metric':32} {'after':>10} {'before':>10} {'unit':9} {'after/before':>12}")
+    print("-" * 80)
+    for key, name, unit in labels:
+        a, b = med["after"][key], med["before"][key]
+        print(f"{name:32} {a:10.2f} {b:10.2f} {unit:9} {a / b:12.2f}")
+
+
 def per_call(fn: Callable[[], object], n: int) -> float:
     """Seconds per call of ``fn`` over ``n`` calls."""
     t0 = time.perf_counter()
@@ -119,11 +260,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seconds", type=float, default=60.0, help="simulated seconds per run")
     ap.add_argument("--quick", action="store_true", help="3 runs of 15 simulated seconds")
+    ap.add_argument("--before", metavar="REV", help="also time the camera rows at git REV")
+    ap.add_argument("--camera-only", action="store_true", help="one run of the camera rows, JSON")
     args = ap.parse_args(argv)
     if args.quick:
         args.repeats, args.seconds = min(args.repeats, 3), min(args.seconds, 15.0)
     r = args.repeats
     world = _world()
+    if args.camera_only:
+        if world is None:
+            return 1
+        print(json.dumps(camera_rows(args.seconds, world)))
+        return 0
     rows: list[tuple[str, float, str, str, float | None, str]] = []
 
     base = median_of(r, lambda: physics_only_rtf(args.seconds))
@@ -133,9 +281,7 @@ def main(argv: list[str] | None = None) -> int:
     if world is not None:
         cam = median_of(r, lambda: rtf(args.seconds / 4, True, world))
         rows.append(("lockstep RTF, camera 15 fps", cam, "x", "target 10x", cam / 10.0, "x target"))
-        sim = SimDrone(world, seed=1)
-        sim.render_frame()  # warm the renderer's caches
-        ms = median_of(r, lambda: per_call(sim.render_frame, 50)) * 1e3
+        ms = median_of(r, lambda: render_ms(world)[0])
         rows.append(("camera render", ms, "ms/frame", "budget 5 ms", ms / 5.0, "x budget"))
 
     demo = Demo(CtrlState.FLYING << 16, 80, 1234.5, -321.0, 45000.0, 812, 250.0, -30.0, 12.0, 7)
@@ -213,6 +359,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, value, unit, baseline, ratio, how in rows:
         rs = f"{ratio:8.2f}  {how}" if ratio is not None else ""
         print(f"{name:32} {value:10.2f} {unit:9} {baseline:22} {rs}")
+    if args.before:
+        before_table(args.before, r, args.seconds)
     return 0
 
 

@@ -400,6 +400,8 @@ class Renderer:
         brightness: default lighting factor (1.0 = as designed; 0.5 dim, 1.5 bright).
         noise_sigma: std of the additive per-pixel sensor noise in grey levels (0 = none).
         vignette: darkening of the image corners in grey levels (lens falloff).
+        cull: skip objects, faces, lines and markers wholly outside the image before drawing
+            (the same pixels, less work); False draws everything, as the reference for tests.
 
     Raises:
         ValueError: a negative or non-finite brightness, noise_sigma or vignette.
@@ -408,6 +410,10 @@ class Renderer:
     NEAR_M = 0.03
     MIN_LENS_HEIGHT_M = 0.04
     GUARD = 16.0  # clip polygons to a frustum this many times wider than the image (int32 safe)
+    # Culling: what lies wholly beyond one edge of the image by more than this is not drawn. A
+    # filled polygon or an anti-aliased 1-px line touches pixels at most ~1.5 px past its
+    # outline, so 3 px leaves every drawn pixel as it is (tests/sim/test_render_cull.py).
+    CULL_MARGIN_PX = 3.0
     _N_NOISE = 4
 
     def __init__(
@@ -418,6 +424,7 @@ class Renderer:
         brightness: float = 1.0,
         noise_sigma: float = 2.0,
         vignette: float = 18.0,
+        cull: bool = True,
     ) -> None:
         for name, v in (
             ("brightness", brightness),
@@ -426,6 +433,7 @@ class Renderer:
         ):
             _check_non_negative(name, v)
         self.world = world
+        self.cull = cull
         self.camera = camera or CameraModel()
         self.brightness = brightness
         self._scene = _build_scene(world)
@@ -433,6 +441,11 @@ class Renderer:
         self._noise_key = (int(seed), float(noise_sigma), float(vignette), w, h)
         sky = np.asarray(world.surfaces.sky if not world.indoor else world.surfaces.walls, np.uint8)
         self._background = np.broadcast_to(sky, (h, w, 3)).copy()
+        # frames of a camera that stands still, by (brightness, noise pattern): the render is a
+        # pure function of pose, brightness and pattern, so a repeat is a copy, not a redraw
+        self._last_pose: tuple[float, ...] | None = None
+        self._still_pose: tuple[float, ...] | None = None
+        self._still: dict[tuple[float, int], np.ndarray] = {}
 
     # -- public ---------------------------------------------------------------------------
 
@@ -452,15 +465,27 @@ class Renderer:
         """
         b = self.brightness if brightness is None else brightness
         _check_non_negative("brightness", b)
+        pose6 = pose_tuple(pose)
+        key = (b, frame % self._N_NOISE)
+        if pose6 == self._still_pose:
+            kept = self._still.get(key)
+            if kept is not None:
+                return kept.copy()
         cam = self.camera
         img = self._background.copy()
-        self._draw(img, pose, cam, ids=False)
+        self._draw(img, pose6, cam, ids=False)
         seed, sigma, vig, w, h = self._noise_key
-        pos, neg = _noise_pattern(seed, frame % self._N_NOISE, sigma, vig, w, h)
+        pos, neg = _noise_pattern(seed, key[1], sigma, vig, w, h)
         cv2.add(img, pos, dst=img)
         cv2.subtract(img, neg, dst=img)
         if b != 1.0:
             cv2.convertScaleAbs(img, dst=img, alpha=b)
+        if pose6 == self._last_pose:
+            # the camera stands still (a landed drone): keep its frames, one per noise pattern
+            if pose6 != self._still_pose or len(self._still) >= 2 * self._N_NOISE:
+                self._still_pose, self._still = pose6, {}  # bounded: brightness may vary
+            self._still[key] = img.copy()
+        self._last_pose = pose6
         return img
 
     def render_ids(self, pose: PoseLike, scale: float = 0.5) -> np.ndarray:
@@ -546,6 +571,8 @@ class Renderer:
                 [0.0, 1.0, gy, 0.0],
             ]
         )
+        if self.cull:
+            planes = np.concatenate([planes, _view_planes(cam, self.CULL_MARGIN_PX)])
         kmat = (fx, fy, cx, cy)
 
         # 1. room surfaces and ground (all front-facing from inside a convex room)
@@ -579,6 +606,11 @@ class Renderer:
                 & (np.abs(oc[:, 0]) - rad * 1.5 < gx * (oc[:, 2] + rad))
                 & (np.abs(oc[:, 1]) - rad * 1.5 < gy * (oc[:, 2] + rad))
             )
+            if self.cull:
+                # bounding sphere wholly outside one side of the image's frustum: not drawn
+                view = planes[_N_CLIP:, :3]
+                dist = oc @ (view / np.linalg.norm(view, axis=1)[:, None]).T
+                obj_ok &= (dist >= -rad[:, None]).all(axis=1)
             front = np.einsum("ij,ij->i", sc.normals, cam_pos - sc.face_centre) > 1e-9
             sel = np.nonzero(front & obj_ok[sc.owner])[0]
             obj_dist = np.linalg.norm(oc, axis=1)
@@ -633,6 +665,21 @@ class Renderer:
 
 _SHIFT = 4
 _ONE = 1 << _SHIFT
+_N_CLIP = 5  # planes[:5] (near + guard band) clip; any further rows (the image's edges) only cull
+
+
+def _view_planes(cam: CameraModel, margin_px: float) -> np.ndarray:
+    """(4, 4) camera-frame planes a·p + d ≥ 0 through the lens bounding what projects within
+    ``margin_px`` of the image (pixel centres at integers, the image from -0.5 to w - 0.5)."""
+    m = 0.5 + margin_px
+    return np.array(
+        [
+            [cam.fx, 0.0, cam.cx + m, 0.0],
+            [-cam.fx, 0.0, cam.width - 1 - cam.cx + m, 0.0],
+            [0.0, cam.fy, cam.cy + m, 0.0],
+            [0.0, -cam.fy, cam.height - 1 - cam.cy + m, 0.0],
+        ]
+    )
 
 
 def _project(pc: np.ndarray, kmat: tuple[float, float, float, float]) -> np.ndarray:
@@ -684,8 +731,9 @@ def _fill(
     d = pc @ planes[:, :3].T + planes[:, 3]
     if (d < 0).all(axis=0).any():
         return  # entirely outside one plane
-    if (d < 0).any():
-        poly = _clip([tuple(v) for v in pc.tolist()], [tuple(p) for p in planes.tolist()])
+    if (d[:, :_N_CLIP] < 0).any():
+        clip_planes = [tuple(p) for p in planes[:_N_CLIP].tolist()]
+        poly = _clip([tuple(v) for v in pc.tolist()], clip_planes)
         if len(poly) < 3:
             return
         fx, fy, cx, cy = kmat
@@ -715,19 +763,22 @@ def _fill_many(
     d = pcs @ planes[:, :3].T + planes[:, 3]  # (N, 4, planes)
     out = d < 0
     reject = out.all(axis=1).any(axis=1)
-    clip = out.any(axis=(1, 2)) & ~reject
+    keep = np.nonzero(~reject)[0]
+    if not len(keep):
+        return
+    pcs = pcs[keep]
+    clip = out[keep, :, :_N_CLIP].any(axis=(1, 2))
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.where(clip[:, None] | reject[:, None], 1.0, pcs[..., 2])
+        z = np.where(clip[:, None], 1.0, pcs[..., 2])
         fx, fy, cx, cy = kmat
         u = fx * pcs[..., 0] / z + cx
         v = fy * pcs[..., 1] / z + cy
     pts = np.round(np.stack([u, v], axis=-1) * _ONE).astype(np.int32)
-    status = np.where(reject, 0, np.where(clip, 2, 1)).tolist()
-    for i, st in enumerate(status):
-        if st == 1:
-            cv2.fillConvexPoly(img, pts[i], colours[i], cv2.LINE_8, _SHIFT)
-        elif st == 2:
-            _fill(img, pcs[i], planes, kmat, colours[i])
+    for k, i, c in zip(range(len(keep)), keep.tolist(), clip.tolist(), strict=True):
+        if c:
+            _fill(img, pcs[k], planes, kmat, colours[i])
+        else:
+            cv2.fillConvexPoly(img, pts[k], colours[i], cv2.LINE_8, _SHIFT)
 
 
 def _draw_segments(
@@ -737,11 +788,12 @@ def _draw_segments(
     planes: np.ndarray,
     kmat: tuple[float, float, float, float],
 ) -> None:
-    """Clip (N, 2, 3) camera-frame segments to the guard frustum (Liang–Barsky) and draw them."""
+    """Clip (N, 2, 3) camera-frame segments to the guard frustum (Liang–Barsky) and draw the
+    ones not wholly beyond an image edge (``planes[_N_CLIP:]``), in the same colour order."""
     a = seg[:, 0].copy()
     b = seg[:, 1].copy()
     keep = np.ones(len(seg), bool)
-    for plane in planes:
+    for plane in planes[:_N_CLIP]:
         da = a @ plane[:3] + plane[3]
         db = b @ plane[:3] + plane[3]
         keep &= ~((da < 0) & (db < 0))
@@ -750,19 +802,32 @@ def _draw_segments(
         cut = a + (b - a) * tcut
         a = np.where(((da < 0) & (db >= 0))[:, None], cut, a)
         b = np.where(((db < 0) & (da >= 0))[:, None], cut, b)
+    seen = keep.copy()
+    for plane in planes[_N_CLIP:]:
+        seen &= ~(((a @ plane[:3] + plane[3]) < 0) & ((b @ plane[:3] + plane[3]) < 0))
     idx = np.nonzero(keep)[0]
     if not len(idx):
         return
-    ua = _project(a[idx], kmat)
-    ub = _project(b[idx], kmat)
+    # one polylines call per colour (the grid shares one colour): far fewer calls than lines.
+    # Colours are drawn in the order of their first line in the guard band, seen or not, so
+    # that where lines of two colours cross the later colour is on top as without culling.
+    groups: dict[tuple[float, float, float], list[int]] = {}
+    for i, c, s in zip(
+        idx.tolist(), map(tuple, cols[idx].tolist()), seen[idx].tolist(), strict=True
+    ):
+        lines = groups.setdefault(c, [])
+        if s:
+            lines.append(i)
+    drawn = np.nonzero(seen)[0]
+    if not len(drawn):
+        return
+    ua = _project(a[drawn], kmat)
+    ub = _project(b[drawn], kmat)
     pairs = np.round(np.stack([ua, ub], axis=1) * _ONE).astype(np.int32)  # (n, 2, 2)
-    # one polylines call per colour (the grid shares one colour): far fewer calls than lines
-    kept_cols = cols[idx]
-    groups: dict[tuple[float, float, float], list[np.ndarray]] = {}
-    for i, c in enumerate(map(tuple, kept_cols.tolist())):
-        groups.setdefault(c, []).append(pairs[i])
-    for c, lines in groups.items():
-        cv2.polylines(img, lines, False, c, 1, cv2.LINE_AA, _SHIFT)
+    row = {int(i): k for k, i in enumerate(drawn.tolist())}
+    for c, members in groups.items():
+        if members:
+            cv2.polylines(img, [pairs[row[i]] for i in members], False, c, 1, cv2.LINE_AA, _SHIFT)
 
 
 def _draw_marker(
