@@ -341,9 +341,21 @@ def _serve(args: argparse.Namespace, settings: Settings) -> int:
         )
     except OSError as exc:
         raise SettingsError(f"cannot listen on {settings.host}:{settings.port}: {exc}") from exc
-    # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
-    with sock, contextlib.suppress(KeyboardInterrupt):
-        uvicorn.Server(config).run(sockets=[sock])
+    # The bus before the first request: the vehicle processes join the console over it, so
+    # a router that cannot start stops serve here with one line.
+    from server.vehicles.errors import NoBus
+
+    with sock:
+        if settings.vehicles == "process":
+            try:
+                app.state.runtime.vehicles.open_bus(
+                    0 if settings.drone == "none" else settings.fleet
+                )
+            except NoBus as exc:
+                raise SettingsError(str(exc)) from exc
+        # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
+        with contextlib.suppress(KeyboardInterrupt):
+            uvicorn.Server(config).run(sockets=[sock])
     return 0
 
 

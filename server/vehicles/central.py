@@ -13,11 +13,14 @@
   (:class:`~server.vehicles.remote.RemoteDroneStack` and its dialog), whether
   ``serve`` spawned the vehicle or it joined from another host (``uav-console vehicle``).
 - Heartbeat: ``/vehicles/heartbeat`` at 10 Hz, so a vehicle can tell a stalled server.
-- Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle`` child
-  per drone, AR.Drone or MAVLink, each given its own ``--drone`` entry (a simulator, AR.Drone
-  or PX4, is started and owned by its vehicle); when one exits (a crash, ``kill -9``) the
-  console is told on ``/console/reply`` (level ``alert``) and the child is started again
-  (backoff 0.5 s doubling to 5 s, reset after 30 s up).
+- Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle
+  --bus-connect ENDPOINT`` child per drone, AR.Drone or MAVLink, each given its own ``--drone``
+  entry (a simulator, AR.Drone or PX4, is started and owned by its vehicle), joining the
+  console's bus router (:class:`~drone.bus.console.ConsoleBus`, which must start: see
+  :meth:`VehicleCentral.open_bus`); when one exits (a crash, ``kill -9``) the console is told
+  on ``/console/reply`` (level ``alert``) and the child is started again (backoff 0.5 s
+  doubling to 5 s, reset after 30 s up). Children left by a ``serve`` that crashed are
+  adopted: their pid files, and the pid in the ``vehicle/info`` they publish on the bus.
 - Safety doors: each spawned vehicle gets its door's port (the same across restarts, so a
   page's Content-Security-Policy keeps naming it) and its door secret (``UAVC_DOOR_SECRET``),
   with which :meth:`VehicleCentral.door_ticket` mints the tickets pages open the door with.
@@ -30,6 +33,7 @@ import contextlib
 import json
 import logging
 import os
+import re
 import signal
 import sys
 import time
@@ -50,6 +54,7 @@ from server.rosbridge.endpoint import serve_rosbridge
 from server.settings import Settings, SettingsError
 from server.vehicles import names
 from server.vehicles.access import VehicleLinkSecurity
+from server.vehicles.errors import NoBus
 from server.vehicles.keys import VehicleKeys, vehicle_env
 from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.vehicles.relay import ReplyRelay
@@ -232,31 +237,54 @@ class VehicleCentral:
         local = [n for n in drones if n not in remote]
         return flight_stacks_line(remote, local)
 
+    def open_bus(self, count: int) -> None:
+        """Open the console's bus router for drones ``uav1`` … ``uavN`` (``serve`` does it
+        before it takes requests, so that a bus that cannot start stops it with one line).
+
+        Raises:
+            NoBus: the router could not start and there are vehicle processes to spawn, which
+                reach the console only over it.
+        """
+        if self.bus is not None:
+            return
+        self.bus = self._open_bus([f"uav{index + 1}" for index in range(count)])
+        if self.bus is None and count > 0:
+            raise NoBus(
+                f"the bus did not start: {self.bus_error}; the drones' flight processes join "
+                "the console over it (--bus-listen ENDPOINT chooses where it listens; "
+                "--vehicles inline runs the drones in this process)"
+            )
+        if self.bus is None:  # no drones of its own: the console runs on without a bus
+            log.error("the bus did not start: %s", self.bus_error)
+            self.alerts.append(f"the bus did not start: {self.bus_error}")
+
     async def spawn(self, count: int) -> None:
         """Register drones ``uav1`` … ``uavN`` now; start (or adopt) their vehicle processes in
-        the background, once the server accepts connections (see :meth:`_orphans`)."""
+        the background, once the server accepts connections (see :meth:`_orphans`). Each
+        joins the console's bus (``uav-console vehicle --bus-connect ENDPOINT --name NAME``).
+
+        Raises:
+            NoBus: see :meth:`open_bus`.
+        """
         s = self.runtime.settings
-        host = "127.0.0.1" if s.host in ("0.0.0.0", "::", "") else s.host
         tls = self.runtime.tls  # set by `serve` before the lifespan starts us
-        url = f"{'wss' if tls else 'ws'}://{host}:{s.port}{names.LINK_PATH}"
         # The safety port listens where the console does (a phone on the LAN reaches both),
         # over HTTPS with the console's certificate when the console speaks it.
         safety = ["--safety-host", s.host]
         if tls is not None:
             safety += ["--safety-cert", str(tls.cert), "--safety-key", str(tls.key)]
         env = child_env(s, self.runtime.tokens.pilot_token)
-        self.bus = self._open_bus([f"uav{index + 1}" for index in range(count)])
+        self.open_bus(count)
         for index in range(count):
             name = f"uav{index + 1}"
             prefix = "" if count == 1 else f"/{name}"
-            argv = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", name]
+            argv = [sys.executable, "-m", "server", "vehicle", *self._bus_argv(name)]
+            argv += ["--name", name]
             kind = drone_kind(s.drone, index)  # its own entry of a comma-separated --drone
             argv += ["--prefix", prefix, "--index", str(index), "--drone", kind]
             argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
             self.door_ports[name] = free_door_port(s.host)
             argv += ["--safety-port", str(self.door_ports[name])]
-            if tls is not None:  # our own certificate, pinned (whatever names it carries)
-                argv += ["--fingerprint", tls.fingerprint]
             self.prefixes[name] = prefix
             child = {**vehicle_env(env, self.keys, name), **self._bus_env(name)}
             child["UAVC_DOOR_SECRET"] = self.door_secrets.get_or_create(name).hex()
@@ -267,7 +295,7 @@ class VehicleCentral:
 
     def _open_bus(self, vehicles: list[str]) -> ConsoleBus | None:
         """The console's embedded bus router (docs/bus.md); None, said in the log, when it
-        cannot start: the vehicles still reach the console over /vehicle-link."""
+        cannot start."""
         s = self.runtime.settings
         try:
             tls = bus_tls(s)
@@ -304,17 +332,23 @@ class VehicleCentral:
         print(f"uav-console: {join.said()}", file=sys.stderr, flush=True)
 
     def _bus_failed(self, why: str) -> None:
-        self.bus_error = why
-        log.error("the bus did not start: %s", why)
-        self.alerts.append(f"the bus did not start: {why}")
+        """Why the bus did not start, in a line: without Zenoh's source locations."""
+        why = why.removeprefix("the bus could not start: ")
+        self.bus_error = re.sub(r" at /\S+\.rs:\d+\.?", "", why)
+
+    def _bus_argv(self, name: str) -> list[str]:
+        """``--bus-connect`` for vehicle ``name``: our router first, then the routers we join
+        (the vehicle fails over to them)."""
+        assert self.bus is not None
+        cred = self.bus.vehicle_credential(name)
+        return ["--bus-connect", ",".join([*cred.connect, *self.runtime.settings.bus_connect])]
 
     def _bus_env(self, name: str) -> dict[str, str]:
-        if self.bus is None:
-            return {}
-        cred = self.bus.vehicle_credential(name)  # the password is its vehicle key
+        """The rest of what vehicle ``name`` joins the bus with (its password is its vehicle
+        key, in its environment already)."""
+        assert self.bus is not None
+        cred = self.bus.vehicle_credential(name)
         return {
-            # our router first, then the routers we join: the vehicle fails over to them
-            "UAVC_BUS_CONNECT": ",".join([*cred.connect, *self.runtime.settings.bus_connect]),
             "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
             **({"UAVC_BUS_CA": cred.ca} if cred.ca is not None else {}),
         }
@@ -354,8 +388,9 @@ class VehicleCentral:
 
     async def _orphans(self, names_: set[str], wait_s: float = 4.0) -> dict[str, int]:
         """Vehicles left flying by a ``serve`` that crashed (their pid files in the data
-        directory name live processes): they reconnect within their backoff (at most 2 s) and
-        announce their pid; wait ``wait_s`` for them, then adopt them. No pid file: no wait."""
+        directory name live processes): they rejoin our bus router, which listens where the
+        crashed one did, within a second, and their ``vehicle/info`` (the pid) comes again
+        within 2 s; wait ``wait_s`` for them, then adopt them. No pid file: no wait."""
         pid_dir = pid_dir_of(self.runtime.settings)
         expected = set()
         for name in names_:

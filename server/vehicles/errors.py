@@ -9,6 +9,8 @@
     ├── VehicleKeyError       a vehicle key or its name is missing, unreadable or malformed
     ├── RemoteCallError       a call over the link was refused or not answered
     │   └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
+    ├── NoBus                 the console's bus did not start: its vehicle processes, which
+    │                         join it over the bus, cannot be spawned
     ├── CommandExpired        the vehicle did not run a sentence: it came past its deadline
     └── DoorError             the safety door (server.vehicles.door)
         ├── DoorProtocolError     a frame the door protocol refuses (bad JSON, op, field)
@@ -49,6 +51,11 @@ class VehicleUnavailable(RemoteCallError):
         super().__init__(message)
         self.drone = drone
         self.retry_after_s = retry_after_s
+
+
+class NoBus(VehicleError):
+    """The console's bus router did not start, and it has vehicle processes to spawn, which
+    reach it only over the bus; the message says why and what to change."""
 
 
 class CommandExpired(VehicleError):
