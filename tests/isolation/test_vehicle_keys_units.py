@@ -148,7 +148,7 @@ def test_a_vehicle_without_its_key_stops_with_the_way_to_get_one(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.delenv(KEY_ENV, raising=False)
-    argv = ["vehicle", "--central", f"ws://127.0.0.1:{free_port()}/vehicle-link", "--name", "uav1"]
+    argv = ["vehicle", "--bus-connect", f"tcp/127.0.0.1:{free_port()}", "--name", "uav1"]
     assert cli_main(argv) == 2
     assert "vehicle-key NAME" in capsys.readouterr().err
     pilot = TokenStore(tmp_path).pilot_token
