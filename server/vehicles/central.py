@@ -1,18 +1,19 @@
-"""The web process's side of vehicle processes: the link endpoint, discovery, supervision.
+"""The web process's side of vehicle processes: the bus, discovery, supervision.
 
-- ``/vehicle-link``: a rosbridge v2 WebSocket for vehicles only. It takes a vehicle key
-  (:mod:`server.vehicles.keys`; never the pilot or observer token) and no browser (a request
-  with ``Origin`` is refused); a vehicle may publish only its own drone's topics and provide only
-  its own services (:mod:`server.vehicles.access`). A vehicle runs no dialog: each drone's
-  dialog runs here (:mod:`server.vehicles.console_dialog`); what a vehicle's nodes say comes
-  under its own name and is re-published after a check (:mod:`server.vehicles.relay`), so this
-  process is the only publisher of ``/console/reply``.
+- The bus: the console's own Zenoh router (:class:`~drone.bus.console.ConsoleBus`, docs/bus.md),
+  which every vehicle joins as ``vehicle-NAME`` with its vehicle key
+  (:mod:`server.vehicles.keys`; never the pilot or observer token) and where it may publish
+  only under its own name. A vehicle runs no dialog: each drone's dialog runs here
+  (:mod:`server.vehicles.console_dialog`); what a vehicle's nodes say comes under its own name
+  and is re-published after a check (:mod:`server.vehicles.relay`), so this process is the
+  only publisher of ``/console/reply``.
 - Keys: ``serve`` makes one per vehicle it spawns (``<data dir>/vehicle-keys``) and hands it over
   in the child's environment (``UAVC_VEHICLE_KEY``), not on its command line.
-- Discovery: every ``/NAME/vehicle/info`` on the graph becomes a drone of the runtime
-  (:class:`~server.vehicles.remote.RemoteDroneStack` and its dialog), whether
-  ``serve`` spawned the vehicle or it joined from another host (``uav-console vehicle``).
-- Heartbeat: ``/vehicles/heartbeat`` at 10 Hz, so a vehicle can tell a stalled server.
+- Discovery: every vehicle alive on the bus becomes a drone of the runtime
+  (:class:`~server.vehicles.bus_remote.BusDroneStack` and its dialog), whether ``serve``
+  spawned it or it joined from another host (``uav-console vehicle --bus-connect``).
+- Heartbeat: this console's beat on the bus at 10 Hz (its clock and the flight recording's
+  id), so a vehicle can tell a stalled console.
 - Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle
   --bus-connect ENDPOINT`` child per drone, AR.Drone or MAVLink, each given its own ``--drone``
   entry (a simulator, AR.Drone or PX4, is started and owned by its vehicle), joining the
@@ -40,8 +41,6 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fastapi import APIRouter, WebSocket
-
 from drone.bus.commander import BusCommander
 from drone.bus.config import BusTLS, endpoint_host, on_loopback, wants_tls
 from drone.bus.console import ConsoleBus, Join
@@ -49,11 +48,8 @@ from drone.bus.errors import BusError
 from drone.bus.session import DEFAULT_LISTEN
 from server.http.tls import TLSError, ensure_ca, ensure_server_cert
 from server.msgs import header
-from server.rosbridge.context import BridgeContext
-from server.rosbridge.endpoint import serve_rosbridge
 from server.settings import Settings, SettingsError
 from server.vehicles import names
-from server.vehicles.access import VehicleLinkSecurity
 from server.vehicles.errors import NoBus
 from server.vehicles.keys import VehicleKeys, vehicle_env
 from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
@@ -115,7 +111,7 @@ CHILD_SETTINGS = (
 
 def child_env(settings: Settings, token: str) -> dict[str, str]:
     """The environment of a vehicle child: ours plus the settings it needs as ``UAVC_*``, and
-    the pilot token as ``UAVC_TOKEN``, which only its safety port checks (its link opens with
+    the pilot token as ``UAVC_TOKEN``, which only its safety port checks (it joins the bus with
     its own key: :func:`~server.vehicles.keys.vehicle_env`)."""
     env = dict(os.environ)
     for name in CHILD_SETTINGS:
@@ -190,8 +186,6 @@ class VehicleCentral:
         self.keys = VehicleKeys(s.data_dir)
         # The prefix of each spawned vehicle's drone topics; any other vehicle's is /NAME.
         self.prefixes: dict[str, str] = {}
-        security = VehicleLinkSecurity(s, runtime.tokens, self.keys, prefix_of=self.prefix_of)
-        self.ctx = BridgeContext(runtime.graph, security, s)
         self.processes: dict[str, VehicleProcess] = {}
         self.dialogs: list[RemoteDialog] = []
         self.relays: dict[str, ReplyRelay] = {}
@@ -199,7 +193,6 @@ class VehicleCentral:
         self._tasks: list[asyncio.Task[Any]] = []
         self._stopping = False
         self._recording_sent: str | None = None
-        self._misnamed: set[str] = set()
         self._utterances: Any = None
         self.bus: ConsoleBus | None = None
         self.bus_error: str | None = None  # why the bus did not start (serve says it)
@@ -207,22 +200,12 @@ class VehicleCentral:
         self.door_secrets = DoorSecrets(pid_dir_of(s))
         self.door_ports: dict[str, int] = {}  # spawned vehicles' door ports
 
-    def router(self) -> APIRouter:
-        router = APIRouter()
-
-        async def link(websocket: WebSocket) -> None:
-            await serve_rosbridge(websocket, self.ctx)
-
-        router.add_api_websocket_route(names.LINK_PATH, link)
-        return router
-
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         g = self.runtime.graph
-        g.advertise(names.HEARTBEAT, names.STRING)
         g.advertise("/console/reply", "uav_console/Reply")
-        g.advertise(names.RECORDING, names.STRING, latch=True)
-        # Subscribed before any vehicle link: called before the link passes the utterance on.
+        # Subscribed before the drones' dialogs: the recording's id reaches the vehicles before
+        # the command a dialog makes of the utterance.
         self._utterances = g.subscribe(
             "/console/utterance", lambda _msg: self.touch_recording(), type="uav_console/Utterance"
         )
@@ -428,11 +411,10 @@ class VehicleCentral:
         self._publish_recording(rec.touch())
 
     def _publish_recording(self, recording: str) -> None:
-        """The recording's id to the vehicles: on the link, and at once in a beat on the bus
-        (not only at the next one), when it changed."""
+        """The recording's id to the vehicles, at once in a beat on the bus (not only at the
+        next one), when it changed."""
         if recording != self._recording_sent:
             self._recording_sent = recording
-            self.runtime.graph.publish(names.RECORDING, {"data": recording})
             if self.commander is not None:
                 self.commander.beat(time.time(), recording)
 
@@ -469,24 +451,20 @@ class VehicleCentral:
         from server.dialog.adapters import CallableDescriber
         from server.vehicles.bus_remote import BusDroneStack
         from server.vehicles.console_dialog import RemoteDialog
-        from server.vehicles.remote import RemoteDroneStack
 
         rt = self.runtime
-        if name in rt.drones:
-            return
-        if self.commander is not None and self.bus is not None:
-            stack: RemoteDroneStack = BusDroneStack(
-                rt.graph,
-                name,
-                prefix,
-                self.commander,
-                self.bus.alive,
-                self.pilot,
-                topics=bus_topics(name, prefix),
-                simulated=simulated,
-            )
-        else:
-            stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
+        if name in rt.drones or self.commander is None or self.bus is None:
+            return  # no bus: no vehicle reaches this console
+        stack = BusDroneStack(
+            rt.graph,
+            name,
+            prefix,
+            self.commander,
+            self.bus.alive,
+            self.pilot,
+            topics=bus_topics(name, prefix),
+            simulated=simulated,
+        )
         stack.touch_recording = self.touch_recording
         rt.drones[name] = stack
         # Its dialog runs here: it understands what is said to the drone and sends the
@@ -529,50 +507,20 @@ class VehicleCentral:
         return holder[:128] if holder else "pilot"
 
     def discover(self) -> None:
-        """Register every vehicle alive on the bus or announced on the graph that is not a
-        drone yet."""
-        if self.bus is not None and self.commander is not None:
-            for name in self.bus.alive():
-                if name not in self.runtime.drones:
-                    status = self.commander.status(name)
-                    simulated = status.simulated if status is not None else True
-                    self._register(name, self.prefix_of(name), simulated=simulated)
-        for topic in self.runtime.graph.topics():
-            if not topic.endswith("/vehicle/info"):
-                continue
-            last = self.runtime.graph.latched(topic)
-            if last is None:
-                continue
-            try:
-                info = json.loads(str(last.get("data", "")))
-                name, prefix = str(info["name"]), str(info.get("prefix", f"/{info['name']}"))
-            except (ValueError, KeyError, TypeError):
-                continue
-            if name in self.runtime.drones:
-                continue
-            if topic != names.info_topic(name) or prefix != self.prefix_of(name):
-                # Its link may publish only under the prefix the console gives it: the drone
-                # it describes would show nothing.
-                if name not in self._misnamed:
-                    self._misnamed.add(name)
-                    log.warning(
-                        "vehicle %s announced itself on %s with prefix %r: not registered "
-                        "(a vehicle that joins from elsewhere uses the prefix %s)",
-                        name,
-                        topic,
-                        prefix,
-                        self.prefix_of(name),
-                    )
-                continue
-            self._register(name, prefix, simulated=bool(info.get("simulated", True)))
+        """Register every vehicle alive on the bus that is not a drone yet."""
+        if self.bus is None or self.commander is None:
+            return
+        for name in self.bus.alive():
+            if name not in self.runtime.drones:
+                status = self.commander.status(name)
+                simulated = status.simulated if status is not None else True
+                self._register(name, self.prefix_of(name), simulated=simulated)
 
     async def _beat(self) -> None:
         n = 0
         while True:
             # Our clock in each beat: a vehicle learns its offset from it (command deadlines).
             now = time.time()
-            beat = json.dumps({"n": n, "t": now})
-            self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
             if self.commander is not None:
                 self.commander.beat(now, self.runtime.recording_id() or "")
             self._publish_recording(self.runtime.recording_id() or "")
@@ -716,4 +664,4 @@ async def _terminate(vp: VehicleProcess, timeout_s: float = 10.0) -> None:
         await proc.wait()
 
 
-__all__ = ["VehicleCentral", "VehicleLinkSecurity", "child_env", "flight_stacks_line"]
+__all__ = ["VehicleCentral", "child_env", "flight_stacks_line"]

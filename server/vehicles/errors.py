@@ -1,11 +1,10 @@
-"""Errors of the vehicle link and the vehicle processes.
+"""Errors of the vehicle processes and the console's side of them.
 
 ::
 
     VehicleError
     ├── CannotStart           the vehicle cannot start here (e.g. its simulator's address is
     │                         taken): starting it again would fail the same way
-    ├── LinkError             the vehicle link cannot be used (bad URL, closed)
     ├── VehicleKeyError       a vehicle key or its name is missing, unreadable or malformed
     ├── RemoteCallError       a call over the link was refused or not answered
     │   └── VehicleUnavailable    the drone's vehicle process is not on the link (REST: 503)
@@ -30,21 +29,17 @@ class CannotStart(VehicleError):
     """The vehicle cannot start here; the message says why and what to change."""
 
 
-class LinkError(VehicleError):
-    """The vehicle link cannot be used; the message says why."""
-
-
 class VehicleKeyError(VehicleError):
     """A vehicle key (or the vehicle name it is for) is missing, unreadable or malformed; the
     message says which and how to make one."""
 
 
 class RemoteCallError(VehicleError):
-    """A service call over the link was refused, failed or timed out."""
+    """A command to a vehicle was refused, failed or timed out."""
 
 
 class VehicleUnavailable(RemoteCallError):
-    """The drone's vehicle process is not on the link: not joined yet (starting, restarting),
+    """The drone's vehicle process is not on the bus: not joined yet (starting, restarting),
     gone, or silent. REST answers 503 with this message, the drone and ``Retry-After``."""
 
     def __init__(self, message: str, *, drone: str | None = None, retry_after_s: int = 2) -> None:

@@ -405,7 +405,7 @@ def test_a_vehicle_needs_a_bus_or_a_central(
 
     monkeypatch.delenv("UAVC_BUS_CONNECT", raising=False)
     assert cli_main(["vehicle", "--name", NAME]) == 2
-    assert "--bus-connect ENDPOINT (or --central URL) is needed" in capsys.readouterr().err
+    assert "--bus-connect ENDPOINT is needed" in capsys.readouterr().err
 
 
 def test_a_bus_vehicle_hovers_then_lands_when_its_console_stalls(tmp_path: Path) -> None:
