@@ -12,8 +12,8 @@
 - Discovery: every vehicle alive on the bus becomes a drone of the runtime
   (:class:`~server.vehicles.bus_remote.BusDroneStack` and its dialog), whether ``serve``
   spawned it or it joined from another host (``uav-console vehicle --bus-connect``).
-- Heartbeat: this console's beat on the bus at 10 Hz (its clock and the flight recording's
-  id), so a vehicle can tell a stalled console.
+- Heartbeat: this console's beat at 10 Hz, on the bus (its clock and the flight recording's
+  id), so a vehicle can tell a stalled console, and on ``/vehicles/heartbeat``, so a page can.
 - Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle
   --bus-connect ENDPOINT`` child per drone, AR.Drone or MAVLink, each given its own ``--drone``
   entry (a simulator, AR.Drone or PX4, is started and owned by its vehicle), joining the
@@ -203,6 +203,7 @@ class VehicleCentral:
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         g = self.runtime.graph
+        g.advertise(names.HEARTBEAT, names.STRING)
         g.advertise("/console/reply", "uav_console/Reply")
         # Subscribed before the drones' dialogs: the recording's id reaches the vehicles before
         # the command a dialog makes of the utterance.
@@ -521,6 +522,9 @@ class VehicleCentral:
         while True:
             # Our clock in each beat: a vehicle learns its offset from it (command deadlines).
             now = time.time()
+            # the pages' and rosbridge clients' beat: they call the server road down without it
+            beat = json.dumps({"n": n, "t": now})
+            self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
             if self.commander is not None:
                 self.commander.beat(now, self.runtime.recording_id() or "")
             self._publish_recording(self.runtime.recording_id() or "")

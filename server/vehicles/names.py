@@ -33,7 +33,10 @@ from pathlib import Path
 
 STRING = "std_msgs/String"
 CONTROL_TYPE = "uav_console/VehicleControl"
-HEARTBEAT_PERIOD_S = 0.1  # a console's beat on the bus
+# The console's beat on its graph (``{n, t}``: a counter and its Unix time, 10 Hz), by which a
+# page or rosbridge client tells a stalled console (web/static/js/app.js).
+HEARTBEAT = "/vehicles/heartbeat"
+HEARTBEAT_PERIOD_S = 0.1  # the console's beat, on its graph and on the bus
 # A vehicle process's exit status when it cannot start here (errors.CannotStart): its
 # supervisor does not start it again, since it would fail the same way.
 EXIT_CANNOT_START = 3
