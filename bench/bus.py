@@ -1,33 +1,24 @@
-"""The fleet's bus at scale: N light simulated vehicles on Zenoh, against today's /vehicle-link.
+"""The fleet's bus at scale: N light simulated vehicles on Zenoh.
 
 Each light vehicle is the simulator's physics and battery flying a circle (50 Hz physics, no
 camera) with its own credential, publishing telemetry at 10 Hz and a status (the LTM's
 ``LtmStatus``) at 1 Hz under its own name, as a vehicle process does; many run in one process
-(``--procs`` worker processes share them out). Two transports, the same N, in the same run:
-
-- **bus**: each vehicle its own Zenoh session (``drone.bus.vehicle.VehicleBus``, its bus
-  credential) to the central, a separate process running the console's embedded router with its
-  access control (``drone.bus.console.ConsoleBus``, which subscribes to every drone's telemetry);
-- **link** (baseline, ``--link``, on by default): a real ``uav-console serve --fleet 0 --drone
-  none`` (vehicle keys made with ``uav-console vehicle-key`` before it starts); each vehicle a
-  ``websockets`` client on ``/vehicle-link`` with its key, a rosbridge v2 client as
-  ``server.vehicles.link_core`` speaks it: advertises ``/NAME/vehicle/info`` (latched),
-  ``/NAME/vehicle/telemetry`` and ``/NAME/fleet/ltm_status``, subscribes to the console's
-  heartbeat, publishes. The telemetry's ``data`` is the same JSON as the bus payload.
-
-Both rows are measured the same way, through a real client of the central: an observer
-(a Zenoh session with the console's ``client.json5``; a rosbridge subscription on
-``/rosbridge`` to every ``/NAME/vehicle/telemetry``) stamps each telemetry on arrival. Figures:
+(``--procs`` worker processes share them out). Each vehicle its own Zenoh session
+(``drone.bus.vehicle.VehicleBus``, its bus credential) to the central, a separate process running
+the console's embedded router with its access control (``drone.bus.console.ConsoleBus``, which
+subscribes to every drone's telemetry); an observer (a Zenoh session with the console's
+``client.json5``) stamps each telemetry on arrival. The baseline, the same N over the rosbridge
+vehicle link that the bus replaced, is no longer runnable; its figures are in docs/bus.md
+("Scale"). Figures:
 
 - telemetry end to end (vehicle's stamp → the observer, one machine, one clock): p50 / p99;
 - the central's CPU (``/proc/<pid>/stat`` of the central process / of ``serve``: CPU seconds per
   wall second, 1.0 is one core) and its work per message (CPU µs per telemetry received);
 - telemetry messages per second at the observer (expected N × 10), how many vehicles it heard
-  and how many the central knows (bus: alive by liveliness; link: drones registered with
-  fresh telemetry, from ``GET /api/v1/health``);
+  and how many the central knows (alive by liveliness);
 - memory per vehicle (RSS of the vehicle processes after joining over before, /N).
 
-Usage: ``python bench/bus.py [--quick] [--n 10 50 200] [--seconds S] [--procs P] [--no-link]``.
+Usage: ``python bench/bus.py [--quick] [--n 10 50 200] [--seconds S] [--procs P]``.
 On 2 cores the vehicles, the observer and the central contend: read the central's CPU and the
 load average beside the latency.
 """
@@ -35,28 +26,21 @@ load average beside the latency.
 from __future__ import annotations
 
 import argparse
-import asyncio
-import contextlib
 import json
 import math
 import multiprocessing as mp
 import os
 import resource
-import secrets
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-from bench.loopback import free_port  # noqa: E402
 
 FLEET = "bench"
 PHYSICS_HZ = 50
@@ -283,254 +267,6 @@ def run_bus(n: int, seconds: float, procs: int) -> dict[str, Any]:
     return summarize("bus", n, r, latencies, heard, joined_mb, sent, alive, seconds)
 
 
-# ---------------------------------------------------------------------- link row
-def link_vehicle_worker(
-    url: str,
-    names: list[str],
-    keys: dict[str, str],
-    seconds: float,
-    ready: Any,
-    start: Any,
-    out: Any,
-) -> None:
-    """Fly ``names``, each a rosbridge v2 client on ``/vehicle-link`` with its vehicle key."""
-    try:
-        asyncio.run(_link_vehicles(url, names, keys, seconds, ready, start, out))
-    except Exception as exc:  # tell the bench at once rather than leave it waiting
-        ready.put(("failed", os.getpid(), repr(exc)))
-        raise
-
-
-async def _link_vehicles(
-    url: str,
-    names: list[str],
-    keys: dict[str, str],
-    seconds: float,
-    ready: Any,
-    start: Any,
-    out: Any,
-) -> None:
-    import websockets
-
-    from server.fleet.messages import STATUS_TOPIC, STATUS_TYPE
-    from server.vehicles import names as vn
-
-    base = rss_mb()
-    fleet: list[tuple[LightVehicle, Any, str, str]] = []
-    readers: list[asyncio.Task[None]] = []
-
-    async def drain(ws: Any) -> None:  # the console's heartbeat and status frames
-        with contextlib.suppress(websockets.ConnectionClosed):
-            async for _ in ws:
-                pass
-
-    for name in names:
-        ws = None
-        for _attempt in range(10):
-            try:
-                ws = await websockets.connect(
-                    url,
-                    additional_headers={"Authorization": f"Bearer {keys[name]}"},
-                    # its own source address, as vehicles on their own computers have: serve
-                    # caps the WebSockets from one address (rosbridge/context.py)
-                    local_addr=(source_address(int(name[1:])), 0),
-                    open_timeout=20,
-                    max_queue=None,
-                )
-                break
-            except (OSError, TimeoutError, websockets.InvalidStatus):
-                await asyncio.sleep(0.5)
-        if ws is None:
-            raise RuntimeError(f"{name} could not join {url}")
-        telemetry, status = vn.telemetry_topic(name), f"/{name}/{STATUS_TOPIC}"
-        hello = [
-            {"op": "advertise", "topic": vn.info_topic(name), "type": vn.STRING, "latch": True},
-            {"op": "advertise", "topic": telemetry, "type": vn.STRING, "latch": False},
-            {"op": "advertise", "topic": status, "type": STATUS_TYPE, "latch": False},
-            {"op": "subscribe", "topic": vn.HEARTBEAT, "type": vn.STRING},
-            {
-                "op": "publish",
-                "topic": vn.info_topic(name),
-                "msg": {
-                    "data": json.dumps(
-                        {
-                            "name": name,
-                            "prefix": f"/{name}",
-                            "simulated": True,
-                            "door_url": "",
-                            "door_tickets": False,
-                            "pid": os.getpid(),
-                        }
-                    )
-                },
-            },
-        ]
-        for frame in hello:
-            await ws.send(json.dumps(frame))
-        readers.append(asyncio.create_task(drain(ws)))
-        fleet.append((LightVehicle(name, int(name[1:])), ws, telemetry, status))
-    ready.put(("ready", os.getpid(), rss_mb() - base))
-    await asyncio.to_thread(start.wait)
-    dt = 1.0 / PHYSICS_HZ
-    t0 = time.monotonic()
-    tick = sent = 0
-    while (now := time.monotonic()) - t0 < seconds:
-        for k, (v, ws, telemetry, status) in enumerate(fleet):
-            v.step(now - t0, dt)
-            if due(tick, k, TELEMETRY_HZ):
-                data = v.telemetry().decode()
-                await ws.send(
-                    json.dumps({"op": "publish", "topic": telemetry, "msg": {"data": data}})
-                )
-                sent += 1
-            if due(tick, k, STATUS_HZ):
-                await ws.send(
-                    json.dumps({"op": "publish", "topic": status, "msg": {"data": v.status()}})
-                )
-        tick += 1
-        await asyncio.sleep(max(0.0, t0 + tick * dt - time.monotonic()))
-    out.put(("done", os.getpid(), sent))
-    for _, ws, _, _ in fleet:
-        await ws.close()
-    for task in readers:
-        task.cancel()
-
-
-def link_observer_worker(
-    url: str, names: list[str], counting: Any, ready: Any, stop: Any, out: Any
-) -> None:
-    """A rosbridge client of ``serve`` subscribed to every vehicle's telemetry."""
-    asyncio.run(_link_observer(url, names, counting, ready, stop, out))
-
-
-async def _link_observer(
-    url: str, names: list[str], counting: Any, ready: Any, stop: Any, out: Any
-) -> None:
-    import websockets
-
-    from server.vehicles import names as vn
-
-    latencies: list[float] = []
-    heard: set[str] = set()
-    async with websockets.connect(url, max_size=None, max_queue=None) as ws:
-        for name in names:
-            topic = vn.telemetry_topic(name)
-            await ws.send(json.dumps({"op": "subscribe", "topic": topic, "type": vn.STRING}))
-        ready.put(("observer",))
-
-        async def read() -> None:
-            async for text in ws:
-                t = time.time()
-                if not counting.is_set():
-                    continue
-                frame = json.loads(text)
-                if frame.get("op") != "publish":
-                    continue
-                msg = json.loads(frame["msg"]["data"])
-                latencies.append(t - msg["stamp"])
-                heard.add(msg["drone"])
-
-        reader = asyncio.create_task(read())
-        await asyncio.to_thread(stop.wait)
-        reader.cancel()
-    out.put(("observer", latencies, len(heard)))
-
-
-def source_address(index: int) -> str:
-    """A loopback address of vehicle ``index``'s own (127.1.0.1, 127.1.0.2, …)."""
-    return f"127.1.{index // 250}.{index % 250 + 1}"
-
-
-@contextlib.contextmanager
-def serve(data: Path, names: list[str]) -> Iterator[tuple[subprocess.Popen[bytes], int, str]]:
-    """Vehicle keys for ``names``, then a real ``serve --fleet 0 --drone none`` on loopback."""
-    env = {**os.environ, "UAVC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
-    cli = [sys.executable, "-m", "server"]
-    subprocess.run(
-        [*cli, "vehicle-key", *names, "--data-dir", str(data)],
-        cwd=ROOT,
-        env=env,
-        check=True,
-        stdout=subprocess.DEVNULL,
-    )
-    port, token = free_port(HOST), secrets.token_urlsafe(16)
-    argv = [*cli, "serve", "--host", HOST, "--port", str(port), "--drone", "none"]
-    argv += ["--fleet", "0", "--vehicles", "process", "--token", token]
-    log_path = data / "serve.log"
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
-    try:
-        deadline = time.monotonic() + 90
-        while True:
-            health = f"http://{HOST}:{port}/api/v1/health"
-            with contextlib.suppress(OSError), urllib.request.urlopen(health, timeout=5):
-                break
-            if proc.poll() is not None or time.monotonic() > deadline:
-                tail = log_path.read_text(errors="replace")[-2000:]
-                raise RuntimeError(f"serve did not start:\n{tail}")
-            time.sleep(0.3)
-        yield proc, port, token
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
-def run_link(n: int, seconds: float, procs: int) -> dict[str, Any]:
-    from server.vehicles.keys import VehicleKeys
-
-    ctx = mp.get_context("spawn")
-    names = [f"v{i:03d}" for i in range(n)]
-    ready, out = ctx.Queue(), ctx.Queue()
-    start, counting, stop = ctx.Event(), ctx.Event(), ctx.Event()
-    with tempfile.TemporaryDirectory() as tmp, serve(Path(tmp) / "data", names) as served:
-        proc, port, token = served
-        store = VehicleKeys(Path(tmp) / "data")
-        keys = {name: key.secret for name in names if (key := store.get(name)) is not None}
-        observer = ctx.Process(
-            target=link_observer_worker,
-            args=(f"ws://{HOST}:{port}/rosbridge?token={token}", names, counting, ready, stop, out),
-        )
-        observer.start()
-        assert ready.get(timeout=60)[0] == "observer"
-        url = f"ws://{HOST}:{port}/vehicle-link"
-        workers = [
-            ctx.Process(
-                target=link_vehicle_worker,
-                args=(url, names[i::procs], keys, seconds, ready, start, out),
-            )
-            for i in range(procs)
-            if names[i::procs]
-        ]
-        for w in workers:
-            w.start()
-        joined = [ready.get(timeout=300) for _ in workers]
-        failed = [item for item in joined if item[0] != "ready"]
-        if failed:
-            stop.set()
-            raise RuntimeError(f"vehicles failed to join: {failed[0][2]}")
-        joined_mb = [item[2] for item in joined]
-        assert observer.pid is not None
-        r = measure(proc.pid, observer.pid, seconds, start, counting)
-        # the drones serve registered whose telemetry is fresh (GET /api/v1/health, no token)
-        with urllib.request.urlopen(f"http://{HOST}:{port}/api/v1/health", timeout=30) as resp:
-            registered = sum(bool(ok) for ok in json.load(resp)["drones"].values())
-        sent = sum(out.get(timeout=120)[2] for _ in workers)
-        stop.set()
-        _, latencies, heard = out.get(timeout=60)
-        for p in [observer, *workers]:
-            p.join(30)
-        text = (Path(tmp) / "data" / "serve.log").read_text(errors="replace")
-    warnings = [line for line in text.splitlines() if "WARNING" in line or "refused" in line]
-    if warnings:
-        print(f"serve logged {len(warnings)} warnings, e.g. {warnings[0][:160]}", file=sys.stderr)
-    return summarize("link", n, r, latencies, heard, joined_mb, sent, registered, seconds)
-
-
-# ---------------------------------------------------------------------- measuring
 def measure(pid: int, observer: int, seconds: float, start: Any, counting: Any) -> dict[str, float]:
     """Start the vehicles; over the window (after the warm-up, before the last second) count at
     the observer and read the central's CPU from /proc."""
@@ -586,29 +322,12 @@ def row(r: dict[str, Any]) -> str:
     )
 
 
-def ratio_row(bus: dict[str, Any], link: dict[str, Any]) -> str:
-    def q(key: str, digits: int = 2) -> str:
-        a, b = bus[key], link[key]
-        return f"{a / b:.{digits}f}×" if b and math.isfinite(a) and math.isfinite(b) else "–"
-
-    return (
-        f"| {bus['n']} | bus/link | {q('p50_ms')} | {q('p99_ms')} | {q('central_cores')} | "
-        f"{q('cpu_us_per_msg')} | {q('msgs_per_s')} | {q('mb_per_vehicle')} | | | |"
-    )
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="N = 10 and 50, 10 s each")
     ap.add_argument("--n", type=int, nargs="+", default=None)
     ap.add_argument("--seconds", type=float, default=None)
     ap.add_argument("--procs", type=int, default=4, help="vehicle processes")
-    ap.add_argument(
-        "--link",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="the baseline over /vehicle-link (a real serve) beside each bus row (default: on)",
-    )
     args = ap.parse_args(argv)
     ns = args.n or ([10, 50] if args.quick else [10, 50, 200])
     seconds = args.seconds or (10.0 if args.quick else 20.0)
@@ -621,8 +340,6 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     rows: list[dict[str, Any]] = []
     runs: list[tuple[str, Callable[[int, float, int], dict[str, Any]]]] = [("bus", run_bus)]
-    if args.link:
-        runs.append(("link", run_link))
     for n in ns:
         got = {}
         for transport, run in runs:
@@ -633,8 +350,6 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             rows.append(r)
             print(row(r), flush=True)
-        if "bus" in got and "link" in got:
-            print(ratio_row(got["bus"], got["link"]), flush=True)
     for transport, _ in runs:
         mine = [r for r in rows if r["transport"] == transport]
         if len(mine) > 1:

@@ -65,26 +65,27 @@ def _parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser(
         "vehicle",
-        help="one drone's stack joining a central server",
-        description="One drone's flight stack, joining a console's bus (--bus-connect) or a "
-        "central server (--central). Settings come from UAVC_* variables and the flags below.",
+        help="one drone's stack joining a console's bus",
+        description="One drone's flight stack, joining a console's bus (--bus-connect), or only "
+        "its local task manager joining a rosbridge central (--central). Settings come from "
+        "UAVC_* variables and the flags below.",
     )
     v.add_argument(
         "--central",
         default=None,
-        help="ws://HOST:8000/rosbridge (a rosbridge central); without it the vehicle joins the "
-        "bus (--bus-connect)",
+        help="ws://HOST:8000/rosbridge: only the fleet's local task manager, on a rosbridge "
+        "central; without it the whole vehicle joins the bus (--bus-connect)",
     )
     v.add_argument("--name", required=True)
     v.add_argument(
         "--key-file",
         type=Path,
         default=None,
-        help="/vehicle-link: this vehicle's own key (uav-console vehicle-key NAME on the console; "
-        "else UAVC_VEHICLE_KEY)",
+        help="this vehicle's own key, its bus password (uav-console vehicle-key NAME on the "
+        "console; else UAVC_VEHICLE_KEY)",
     )
-    v.add_argument("--ca", type=Path, default=None, help="CA file for a wss:// central")
-    v.add_argument("--fingerprint", default=None, help="pinned SHA-256 of the central's cert")
+    v.add_argument("--ca", type=Path, default=None, help="--central: CA file for a wss:// one")
+    v.add_argument("--fingerprint", default=None, help="--central: its cert's pinned SHA-256")
     v.add_argument("--prefix", default=None, help="topic prefix (default /NAME; '' for one drone)")
     v.add_argument("--index", type=int, default=None, help="simulator address / station index")
     v.add_argument("--safety-host", default="127.0.0.1", help="the safety door's address")
@@ -146,7 +147,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "vehicle":
             settings = settings_from(args)
-            if args.central is None or args.central.rstrip("/").endswith("/vehicle-link"):
+            if args.central is not None and args.central.rstrip("/").endswith("/vehicle-link"):
+                print(
+                    "uav-console vehicle: a vehicle joins its console over the bus: "
+                    "--bus-connect ENDPOINT (serve prints it: 'bus: tcp/…'), not --central",
+                    file=sys.stderr,
+                )
+                return 2
+            if args.central is None:
                 from server.vehicles.main import whole_vehicle_main
 
                 return whole_vehicle_main(args, settings)
@@ -341,9 +349,21 @@ def _serve(args: argparse.Namespace, settings: Settings) -> int:
         )
     except OSError as exc:
         raise SettingsError(f"cannot listen on {settings.host}:{settings.port}: {exc}") from exc
-    # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
-    with sock, contextlib.suppress(KeyboardInterrupt):
-        uvicorn.Server(config).run(sockets=[sock])
+    # The bus before the first request: the vehicle processes join the console over it, so
+    # a router that cannot start stops serve here with one line.
+    from server.vehicles.errors import NoBus
+
+    with sock:
+        if settings.vehicles == "process":
+            try:
+                app.state.runtime.vehicles.open_bus(
+                    0 if settings.drone == "none" else settings.fleet
+                )
+            except NoBus as exc:
+                raise SettingsError(str(exc)) from exc
+        # uvicorn shuts down gracefully on Ctrl-C, then re-raises it: that is a normal exit.
+        with contextlib.suppress(KeyboardInterrupt):
+            uvicorn.Server(config).run(sockets=[sock])
     return 0
 
 

@@ -97,9 +97,8 @@ class Runtime:
             ),
             self.nlu,
         )
-        # vehicle processes (``--vehicles process``) and remote vehicles: link, discovery
+        # vehicle processes (``--vehicles process``) and vehicles from elsewhere: the bus, discovery
         self.vehicles = VehicleCentral(self)
-        self._routers.append(self.vehicles.router())
         # Flight recorder (server/recorder): every graph topic to MCAP, one file per session.
         recorder_config = config_from_settings(s)
         self.flight_index = FlightIndex(recorder_config.directory, recorder_config.budget_bytes)

@@ -349,8 +349,9 @@ class Settings(BaseSettings):
     # -- the bus (Zenoh; docs/bus.md) ---------------------------------------------------------
     bus_listen: CommaList = Field(
         (),
-        description="Endpoints the console's bus router listens on; unset: tcp/127.0.0.1:7447, "
-        "or the next free port.",
+        description="Endpoints the console's bus router listens on; unset: where it listened "
+        "last (DATA/bus/listen/CONSOLE, so the vehicles of a console that crashed find the one "
+        "restarted in its place), else tcp/127.0.0.1:7447; the next free port if that is taken.",
         json_schema_extra=_topic(BUS),
     )
     bus_connect: CommaList = Field(

@@ -36,6 +36,7 @@ from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session
 log = logging.getLogger(__name__)
 
 CLIENT_FILE = "client.json5"  # observer: watch only
+LISTEN_DIR = "listen"  # <bus dir>/listen/<console name>: where its router listened last
 PILOT_FILE = "pilot.json5"
 JOIN_WATCH_S = 0.5  # how often the joiners' links are looked at (the log, /health)
 JOIN_GRACE_S = 2.0  # a router not joined this long after the start is said to be not up
@@ -81,7 +82,10 @@ class ConsoleBus:
             derives from it (:func:`drone.bus.config.router_id`).
         vehicle_passwords: name → password for vehicles whose password is given (the
             console's vehicle keys); they are on the bus too.
-        listen: endpoints to listen on; empty: ``tcp/127.0.0.1:7447`` or the next free port.
+        listen: endpoints to listen on; empty: where this console's router listened last
+            (``<directory>/listen/<name>``, so the vehicles of a console that crashed find
+            the one restarted in its place), else ``tcp/127.0.0.1:7447``; the next free port
+            when that one is taken.
         connect: other routers to join (consoles on other hosts, ``zenohd``), each through a
             joiner of its own (:func:`drone.bus.config.joiner_config`): dialled until it
             answers, so either console may start first; :meth:`joins` says which are up.
@@ -119,9 +123,11 @@ class ConsoleBus:
             {keys.segment(v) for v in vehicles} | set(self.vehicle_passwords)
         )
         wrap = as_tls if tls is not None and tls.cert is not None else str
-        self.listen = [wrap(e) for e in listen] or [free_listen_endpoint(wrap(DEFAULT_LISTEN))]
-        self.connect = list(connect)
         self.name = keys.segment(name)
+        self.listen = [wrap(e) for e in listen] or [
+            free_listen_endpoint(self._listened_last(wrap(DEFAULT_LISTEN)))
+        ]
+        self.connect = list(connect)
         self.zid = router_id(self.fleet, self.name)  # its router's Zenoh id, from its name
         self.credentials: Credentials | None = None
         self.session: zenoh.Session | None = None
@@ -160,6 +166,8 @@ class ConsoleBus:
         )
         self._write_client(CLIENT_FILE, OBSERVER_USER)
         self._write_client(PILOT_FILE, PILOT_USER)
+        (self.directory / LISTEN_DIR).mkdir(mode=0o700, exist_ok=True)
+        write_private(self._listen_file, "\n".join(self.listen) + "\n")
         liveliness = self.session.liveliness()
         # this console on the bus (any role), as long as its router: the vehicles' watch of
         # their consoles and the central's election both go by this one token
@@ -224,6 +232,20 @@ class ConsoleBus:
         """The routers this console joins (``connect``), each up or not."""
         with self._lock:
             return [self._joins[e] for e in self.connect if e in self._joins]
+
+    @property
+    def _listen_file(self) -> Path:
+        return self.directory / LISTEN_DIR / self.name
+
+    def _listened_last(self, default: str) -> str:
+        """Where this console's router listened last, when it listened on ``default``'s
+        transport and address (another port of them, taken then); else ``default``."""
+        try:
+            last = self._listen_file.read_text().split()
+        except OSError:
+            return default
+        same = [e for e in last if e.rpartition(":")[0] == default.rpartition(":")[0]]
+        return same[0] if same and same[0].rpartition(":")[2].isdigit() else default
 
     @property
     def client_endpoints(self) -> list[str]:

@@ -31,7 +31,9 @@ def open_session(config: dict[str, Any]) -> zenoh.Session:
 
 def free_listen_endpoint(endpoint: str = DEFAULT_LISTEN, tries: int = 64) -> str:
     """``endpoint`` if its TCP port is free, else the next free port on the same address
-    (``tls/`` runs over TCP)."""
+    (``tls/`` runs over TCP). A port is free when nothing listens on it: probed with
+    ``SO_REUSEADDR``, as Zenoh binds its listener, so the connections a router killed a moment
+    ago left in ``TIME_WAIT`` do not keep its successor off its port."""
     proto, _, rest = endpoint.partition("/")
     host, _, port_text = rest.rpartition(":")
     if proto not in ("tcp", "tls") or not port_text.isdigit():
@@ -39,6 +41,7 @@ def free_listen_endpoint(endpoint: str = DEFAULT_LISTEN, tries: int = 64) -> str
     port = int(port_text)
     for candidate in range(port, port + tries):
         with socket.socket(socket.AF_INET6 if ":" in host.strip("[]") else socket.AF_INET) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             try:
                 s.bind((host.strip("[]"), candidate))
             except OSError:

@@ -10,9 +10,6 @@
   observers can read it).
 - Only the server publishes ``/console/*`` and ``/fleet/*`` (replies, state, fleet status), but
   for ``/console/utterance``, which a pilot sends; a fake "battery critical" reply is refused.
-- A third role, ``vehicle``, exists only on ``/vehicle-link``: a vehicle process authenticated by
-  its own key (``server.vehicles.keys``), which may publish only its own drone's topics
-  (``server.vehicles.access``). Checks take ``who`` (the vehicle's name) for that.
 - The lease judges what a pilot sends, not where it enters: land, a zero ``/cmd_vel`` (hover) and
   an utterance that asks only land, hover or emergency need no lease (:meth:`Security.
   lease_exempt`), as at REST (``server.api.deps.check_lease``).
@@ -52,8 +49,8 @@ CONTROL_TOPIC_RE = re.compile(r"^(/uav\d+)?(/cmd_vel|/ardrone/.+|/console/uttera
 SERVER_TOPIC_RE = re.compile(r"^(/fleet(/.*)?|(/[^/]+)?/console(/.*)?)$")
 PILOT_CONSOLE_TOPIC_RE = re.compile(r"^(/[^/]+)?/console/utterance$")
 # A vehicle process's own names (server.vehicles.names: info, telemetry, reply, state, control,
-# interpret): only that vehicle publishes or provides them, over /vehicle-link, never a client
-# here (a pilot's "reply" there would be re-published on /console/reply as the drone's).
+# interpret): only that vehicle publishes them, over the bus, never a client here (a pilot's
+# "reply" there would be re-published on /console/reply as the drone's).
 VEHICLE_NAME_RE = re.compile(r"^/[^/]+/vehicle(/.*)?$")
 # Safety commands any pilot may publish without the lease (DESIGN §5: any pilot may land).
 ANY_PILOT_TOPIC_RE = re.compile(r"^(/uav\d+)?/ardrone/land$")
@@ -72,7 +69,6 @@ LEASE_SERVICE = "/console/lease"
 class Role(enum.StrEnum):
     PILOT = "pilot"
     OBSERVER = "observer"
-    VEHICLE = "vehicle"  # a vehicle process on /vehicle-link, never a token of TokenStore
 
 
 def _canonical(name: str) -> str:
@@ -336,7 +332,7 @@ class Security:
 
     def refusal(self, role: Role | None, action: str, name: str, who: str | None = None) -> str:
         """The message for a refused action, naming the role ("observer may not publish to …")
-        and, for a vehicle, its name ("vehicle uav1 may not publish to …")."""
+        and, when ``who`` is given, who it is."""
         party = role.value if role is not None else "an unauthenticated client"
         if who:
             party = f"{party} {who}"

@@ -2,7 +2,7 @@
 
 A camera frame is a 40–60 KB JPEG in base64 text: deflate wins back little more than base64's
 third and costs ~1 ms of zlib per frame and per hop, on the event loop that carries every
-drone's telemetry and commands. With two drones at 15 fps over the vehicle links and out to a
+drone's telemetry and commands. With two drones at 15 fps over rosbridge links and out to a
 page, deflate was a third of the console's event loop under load; the loop fell behind and
 frames queued for seconds (bench/fleet_camera.py). RFC 7692 §6 lets a sender choose per
 message: a message sent with RSV1 clear is not compressed and the peer's decompressor is not
@@ -10,7 +10,7 @@ touched (§6.2). So messages over ``PLAIN_BYTES`` go out as they are; telemetry,
 service calls, small and repetitive, stay compressed.
 
 :class:`PlainLargeServerFactory` replaces websockets' server factory (uvicorn's, via
-``server.http.ws_guard``); :class:`PlainLargeClientFactory` its client factory (the vehicle link,
+``server.http.ws_guard``); :class:`PlainLargeClientFactory` its client factory (the fleet client's,
 ``server.vehicles.central_connection``).
 """
 

@@ -27,10 +27,9 @@ from drone.bus.payloads import Status, Telemetry
 from server.graph import GraphError, ServiceError
 from server.msgs import header
 from server.nodes.vehicle_node import EMPTY, IMAGE, TWIST
-from server.vehicles import names
 from server.vehicles.errors import RemoteCallError
-from server.vehicles.link_core import TopicSpec
 from server.vehicles.remote import CALL_TIMEOUT_S, RemoteDroneStack
+from server.vehicles.spec import TopicSpec
 
 if TYPE_CHECKING:
     from drone.bus.commander import BusCommander
@@ -90,13 +89,12 @@ class BusDroneStack(RemoteDroneStack):
     # ------------------------------------------------------------------ rosbridge's topics
     def _forwarder(self, op: str, fixed: dict[str, Any]) -> Callable[..., None]:
         """A pilot's message on this drone's control topic (rosbridge): the same command on
-        the bus, when no vehicle link carries the topic to the vehicle."""
+        the bus, which the vehicle publishes on its own control topic (``topic``), so its node
+        judges, says and audits it as the topic it was."""
 
         def forward(msg: dict[str, Any]) -> None:
-            if self.linked:
-                return  # its vehicle link delivers the topic itself
             issued = self.graph.issued
-            args = dict(fixed)
+            args = {**fixed, "topic": True}
             if op == "jog":
                 args = {k: msg.get(k, {}) for k in ("linear", "angular")}
             if issued is not None:
@@ -138,11 +136,6 @@ class BusDroneStack(RemoteDroneStack):
         self.last = base
         self.last_t = time.monotonic()
 
-    @property
-    def linked(self) -> bool:
-        """Whether a vehicle link (``/vehicle-link``) carries this drone's graph itself."""
-        return self.graph.service_type(names.control_service(self.name)) is not None
-
     def _on_graph(self, sample: zenoh.Sample) -> None:
         """One of the vehicle's graph topics (Zenoh thread): onto this graph, if it is one the
         vehicle may publish (the router already made sure the vehicle is who it says)."""
@@ -164,7 +157,7 @@ class BusDroneStack(RemoteDroneStack):
             self.graph.loop.call_soon_threadsafe(self._show, spec, msg)
 
     def _show(self, spec: TopicSpec, msg: dict[str, Any]) -> None:
-        if self._closed or self.linked:  # closed: a message handed over as it closed
+        if self._closed:  # a message handed over as it closed
             return
         if spec.name not in self._advertised:
             self.graph.advertise(spec.name, spec.type, latch=spec.latch, owner=self._owner)
@@ -175,9 +168,8 @@ class BusDroneStack(RemoteDroneStack):
         """A camera frame (Zenoh thread): the drone's image topic here, as its node sends it,
         stamped when the vehicle made it (else now), with the JPEG's bytes as they came (base64
         is made only for the rosbridge clients subscribed, once per frame:
-        server/rosbridge/context.py ``JsonCache``). Shown whether or not a vehicle link carries
-        the rest of its graph: a vehicle on the bus sends its camera only here, where a frame
-        is dropped rather than queued behind others."""
+        server/rosbridge/context.py ``JsonCache``); a frame is dropped on the way rather than
+        queued behind others."""
         msg = {
             "header": header("ardrone_base_frontcam", time.time() if stamp is None else stamp),
             "format": "jpeg",
@@ -219,8 +211,8 @@ class BusDroneStack(RemoteDroneStack):
 
     @property
     def joined(self) -> bool:
-        """Whether the vehicle can be commanded now: on the bus, or over its vehicle link."""
-        return self.on_bus or self.linked
+        """Whether the vehicle can be commanded now: on the bus."""
+        return self.on_bus
 
     async def _call_now(self, args: dict[str, Any], timeout_s: float) -> Any:
         rest = dict(args)
@@ -267,8 +259,6 @@ class BusDroneStack(RemoteDroneStack):
             GraphError: the vehicle refused a read or fault, or did not answer in time.
         """
         await self.wait_joined(join_wait_s)
-        if not self.on_bus:  # a vehicle whose bus did not come up: its link carries it
-            return await super().call(args, timeout_s, join_wait_s=join_wait_s, silent_s=silent_s)
         if silent_s is not None and self.silent_for() > silent_s:
             raise self._unavailable(
                 f"is not answering (silent for {self.silent_for():.1f} s); nothing was sent"

@@ -2,8 +2,7 @@
 the vehicle's own control ops, its status at 1 Hz and its camera, and the consoles it hears.
 
 The camera goes out frame by frame as the vehicle node publishes it (up to its ``image_hz``),
-the JPEG's bytes with its stamp as the attachment; a vehicle on the bus leaves it out of its
-vehicle link (:meth:`VehicleHost.start`), whose queue would hold frames back behind others.
+the JPEG's bytes with its stamp as the attachment, dropped rather than queued under congestion.
 
 The ops are those of the vehicle's control service (:meth:`VehicleHost._control`): ``direct``,
 the task ops ``submit``, ``preempt`` and ``cancel`` (what a console's dialog understood, as
@@ -35,7 +34,7 @@ from server.vehicles.errors import VehicleError
 if TYPE_CHECKING:
     from drone.bus.vehicle import VehicleBus
     from server.vehicles.host import VehicleHost
-    from server.vehicles.link_core import LinkSpec
+    from server.vehicles.spec import LinkSpec
 
 log = logging.getLogger("uav_console.vehicle")
 
@@ -43,6 +42,7 @@ STATUS_PERIOD_S = 1.0
 LATCHED_AGAIN_S = 2.0
 CAMERA_TOPIC = "/ardrone/image_raw/compressed"
 ALARM_HOLD_S = 10.0  # an alarm stays in the status this long after the supervisor said it
+TOPIC_ACTIONS = ("takeoff", "land", "reset")  # the AR.Drone's /ardrone/<action> topics
 
 
 class BusVehicleSide:
@@ -68,7 +68,7 @@ class BusVehicleSide:
             bus.session,
             bus.fleet,
             time.monotonic,
-            # a console's clock, sampled as the link's heartbeat does (command deadlines)
+            # a console's clock, from its beat (command deadlines)
             on_beat=lambda sent: loop.call_soon_threadsafe(
                 host.clock_offset.sample, sent, time.time()
             ),
@@ -126,8 +126,8 @@ class BusVehicleSide:
         self.commanded.publish_camera(bytes(data), made)
 
     def _on_beat(self, sample: zenoh.Sample, loop: asyncio.AbstractEventLoop) -> None:
-        """A console's beat (Zenoh thread): the recording id it carries, if any, as the link's
-        ``/console/recording`` gives it."""
+        """A console's beat (Zenoh thread): the id of the flight recording it carries, if any,
+        for the vehicle's audit rows."""
         try:
             recording = json.loads(sample.payload.to_bytes()).get("recording")
         except (ValueError, AttributeError):
@@ -147,6 +147,8 @@ class BusVehicleSide:
         """One command, through the vehicle's control ops; refusals with their reason."""
         if command.op == "jog":
             return self._jog(command)
+        if command.op == "direct" and command.args.get("topic") is True:
+            return self._topic(command)
         args: dict[str, Any] = {**command.args, "op": command.op}
         if command.issued is not None:
             args["issued"] = command.issued
@@ -170,6 +172,17 @@ class BusVehicleSide:
         issued = self.host._issued_arg({"issued": command.issued})
         self.host.graph.publish(f"{self.host.options.prefix}/cmd_vel", twist, issued=issued)
         return {"accepted": True, "detail": "jog sent"}
+
+    def _topic(self, command: Command) -> dict[str, Any]:
+        """A pilot's ``/ardrone/takeoff``, ``land`` or ``reset`` message at a console
+        (rosbridge), published on the vehicle node's own topic as it came: the node judges its
+        deadline, says a refusal and audits it as a topic's."""
+        action = command.action
+        if action not in TOPIC_ACTIONS:
+            raise CommandRefused(f"no control topic for {action!r} ({', '.join(TOPIC_ACTIONS)})")
+        issued = self.host._issued_arg({"issued": command.issued})
+        self.host.graph.publish(f"{self.host.options.prefix}/ardrone/{action}", {}, issued=issued)
+        return {"accepted": True, "detail": f"{action} sent"}
 
     def step(self, now: float) -> None:
         """Publish the status when due, and the latched topics again every few seconds (a

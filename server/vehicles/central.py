@@ -1,23 +1,27 @@
-"""The web process's side of vehicle processes: the link endpoint, discovery, supervision.
+"""The web process's side of vehicle processes: the bus, discovery, supervision.
 
-- ``/vehicle-link``: a rosbridge v2 WebSocket for vehicles only. It takes a vehicle key
-  (:mod:`server.vehicles.keys`; never the pilot or observer token) and no browser (a request
-  with ``Origin`` is refused); a vehicle may publish only its own drone's topics and provide only
-  its own services (:mod:`server.vehicles.access`). A vehicle runs no dialog: each drone's
-  dialog runs here (:mod:`server.vehicles.console_dialog`); what a vehicle's nodes say comes
-  under its own name and is re-published after a check (:mod:`server.vehicles.relay`), so this
-  process is the only publisher of ``/console/reply``.
+- The bus: the console's own Zenoh router (:class:`~drone.bus.console.ConsoleBus`, docs/bus.md),
+  which every vehicle joins as ``vehicle-NAME`` with its vehicle key
+  (:mod:`server.vehicles.keys`; never the pilot or observer token) and where it may publish
+  only under its own name. A vehicle runs no dialog: each drone's dialog runs here
+  (:mod:`server.vehicles.console_dialog`); what a vehicle's nodes say comes under its own name
+  and is re-published after a check (:mod:`server.vehicles.relay`), so this process is the
+  only publisher of ``/console/reply``.
 - Keys: ``serve`` makes one per vehicle it spawns (``<data dir>/vehicle-keys``) and hands it over
   in the child's environment (``UAVC_VEHICLE_KEY``), not on its command line.
-- Discovery: every ``/NAME/vehicle/info`` on the graph becomes a drone of the runtime
-  (:class:`~server.vehicles.remote.RemoteDroneStack` and its dialog), whether
-  ``serve`` spawned the vehicle or it joined from another host (``uav-console vehicle``).
-- Heartbeat: ``/vehicles/heartbeat`` at 10 Hz, so a vehicle can tell a stalled server.
-- Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle`` child
-  per drone, AR.Drone or MAVLink, each given its own ``--drone`` entry (a simulator, AR.Drone
-  or PX4, is started and owned by its vehicle); when one exits (a crash, ``kill -9``) the
-  console is told on ``/console/reply`` (level ``alert``) and the child is started again
-  (backoff 0.5 s doubling to 5 s, reset after 30 s up).
+- Discovery: every vehicle alive on the bus becomes a drone of the runtime
+  (:class:`~server.vehicles.bus_remote.BusDroneStack` and its dialog), whether ``serve``
+  spawned it or it joined from another host (``uav-console vehicle --bus-connect``).
+- Heartbeat: this console's beat at 10 Hz, on the bus (its clock and the flight recording's
+  id), so a vehicle can tell a stalled console, and on ``/vehicles/heartbeat``, so a page can.
+- Supervision (``--vehicles process``, ``serve``'s default): one ``uav-console vehicle
+  --bus-connect ENDPOINT`` child per drone, AR.Drone or MAVLink, each given its own ``--drone``
+  entry (a simulator, AR.Drone or PX4, is started and owned by its vehicle), joining the
+  console's bus router (:class:`~drone.bus.console.ConsoleBus`, which must start: see
+  :meth:`VehicleCentral.open_bus`); when one exits (a crash, ``kill -9``) the console is told
+  on ``/console/reply`` (level ``alert``) and the child is started again (backoff 0.5 s
+  doubling to 5 s, reset after 30 s up). Children left by a ``serve`` that crashed are
+  adopted: their pid files, and the pid in the ``vehicle/info`` they publish on the bus.
 - Safety doors: each spawned vehicle gets its door's port (the same across restarts, so a
   page's Content-Security-Policy keeps naming it) and its door secret (``UAVC_DOOR_SECRET``),
   with which :meth:`VehicleCentral.door_ticket` mints the tickets pages open the door with.
@@ -30,13 +34,12 @@ import contextlib
 import json
 import logging
 import os
+import re
 import signal
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-
-from fastapi import APIRouter, WebSocket
 
 from drone.bus.commander import BusCommander
 from drone.bus.config import BusTLS, endpoint_host, on_loopback, wants_tls
@@ -45,11 +48,9 @@ from drone.bus.errors import BusError
 from drone.bus.session import DEFAULT_LISTEN
 from server.http.tls import TLSError, ensure_ca, ensure_server_cert
 from server.msgs import header
-from server.rosbridge.context import BridgeContext
-from server.rosbridge.endpoint import serve_rosbridge
 from server.settings import Settings, SettingsError
 from server.vehicles import names
-from server.vehicles.access import VehicleLinkSecurity
+from server.vehicles.errors import NoBus
 from server.vehicles.keys import VehicleKeys, vehicle_env
 from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.vehicles.relay import ReplyRelay
@@ -110,7 +111,7 @@ CHILD_SETTINGS = (
 
 def child_env(settings: Settings, token: str) -> dict[str, str]:
     """The environment of a vehicle child: ours plus the settings it needs as ``UAVC_*``, and
-    the pilot token as ``UAVC_TOKEN``, which only its safety port checks (its link opens with
+    the pilot token as ``UAVC_TOKEN``, which only its safety port checks (it joins the bus with
     its own key: :func:`~server.vehicles.keys.vehicle_env`)."""
     env = dict(os.environ)
     for name in CHILD_SETTINGS:
@@ -185,8 +186,6 @@ class VehicleCentral:
         self.keys = VehicleKeys(s.data_dir)
         # The prefix of each spawned vehicle's drone topics; any other vehicle's is /NAME.
         self.prefixes: dict[str, str] = {}
-        security = VehicleLinkSecurity(s, runtime.tokens, self.keys, prefix_of=self.prefix_of)
-        self.ctx = BridgeContext(runtime.graph, security, s)
         self.processes: dict[str, VehicleProcess] = {}
         self.dialogs: list[RemoteDialog] = []
         self.relays: dict[str, ReplyRelay] = {}
@@ -194,7 +193,6 @@ class VehicleCentral:
         self._tasks: list[asyncio.Task[Any]] = []
         self._stopping = False
         self._recording_sent: str | None = None
-        self._misnamed: set[str] = set()
         self._utterances: Any = None
         self.bus: ConsoleBus | None = None
         self.bus_error: str | None = None  # why the bus did not start (serve says it)
@@ -202,22 +200,13 @@ class VehicleCentral:
         self.door_secrets = DoorSecrets(pid_dir_of(s))
         self.door_ports: dict[str, int] = {}  # spawned vehicles' door ports
 
-    def router(self) -> APIRouter:
-        router = APIRouter()
-
-        async def link(websocket: WebSocket) -> None:
-            await serve_rosbridge(websocket, self.ctx)
-
-        router.add_api_websocket_route(names.LINK_PATH, link)
-        return router
-
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
         g = self.runtime.graph
         g.advertise(names.HEARTBEAT, names.STRING)
         g.advertise("/console/reply", "uav_console/Reply")
-        g.advertise(names.RECORDING, names.STRING, latch=True)
-        # Subscribed before any vehicle link: called before the link passes the utterance on.
+        # Subscribed before the drones' dialogs: the recording's id reaches the vehicles before
+        # the command a dialog makes of the utterance.
         self._utterances = g.subscribe(
             "/console/utterance", lambda _msg: self.touch_recording(), type="uav_console/Utterance"
         )
@@ -232,31 +221,54 @@ class VehicleCentral:
         local = [n for n in drones if n not in remote]
         return flight_stacks_line(remote, local)
 
+    def open_bus(self, count: int) -> None:
+        """Open the console's bus router for drones ``uav1`` … ``uavN`` (``serve`` does it
+        before it takes requests, so that a bus that cannot start stops it with one line).
+
+        Raises:
+            NoBus: the router could not start and there are vehicle processes to spawn, which
+                reach the console only over it.
+        """
+        if self.bus is not None:
+            return
+        self.bus = self._open_bus([f"uav{index + 1}" for index in range(count)])
+        if self.bus is None and count > 0:
+            raise NoBus(
+                f"the bus did not start: {self.bus_error}; the drones' flight processes join "
+                "the console over it (--bus-listen ENDPOINT chooses where it listens; "
+                "--vehicles inline runs the drones in this process)"
+            )
+        if self.bus is None:  # no drones of its own: the console runs on without a bus
+            log.error("the bus did not start: %s", self.bus_error)
+            self.alerts.append(f"the bus did not start: {self.bus_error}")
+
     async def spawn(self, count: int) -> None:
         """Register drones ``uav1`` … ``uavN`` now; start (or adopt) their vehicle processes in
-        the background, once the server accepts connections (see :meth:`_orphans`)."""
+        the background, once the server accepts connections (see :meth:`_orphans`). Each
+        joins the console's bus (``uav-console vehicle --bus-connect ENDPOINT --name NAME``).
+
+        Raises:
+            NoBus: see :meth:`open_bus`.
+        """
         s = self.runtime.settings
-        host = "127.0.0.1" if s.host in ("0.0.0.0", "::", "") else s.host
         tls = self.runtime.tls  # set by `serve` before the lifespan starts us
-        url = f"{'wss' if tls else 'ws'}://{host}:{s.port}{names.LINK_PATH}"
         # The safety port listens where the console does (a phone on the LAN reaches both),
         # over HTTPS with the console's certificate when the console speaks it.
         safety = ["--safety-host", s.host]
         if tls is not None:
             safety += ["--safety-cert", str(tls.cert), "--safety-key", str(tls.key)]
         env = child_env(s, self.runtime.tokens.pilot_token)
-        self.bus = self._open_bus([f"uav{index + 1}" for index in range(count)])
+        self.open_bus(count)
         for index in range(count):
             name = f"uav{index + 1}"
             prefix = "" if count == 1 else f"/{name}"
-            argv = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", name]
+            argv = [sys.executable, "-m", "server", "vehicle", *self._bus_argv(name)]
+            argv += ["--name", name]
             kind = drone_kind(s.drone, index)  # its own entry of a comma-separated --drone
             argv += ["--prefix", prefix, "--index", str(index), "--drone", kind]
             argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
             self.door_ports[name] = free_door_port(s.host)
             argv += ["--safety-port", str(self.door_ports[name])]
-            if tls is not None:  # our own certificate, pinned (whatever names it carries)
-                argv += ["--fingerprint", tls.fingerprint]
             self.prefixes[name] = prefix
             child = {**vehicle_env(env, self.keys, name), **self._bus_env(name)}
             child["UAVC_DOOR_SECRET"] = self.door_secrets.get_or_create(name).hex()
@@ -267,7 +279,7 @@ class VehicleCentral:
 
     def _open_bus(self, vehicles: list[str]) -> ConsoleBus | None:
         """The console's embedded bus router (docs/bus.md); None, said in the log, when it
-        cannot start: the vehicles still reach the console over /vehicle-link."""
+        cannot start."""
         s = self.runtime.settings
         try:
             tls = bus_tls(s)
@@ -304,17 +316,23 @@ class VehicleCentral:
         print(f"uav-console: {join.said()}", file=sys.stderr, flush=True)
 
     def _bus_failed(self, why: str) -> None:
-        self.bus_error = why
-        log.error("the bus did not start: %s", why)
-        self.alerts.append(f"the bus did not start: {why}")
+        """Why the bus did not start, in a line: without Zenoh's source locations."""
+        why = why.removeprefix("the bus could not start: ")
+        self.bus_error = re.sub(r" at /\S+\.rs:\d+\.?", "", why)
+
+    def _bus_argv(self, name: str) -> list[str]:
+        """``--bus-connect`` for vehicle ``name``: our router first, then the routers we join
+        (the vehicle fails over to them)."""
+        assert self.bus is not None
+        cred = self.bus.vehicle_credential(name)
+        return ["--bus-connect", ",".join([*cred.connect, *self.runtime.settings.bus_connect])]
 
     def _bus_env(self, name: str) -> dict[str, str]:
-        if self.bus is None:
-            return {}
-        cred = self.bus.vehicle_credential(name)  # the password is its vehicle key
+        """The rest of what vehicle ``name`` joins the bus with (its password is its vehicle
+        key, in its environment already)."""
+        assert self.bus is not None
+        cred = self.bus.vehicle_credential(name)
         return {
-            # our router first, then the routers we join: the vehicle fails over to them
-            "UAVC_BUS_CONNECT": ",".join([*cred.connect, *self.runtime.settings.bus_connect]),
             "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
             **({"UAVC_BUS_CA": cred.ca} if cred.ca is not None else {}),
         }
@@ -354,8 +372,9 @@ class VehicleCentral:
 
     async def _orphans(self, names_: set[str], wait_s: float = 4.0) -> dict[str, int]:
         """Vehicles left flying by a ``serve`` that crashed (their pid files in the data
-        directory name live processes): they reconnect within their backoff (at most 2 s) and
-        announce their pid; wait ``wait_s`` for them, then adopt them. No pid file: no wait."""
+        directory name live processes): they rejoin our bus router, which listens where the
+        crashed one did, within a second, and their ``vehicle/info`` (the pid) comes again
+        within 2 s; wait ``wait_s`` for them, then adopt them. No pid file: no wait."""
         pid_dir = pid_dir_of(self.runtime.settings)
         expected = set()
         for name in names_:
@@ -393,11 +412,10 @@ class VehicleCentral:
         self._publish_recording(rec.touch())
 
     def _publish_recording(self, recording: str) -> None:
-        """The recording's id to the vehicles: on the link, and at once in a beat on the bus
-        (not only at the next one), when it changed."""
+        """The recording's id to the vehicles, at once in a beat on the bus (not only at the
+        next one), when it changed."""
         if recording != self._recording_sent:
             self._recording_sent = recording
-            self.runtime.graph.publish(names.RECORDING, {"data": recording})
             if self.commander is not None:
                 self.commander.beat(time.time(), recording)
 
@@ -434,24 +452,20 @@ class VehicleCentral:
         from server.dialog.adapters import CallableDescriber
         from server.vehicles.bus_remote import BusDroneStack
         from server.vehicles.console_dialog import RemoteDialog
-        from server.vehicles.remote import RemoteDroneStack
 
         rt = self.runtime
-        if name in rt.drones:
-            return
-        if self.commander is not None and self.bus is not None:
-            stack: RemoteDroneStack = BusDroneStack(
-                rt.graph,
-                name,
-                prefix,
-                self.commander,
-                self.bus.alive,
-                self.pilot,
-                topics=bus_topics(name, prefix),
-                simulated=simulated,
-            )
-        else:
-            stack = RemoteDroneStack(rt.graph, name, prefix, simulated=simulated)
+        if name in rt.drones or self.commander is None or self.bus is None:
+            return  # no bus: no vehicle reaches this console
+        stack = BusDroneStack(
+            rt.graph,
+            name,
+            prefix,
+            self.commander,
+            self.bus.alive,
+            self.pilot,
+            topics=bus_topics(name, prefix),
+            simulated=simulated,
+        )
         stack.touch_recording = self.touch_recording
         rt.drones[name] = stack
         # Its dialog runs here: it understands what is said to the drone and sends the
@@ -494,48 +508,21 @@ class VehicleCentral:
         return holder[:128] if holder else "pilot"
 
     def discover(self) -> None:
-        """Register every vehicle alive on the bus or announced on the graph that is not a
-        drone yet."""
-        if self.bus is not None and self.commander is not None:
-            for name in self.bus.alive():
-                if name not in self.runtime.drones:
-                    status = self.commander.status(name)
-                    simulated = status.simulated if status is not None else True
-                    self._register(name, self.prefix_of(name), simulated=simulated)
-        for topic in self.runtime.graph.topics():
-            if not topic.endswith("/vehicle/info"):
-                continue
-            last = self.runtime.graph.latched(topic)
-            if last is None:
-                continue
-            try:
-                info = json.loads(str(last.get("data", "")))
-                name, prefix = str(info["name"]), str(info.get("prefix", f"/{info['name']}"))
-            except (ValueError, KeyError, TypeError):
-                continue
-            if name in self.runtime.drones:
-                continue
-            if topic != names.info_topic(name) or prefix != self.prefix_of(name):
-                # Its link may publish only under the prefix the console gives it: the drone
-                # it describes would show nothing.
-                if name not in self._misnamed:
-                    self._misnamed.add(name)
-                    log.warning(
-                        "vehicle %s announced itself on %s with prefix %r: not registered "
-                        "(a vehicle that joins from elsewhere uses the prefix %s)",
-                        name,
-                        topic,
-                        prefix,
-                        self.prefix_of(name),
-                    )
-                continue
-            self._register(name, prefix, simulated=bool(info.get("simulated", True)))
+        """Register every vehicle alive on the bus that is not a drone yet."""
+        if self.bus is None or self.commander is None:
+            return
+        for name in self.bus.alive():
+            if name not in self.runtime.drones:
+                status = self.commander.status(name)
+                simulated = status.simulated if status is not None else True
+                self._register(name, self.prefix_of(name), simulated=simulated)
 
     async def _beat(self) -> None:
         n = 0
         while True:
             # Our clock in each beat: a vehicle learns its offset from it (command deadlines).
             now = time.time()
+            # the pages' and rosbridge clients' beat: they call the server road down without it
             beat = json.dumps({"n": n, "t": now})
             self.runtime.graph.publish(names.HEARTBEAT, {"data": beat})
             if self.commander is not None:
@@ -681,4 +668,4 @@ async def _terminate(vp: VehicleProcess, timeout_s: float = 10.0) -> None:
         await proc.wait()
 
 
-__all__ = ["VehicleCentral", "VehicleLinkSecurity", "child_env", "flight_stacks_line"]
+__all__ = ["VehicleCentral", "child_env", "flight_stacks_line"]

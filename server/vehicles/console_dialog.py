@@ -2,8 +2,8 @@
 
 The vehicle process runs no NLU and no dialog. Its console understands what the operator types,
 says or sends by REST, checks it against the drone's state (its telemetry, at most 0.1 s old)
-and hands the vehicle's task executor typed commands (drone/commands.py) over the vehicle link
-or the bus, where the vehicle's own executor decides again (:mod:`server.vehicles.task_ops`):
+and hands the vehicle's task executor typed commands (drone/commands.py) over the bus, where
+the vehicle's own executor decides again (:mod:`server.vehicles.task_ops`):
 
 - :class:`RemoteTaskPort`: the dialog's :class:`~server.dialog.ports.TaskPort` as the control ops
   ``submit`` (awaited: the executor's decisions are the answer), ``preempt`` and ``cancel``, sent

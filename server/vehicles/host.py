@@ -1,25 +1,26 @@
-"""The vehicle process: one drone's flight-critical stack, joined to a central server.
+"""The vehicle process: one drone's flight-critical stack, joined to its consoles' bus.
 
-``uav-console vehicle --central ws://HOST:PORT/vehicle-link --name NAME`` (``serve --vehicles
-process`` spawns one per drone) runs, on its own event loop and its own graph: the simulator
+``uav-console vehicle --bus-connect ENDPOINT --name NAME`` (``serve --vehicles process`` spawns
+one per drone) runs, on its own event loop and its own graph: the simulator
 (``--drone sim``) or the driver of a real drone, the vehicle (EKF, 100 Hz controller thread,
 perception), the task manager, the vehicle node (navdata, camera, pose, markers, task, jog,
 operator watchdog), the supervisor (the ANS monitors), the fleet's LTM, and the safety door;
 nothing of the web stack, the NLU or the dialog (tests/isolation/test_lean_vehicle.py). The
 console runs this drone's dialog: it understands what the operator says and hands the task
 manager typed commands (:mod:`server.vehicles.task_ops`), and it says the supervisor's alarms.
-:class:`~server.vehicles.link.GraphLink` mirrors that graph onto the central one, so the
-central server and its clients see the drone exactly as an in-process one. The link opens with
-the vehicle's own key (``--key-file`` or ``UAVC_VEHICLE_KEY``: :mod:`server.vehicles.keys`),
-never the pilot token; the central server lets it publish only this drone's topics.
+:class:`~server.vehicles.bus_vehicle.BusVehicleSide` answers the consoles' commands on the bus
+and publishes the drone's status, camera and graph topics there, so a console and its clients
+see the drone exactly as an in-process one. It joins the bus as ``vehicle-NAME`` with the
+vehicle's own key (``--key-file`` or ``UAVC_VEHICLE_KEY``: :mod:`server.vehicles.keys`), never
+the pilot token; the bus lets it publish only under its own name.
 
-The drone stays safe without the central server: :class:`CentralWatch` hovers it after
-``heartbeat_timeout_s`` of silence and lands it after ``central_loss_land_s``; the link
-reconnects on its own, and a bus whose router is not up when the vehicle starts is joined when
-it is (:meth:`drone.bus.vehicle.VehicleBus.join_later`). ``emergency``, ``land`` and
-``hover`` also reach the drone through the safety door (:mod:`server.vehicles.door`), the
-page's standing connection that no web traffic can delay; each stop id runs once, whichever
-road brings it first (:meth:`deliver_stop`).
+The drone stays safe without a console: :class:`CentralWatch` hovers it after
+``heartbeat_timeout_s`` without a console's heartbeat on the bus and lands it after
+``central_loss_land_s``; a router that is not up when the vehicle starts is joined when it is
+(:meth:`drone.bus.vehicle.VehicleBus.join_later`), and Zenoh rejoins a router that comes back on
+its endpoint. ``emergency``, ``land`` and ``hover`` also reach the drone through the safety door
+(:mod:`server.vehicles.door`), the page's standing connection that no web traffic can delay;
+each stop id runs once, whichever road brings it first (:meth:`deliver_stop`).
 
 Deadlines (drone/deadline.py): a command from the central server carries when the operator
 gave it, on the console's clock; the vehicle moves it onto its own clock with the offset it
@@ -66,9 +67,8 @@ from server.vehicles.door_protocol import (
     stop_message,
 )
 from server.vehicles.errors import CannotStart, DoorProtocolError, VehicleError
-from server.vehicles.link import GraphLink
-from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
 from server.vehicles.relay import replies_out
+from server.vehicles.spec import LinkSpec, TopicSpec
 from server.vehicles.task_ops import TASK_OPS, notice_message, run_task_op
 from server.vehicles.watch import CentralWatch, LossAction
 
@@ -96,7 +96,6 @@ ORPHAN_EXIT_S = 60.0
 class VehicleOptions:
     """What one vehicle process is (the rest comes from :class:`Settings`)."""
 
-    central: str | None  # the console's /vehicle-link URL; None: on the bus only
     name: str
     prefix: str  # "" for a single drone, "/uav2" in a fleet
     index: int = 0  # which simulator address and station
@@ -106,36 +105,20 @@ class VehicleOptions:
     safety_key: Path | None = None
     door_secret: bytes | None = None  # the console's key for door tickets (None: token only)
     parent_pid: int | None = None  # the supervising serve (None: a standalone vehicle)
-    ca_file: Path | None = None  # wss:// central: verify its certificate with this CA
-    fingerprint: str | None = None  # wss:// central: or accept exactly this certificate
 
 
 def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = False) -> LinkSpec:
-    """The topics and services a whole vehicle shares with the central server: an AR.Drone's
-    navdata (and GPS navdata in a ``gps`` world) and camera, or a MAVLink drone's ``/mavros/*``
-    topics (no camera over MAVLink).
+    """The topics a whole vehicle shares with its consoles on the bus: an AR.Drone's navdata
+    (and GPS navdata in a ``gps`` world) and camera, or a MAVLink drone's ``/mavros/*`` topics
+    (no camera over MAVLink).
 
-    What it publishes and provides is all its own drone's (the central server lets a vehicle
-    publish nothing else: :mod:`server.vehicles.access`); its task notices and alarms go out
-    under ``/NAME/vehicle/*`` for the console's dialog, and what its nodes say on its
-    ``/NAME/vehicle/reply`` (:mod:`server.vehicles.relay`)."""
-    from server.fleet.messages import (
-        PLAN_SERVICE,
-        PLAN_SERVICE_TYPE,
-        STATUS_TOPIC,
-        STATUS_TYPE,
-    )
+    All are its own drone's (a console shows no other: :func:`server.vehicles.central.
+    bus_topics`); its task notices and alarms go out under ``/NAME/vehicle/*`` for the
+    console's dialog, and what its nodes say on its ``/NAME/vehicle/reply``
+    (:mod:`server.vehicles.relay`)."""
+    from server.fleet.messages import STATUS_TOPIC, STATUS_TYPE
     from server.nodes.mavros_node import MAVROS_LATCHED, MAVROS_TOPICS
-    from server.nodes.vehicle_node import (
-        EMPTY,
-        IMAGE,
-        MARKERS,
-        NAVDATA,
-        NAVDATA_GPS,
-        POSE,
-        TASK,
-        TWIST,
-    )
+    from server.nodes.vehicle_node import IMAGE, MARKERS, NAVDATA, NAVDATA_GPS, POSE, TASK
 
     p = prefix
     if mavlink:
@@ -161,19 +144,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         TopicSpec(names.telemetry_topic(name), names.STRING),
         TopicSpec(names.alarm_topic(name), names.STRING),
     )
-    inn = (
-        TopicSpec(f"{p}/cmd_vel", TWIST),
-        TopicSpec(f"{p}/ardrone/takeoff", EMPTY),
-        TopicSpec(f"{p}/ardrone/land", EMPTY),
-        TopicSpec(f"{p}/ardrone/reset", EMPTY),
-        TopicSpec(names.HEARTBEAT, names.STRING),
-        TopicSpec(names.RECORDING, names.STRING, latch=True),
-    )
-    services = (
-        (names.control_service(name), names.CONTROL_TYPE),
-        (f"/{name}/{PLAN_SERVICE}", PLAN_SERVICE_TYPE),
-    )
-    return LinkSpec(out, inn, services, owner=f"link:{name}")
+    return LinkSpec(out)
 
 
 class VehicleHost:
@@ -182,7 +153,7 @@ class VehicleHost:
     def __init__(
         self, settings: Settings, options: VehicleOptions, key: str, *, safety_token: str | None
     ) -> None:
-        """``key``: this vehicle's own key, for the link (:mod:`server.vehicles.keys`);
+        """``key``: this vehicle's own key, its bus password (:mod:`server.vehicles.keys`);
         ``safety_token``: the pilot token the safety port checks (None: the port refuses all)."""
         self.settings = settings
         self.options = options
@@ -196,7 +167,6 @@ class VehicleHost:
         self.loss_actions: list[str] = []
         self.bus: VehicleBus | None = None
         self.bus_side: BusVehicleSide | None = None
-        self.link: GraphLink | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self._started = time.monotonic()
         self.stop_requested = asyncio.Event()
@@ -238,25 +208,9 @@ class VehicleHost:
         await self.stack.node.start()
         gps = getattr(self.world, "gps_origin", None) is not None
         spec = link_spec(self.name, o.prefix, mavlink=self.mavlink, gps=gps)
-        self.core = GraphLinkCore(self.graph, spec, to_local=self.local_issued)
-        self._heartbeat_sub = self.graph.subscribe(
-            names.HEARTBEAT, self._on_heartbeat, type=names.STRING
-        )
-        if o.central is not None:
-            self.link = GraphLink(
-                o.central,
-                self.core,
-                token=self.key,
-                name=self.name,
-                ca_file=o.ca_file,
-                fingerprint=o.fingerprint,
-            )
-        # audit rows carry the central server's flight recording id (names.RECORDING)
+        # audit rows carry the id of the consoles' flight recording (their bus heartbeats)
         self.recording_id = ""
         self.audit.recording = lambda: self.recording_id
-        self._recording_sub = self.graph.subscribe(
-            names.RECORDING, self._on_recording, type=names.STRING
-        )
         # what its nodes say (a late command, an autopilot's denial), under its own name
         self._replies_out = replies_out(self.graph, self.name)
         # the task manager's notices, for the console's dialog to follow and say
@@ -319,10 +273,9 @@ class VehicleHost:
             self.door.port = 0
             await self.door.start()
         self.bus = bus_for(s, self.name, self.key)
-        if self.bus is not None:
-            self._join_bus(self.bus, spec)
-        elif self.link is None:
-            raise VehicleError(f"{self.name}: no bus to join and no --central")
+        if self.bus is None:
+            raise VehicleError(f"{self.name}: no bus to join (--bus-connect ENDPOINT)")
+        self._join_bus(self.bus, spec)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         supervisor = self.stack.supervisor
         assert supervisor is not None
@@ -357,8 +310,6 @@ class VehicleHost:
             return
         log.info("%s: on the bus at %s", self.name, ", ".join(self.settings.bus_connect))
         self.bus_side = BusVehicleSide(self, bus, spec)
-        # the camera on the bus only: dropped there rather than queued on the link
-        self.core.leave_out({t.name for t in self.bus_side.camera_topics})
         self.ltm.join_bus(bus.session, self.settings.fleet_name)
 
     def _publish_alarm(self, alarm: Alarm) -> None:
@@ -380,9 +331,6 @@ class VehicleHost:
             "pid": os.getpid(),
         }
 
-    def _on_recording(self, msg: dict[str, Any]) -> None:
-        self.recording_id = str(msg.get("data", ""))
-
     def direct(
         self, action: str, battery_low_pct: float | None = None, issued: float | None = None
     ) -> DirectOutcome:
@@ -402,15 +350,6 @@ class VehicleHost:
             issued=issued,
             deadline_s=self.settings.command_deadline_s,
         )
-
-    def _on_heartbeat(self, msg: dict[str, Any]) -> None:
-        """The console's heartbeat carries its clock (``t``): one sample of the offset."""
-        try:
-            sent = json.loads(str(msg.get("data", "")))["t"]
-        except (ValueError, KeyError, TypeError):
-            return  # a console whose heartbeat carries no time: commands keep their stamps
-        if isinstance(sent, int | float):
-            self.clock_offset.sample(float(sent), time.time())
 
     def local_issued(self, issued: float) -> float:
         """A console-clock ``issued`` on our clock, never later than now."""
@@ -567,11 +506,9 @@ class VehicleHost:
             await asyncio.sleep(WATCH_PERIOD_S)
 
     def heard(self) -> float:
-        """When a console was last heard from (monotonic): over the link (its heartbeat) or
-        on the bus (a console's liveliness); the start counts as heard."""
+        """When a console was last heard from (monotonic): its heartbeat on the bus; the start
+        counts as heard."""
         times = [self._started]
-        if self.link is not None and self.link.last_heard is not None:
-            times.append(self.link.last_heard)
         if self.bus_side is not None:
             times.append(self.bus_side.presence.last_heard())
         return max(times)
@@ -609,10 +546,7 @@ class VehicleHost:
 
         relay_task = asyncio.create_task(relay())
         try:
-            if self.link is not None:
-                await self.link.run(stop)
-            else:
-                await stop.wait()
+            await stop.wait()
         finally:
             relay_task.cancel()
 
@@ -626,11 +560,8 @@ class VehicleHost:
             self.bus_side.close()
         if self.bus is not None:
             self.bus.close()
-        self._heartbeat_sub.close()
-        self._recording_sub.close()
         self._replies_out.close()
         self.ltm.close()
-        self.core.close()
         st = self.stack
         if st.node is not None:
             await st.node.stop()

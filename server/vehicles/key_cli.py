@@ -46,14 +46,14 @@ def vehicle_key_main(
         return 2
     try:
         for name in args.names:
-            _one(keys, name, args, settings.port, out)
+            _one(keys, name, args, out)
     except VehicleKeyError as exc:
         print(f"uav-console vehicle-key: {exc}", file=err)
         return 2
     return 0
 
 
-def _one(keys: VehicleKeys, name: str, args: argparse.Namespace, port: int, out: TextIO) -> None:
+def _one(keys: VehicleKeys, name: str, args: argparse.Namespace, out: TextIO) -> None:
     if args.revoke:
         if keys.revoke(name):
             print(f"{name}'s vehicle key removed: it opens nothing any more", file=out)
@@ -69,8 +69,12 @@ def _one(keys: VehicleKeys, name: str, args: argparse.Namespace, port: int, out:
     print(f"{key.name}'s vehicle key ({how}): {key.path}", file=out)
     print("  copy it to the vehicle's computer (mode 0600) and run there:", file=out)
     print(
-        f"  uav-console vehicle --central ws://CONSOLE:{port}/vehicle-link "
+        f"  uav-console vehicle --bus-connect tcp/CONSOLE:7447 "
         f"--name {key.name} --key-file {key.path.name}",
         file=out,
     )
-    print("  (wss:// when the console serves HTTPS, with --ca and its CA file)", file=out)
+    print(
+        "  (the endpoint serve prints as 'bus: …'; tls/ off loopback, with --bus-ca and the "
+        "console's tls/ca.pem; restart serve: its bus takes the keys it finds at its start)",
+        file=out,
+    )

@@ -8,9 +8,9 @@ and hands it over in the child's environment (:data:`KEY_ENV`, never on the comm
 ``uav-console vehicle --key-file PATH`` (or :data:`KEY_ENV`).
 
 Whoever presents a key is that vehicle and nothing more: :meth:`VehicleKeys.vehicle_for` maps a
-key to its name (constant-time comparisons), and the link lets that name publish only its own
-drone's topics (:mod:`server.vehicles.access`). The store is the console's list of who may join
-as which vehicle, whatever transport carries them (user = name, password = key).
+key to its name (constant-time comparisons), and the bus lets that name publish only under its
+own name (docs/bus.md). The store is the console's list of who may join as which vehicle
+(bus user ``vehicle-NAME``, password = key).
 
 Reading a key (:func:`read_key_file`, :func:`parse_key`) needs nothing of the web stack, so the
 vehicle process can use it without importing it.
@@ -77,7 +77,7 @@ def parse_key(text: str, source: str) -> str:
         what = "several lines" if "\n" in key else "not a vehicle key"
         raise VehicleKeyError(
             f"{source} holds {what} (a vehicle key starts with {KEY_PREFIX!r}; the pilot "
-            f"token does not open the vehicle link): {_HOW}"
+            f"token does not open the bus as a vehicle): {_HOW}"
         )
     return key
 

@@ -1,7 +1,7 @@
-"""``uav-console vehicle --central ws://HOST:PORT/vehicle-link --name NAME``: a whole vehicle.
+"""``uav-console vehicle --bus-connect ENDPOINT --name NAME``: a whole vehicle.
 
 Settings come from ``UAVC_*`` (``serve`` passes all of its own to the vehicles it spawns) and
-the flags. The link opens with the vehicle's own key: ``--key-file PATH`` or ``UAVC_VEHICLE_KEY``
+the flags. It joins the bus with the vehicle's own key: ``--key-file PATH`` or ``UAVC_VEHICLE_KEY``
 (``serve`` puts it there for the vehicles it spawns; for a vehicle on another computer the
 console's operator makes it with ``uav-console vehicle-key NAME``). The pilot token
 (``--token`` or ``UAVC_TOKEN``) and the safety door's ticket secret ``UAVC_DOOR_SECRET`` (hex;
@@ -29,11 +29,8 @@ log = logging.getLogger("uav_console.vehicle")
 def whole_vehicle_main(args: argparse.Namespace, settings: Settings) -> int:
     """Run the vehicle: ``args`` its own flags, ``settings`` read once by the command."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    if args.central is None and not settings.bus_connect:
-        print(
-            "uav-console vehicle: --bus-connect ENDPOINT (or --central URL) is needed",
-            file=sys.stderr,
-        )
+    if not settings.bus_connect:
+        print("uav-console vehicle: --bus-connect ENDPOINT is needed", file=sys.stderr)
         return 2
     try:
         check_name(args.name)
@@ -57,7 +54,6 @@ def whole_vehicle_main(args: argparse.Namespace, settings: Settings) -> int:
         print("uav-console vehicle: UAVC_DOOR_SECRET is not hex", file=sys.stderr)
         return 2
     options = VehicleOptions(
-        central=args.central,
         name=args.name,
         prefix=f"/{args.name}" if args.prefix is None else args.prefix.rstrip("/"),
         index=index,
@@ -67,8 +63,6 @@ def whole_vehicle_main(args: argparse.Namespace, settings: Settings) -> int:
         safety_key=args.safety_key,
         door_secret=door_secret,
         parent_pid=args.parent_pid,
-        ca_file=args.ca,
-        fingerprint=args.fingerprint,
     )
     try:
         asyncio.run(run_vehicle(settings, options, key, safety_token=safety_token))

@@ -1,8 +1,9 @@
 """Names on the graph that a vehicle process adds to the drone's ordinary topics (DESIGN §4).
 
-A vehicle process puts its drone on the central graph through the vehicle link
-(``/vehicle-link``, rosbridge v2): the same topics and services an in-process drone has
-(``/ardrone/navdata``, ``/uav/pose``, ``/console/reply`` …, prefixed in a fleet) plus these:
+A vehicle process shows its drone on its consoles' graphs through the bus (docs/bus.md: its
+graph topics on ``uavc/<fleet>/<drone>/graph/…``, its control ops as ``cmd`` queries): the same
+topics an in-process drone has (``/ardrone/navdata``, ``/uav/pose`` …, prefixed in a fleet)
+plus these:
 
 - ``/NAME/vehicle/info`` (std_msgs/String, latched; ``data`` = JSON ``{name, prefix,
   simulated, door_url, door_tickets, pid}``): announces the vehicle; the central registry
@@ -20,14 +21,10 @@ A vehicle process puts its drone on the central graph through the vehicle link
   says; ``/NAME/vehicle/reply`` (uav_console/Reply): what the vehicle's nodes say themselves (a
   command past its deadline, a MAVLink autopilot's denial), checked and re-published by the
   console (:mod:`server.vehicles.relay`). The vehicle runs no dialog: the console is the only
-  publisher of ``/console/reply``, ``PREFIX/console/state`` and ``PREFIX/console/interpret``;
-- ``/console/recording`` (std_msgs/String, latched, from the central server): the id of the
-  flight recording being written (``""``: none), for the vehicle's audit rows; published before
-  an operator's command is passed on, so its rows carry the recording it opened;
-- ``/vehicles/heartbeat`` (std_msgs/String, from the central server at 10 Hz; ``data`` = JSON
-  ``{n, t}``, a counter and the server's Unix time): a vehicle that hears nothing from the
-  central server for ``central_timeout_s`` hovers, and lands after ``central_loss_land_s``; ``t``
-  gives it the offset of the server's clock for command deadlines.
+  publisher of ``/console/reply``, ``PREFIX/console/state`` and ``PREFIX/console/interpret``.
+
+A console's heartbeat (its clock, and the id of the flight recording being written, for the
+vehicle's audit rows) is on the bus: ``uavc/<fleet>/console/<name>/heartbeat``.
 """
 
 from __future__ import annotations
@@ -36,10 +33,10 @@ from pathlib import Path
 
 STRING = "std_msgs/String"
 CONTROL_TYPE = "uav_console/VehicleControl"
+# The console's beat on its graph (``{n, t}``: a counter and its Unix time, 10 Hz), by which a
+# page or rosbridge client tells a stalled console (web/static/js/app.js).
 HEARTBEAT = "/vehicles/heartbeat"
-RECORDING = "/console/recording"
-HEARTBEAT_PERIOD_S = 0.1
-LINK_PATH = "/vehicle-link"
+HEARTBEAT_PERIOD_S = 0.1  # the console's beat, on its graph and on the bus
 # A vehicle process's exit status when it cannot start here (errors.CannotStart): its
 # supervisor does not start it again, since it would fail the same way.
 EXIT_CANNOT_START = 3

@@ -7,7 +7,7 @@ a MAVLink autopilot's denials and failsafes (:mod:`server.nodes.mavros_node`).
 
 Vehicle side (:func:`replies_out`, on the vehicle's own graph): what is said on
 ``/console/reply`` is copied to ``/NAME/vehicle/reply`` (:mod:`server.vehicles.names`), which
-the link and the bus carry.
+the bus carries.
 
 Console side (:class:`ReplyRelay`, on the central graph): each reply is checked (it names this
 vehicle's drone, or none, then it is filled in; a known level; text that is text) and published
@@ -24,7 +24,7 @@ from typing import Any
 from server.graph import Graph, Subscription
 from server.vehicles import names
 
-log = logging.getLogger("uav_console.vehicle_link")
+log = logging.getLogger("uav_console.vehicles")
 
 REPLY = "/console/reply"
 REPLY_TYPE = "uav_console/Reply"

@@ -2,7 +2,7 @@
 
 :class:`RemoteDroneStack` answers everything the REST routes ask of a
 :class:`~server.vehicles.stack.DroneStack` (telemetry, direct actions, the latest JPEG, ground
-truth, faults) from what the vehicle publishes over the link (``/NAME/vehicle/telemetry``, the
+truth, faults) from what the vehicle publishes on the bus (``/NAME/vehicle/telemetry``, the
 camera topic) and through its control service; the drone's dialog runs in this process
 (:mod:`server.vehicles.console_dialog`) and hands the vehicle typed commands. Stops (land,
 emergency) are sent and answered at once ("emergency sent"), as in-process; other direct
@@ -13,7 +13,7 @@ A vehicle that ``serve`` has just spawned (or restarted) takes a few seconds to 
 meanwhile wait for it (:attr:`RemoteDroneStack.expected_until`, at most ``JOIN_WAIT_S``) instead
 of failing; a vehicle that does not come raises :class:`VehicleUnavailable` (REST: 503). A spoken
 or typed command waits less (``COMMAND_JOIN_WAIT_S``), and is not sent to a vehicle that is on
-the link but silent (no telemetry for ``SILENT_S``: stopped, stalled), where it would wait in a
+the bus but silent (no telemetry for ``SILENT_S``: stopped, stalled), where it would wait in a
 socket buffer and act whenever the process came back; one that falls silent while the command
 is being answered is not waited for either: 503 with ``Retry-After`` at once, the caller retries.
 """
@@ -110,7 +110,7 @@ class RemoteDroneStack(DroneStack):
         self._jpeg: tuple[int, bytes | None] = (-1, None)
         self._jpeg_count = 0
         self._pending: set[asyncio.Task[Any]] = set()
-        # monotonic time until which a vehicle that is not on the link is expected to join
+        # monotonic time until which a vehicle that is not on the bus is expected to join
         # (set when ``serve`` spawns or restarts its process); None: not expected.
         self.expected_until: float | None = None
         # set by VehicleCentral: opens the flight recording and tells the vehicle its id
@@ -166,7 +166,7 @@ class RemoteDroneStack(DroneStack):
         """The vehicle's telemetry: asked of it now from a worker thread (a sync REST route,
         so a read right after ``/sim/{id}/truth`` or an action is as fresh as in-process), else
         the last periodic one (≤ 0.1 s old). Before its first telemetry a starting vehicle
-        is waited for; one that is gone answers with its last telemetry (link lost).
+        is waited for; one that is gone answers with its last telemetry (the vehicle lost).
 
         Raises:
             VehicleUnavailable: nothing was ever heard from the vehicle and it did not join.
@@ -222,7 +222,7 @@ class RemoteDroneStack(DroneStack):
         the vehicle's verdict, which its dialog also says aloud when it refuses.
 
         Raises:
-            VehicleUnavailable: the vehicle is not on the link (a stop is sent all the same).
+            VehicleUnavailable: the vehicle is not on the bus (a stop is sent all the same).
         """
         if action in STOPS:
             self.direct(action)
@@ -244,7 +244,7 @@ class RemoteDroneStack(DroneStack):
         its deadline again as it receives it, then checks and does it, as :meth:`act`.
 
         Raises:
-            VehicleUnavailable: the vehicle is not on the link.
+            VehicleUnavailable: the vehicle is not on the bus.
         """
         args: dict[str, Any] = {"op": "direct", "action": action, "check": True}
         args["battery_low_pct"] = battery_low_pct
@@ -273,7 +273,7 @@ class RemoteDroneStack(DroneStack):
         answers "sent, not confirmed" (``delivered`` None), so the page keeps trying.
 
         Raises:
-            VehicleUnavailable: the vehicle is not on the link (the stop is still sent).
+            VehicleUnavailable: the vehicle is not on the bus (the stop is still sent).
         """
         args: dict[str, Any] = {"op": "direct", "action": action, "id": stop_id}
         args["issued"] = issued
@@ -380,7 +380,7 @@ class RemoteDroneStack(DroneStack):
     # ------------------------------------------------------------------ calls
     @property
     def joined(self) -> bool:
-        """Whether the vehicle is on the link now (its control service is on the graph)."""
+        """Whether the vehicle's control service is on the graph (a bus drone: its liveliness)."""
         return self.graph.service_type(names.control_service(self.name)) is not None
 
     def expect(self, wait_s: float = JOIN_WAIT_S) -> None:
@@ -398,7 +398,7 @@ class RemoteDroneStack(DroneStack):
         return VehicleUnavailable(f"{self.name}'s flight process {why}", drone=self.name)
 
     async def wait_joined(self, max_wait_s: float | None = None) -> None:
-        """Return once the vehicle is on the link; wait while it is expected to join (at most
+        """Return once the vehicle is on the bus; wait while it is expected to join (at most
         ``max_wait_s`` when given).
 
         Raises:
@@ -433,7 +433,7 @@ class RemoteDroneStack(DroneStack):
         stopped that long is not called, and the call is given up if it stops meanwhile.
 
         Raises:
-            VehicleUnavailable: the vehicle is not on the link (or silent).
+            VehicleUnavailable: the vehicle is not on the bus (or silent).
             GraphError: the call failed or was not answered in ``timeout_s``.
         """
         await self.wait_joined(join_wait_s)
@@ -459,7 +459,7 @@ class RemoteDroneStack(DroneStack):
                 if done:
                     return call.result()
                 # Our own loop stalled (a burst of untrusted input): the telemetry may be
-                # waiting in the link's socket; judge the vehicle on the next round.
+                # waiting on the bus; judge the vehicle on the next round.
                 stalled, polled = time.monotonic() - polled > 0.5, time.monotonic()
                 if not stalled and self.silent_for() > silent_s:
                     raise self._unavailable(

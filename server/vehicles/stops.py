@@ -1,7 +1,7 @@
 """Each stop runs once, whichever road brings it first, and never after it was superseded.
 
 The page sends every Land, Hover and Emergency down two roads at once with one id (the console:
-REST → vehicle link; the vehicle's safety door). :class:`StopLedger` is where a vehicle decides
+REST → the bus; the vehicle's safety door). :class:`StopLedger` is where a vehicle decides
 what a stop that arrives means: run it (first arrival), answer with the first delivery (the copy
 from the other road), or drop it (the operator has issued a newer command since: ``supersede``).
 Pure: time is passed in (unix seconds, the clock ``issued`` is on); bounded memory.

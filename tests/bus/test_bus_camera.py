@@ -28,10 +28,9 @@ from server.graph import Graph
 from server.msgs import header
 from server.nodes.vehicle_node import IMAGE
 from server.rosbridge.context import JsonCache
-from server.vehicles import names
 from server.vehicles.bus_remote import BusDroneStack
 from server.vehicles.bus_vehicle import BusVehicleSide
-from server.vehicles.link_core import LinkSpec, TopicSpec
+from server.vehicles.spec import LinkSpec, TopicSpec
 from tests.support.loopback import free_port
 from tests.support.polling import until_async
 
@@ -138,17 +137,10 @@ def test_a_vehicle_sends_each_frame_as_made_and_the_console_shows_its_stamp(
 ) -> None:
     """The vehicle side (:class:`BusVehicleSide`) puts each frame of its node's camera topic on
     the bus as it is published, stamped; the console's graph shows the same JPEG with that
-    stamp, and while a vehicle link carries the rest of the drone's graph too."""
+    stamp."""
 
     async def main() -> None:
         side = Console(console)
-
-        async def control(_: dict[str, Any]) -> dict[str, Any]:
-            return {}
-
-        # a vehicle link carries the drone's graph here: its control service is on the graph
-        side.graph.advertise_service(names.control_service(NAME), names.CONTROL_TYPE, control)
-        assert side.stack.linked
         cred = console.vehicle_credential(NAME)
         bus = VehicleBus(list(cred.connect), cred.user, cred.password, "default", NAME)
         bus.start()

@@ -17,9 +17,10 @@ import zenoh
 from drone.bus import keys
 from drone.bus.config import OBSERVER_USER, client_config
 from drone.bus.console import ConsoleBus
+from drone.bus.credentials import Credentials
 from drone.bus.errors import BusConfigError
 from drone.bus.payloads import Telemetry, decode_telemetry, encode
-from drone.bus.session import free_listen_endpoint, open_session
+from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session
 from drone.bus.vehicle import VehicleBus
 from tests.support.loopback import free_port
 from tests.support.polling import wait_for
@@ -215,6 +216,18 @@ def test_the_default_endpoint_moves_to_the_next_free_port() -> None:
     assert moved != f"tcp/127.0.0.1:{port}" and moved.startswith("tcp/127.0.0.1:")
 
 
+def test_a_port_whose_connections_linger_in_time_wait_is_free() -> None:
+    """A router killed with clients connected leaves its side of each connection in
+    ``TIME_WAIT`` on its port; nothing listens there, so a router may listen there again."""
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        port = listener.getsockname()[1]
+        with socket.create_connection(("127.0.0.1", port)) as dialler:
+            accepted, _ = listener.accept()
+            accepted.close()  # the listening side closes first: its end waits in TIME_WAIT
+            dialler.recv(1)
+    assert free_listen_endpoint(f"tcp/127.0.0.1:{port}") == f"tcp/127.0.0.1:{port}"
+
+
 def test_a_vehicle_joins_with_its_vehicle_key(tmp_path: Path) -> None:
     """The console's vehicle keys are the bus passwords: one credential per vehicle, also for
     a vehicle from elsewhere whose key was made with ``uav-console vehicle-key``."""
@@ -237,3 +250,61 @@ def test_a_vehicle_joins_with_its_vehicle_key(tmp_path: Path) -> None:
             VehicleBus(bus.listen, "vehicle-uav1", "uavk_seven", "default", "uav1").start()
     finally:
         bus.close()
+
+
+ROUTER = """
+import sys
+from pathlib import Path
+from drone.bus.console import ConsoleBus
+from drone.bus.credentials import Credentials
+bus = ConsoleBus(Path(sys.argv[1]), "default", ["uav1"], name="console")
+bus.start()
+print(bus.listen[0], flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_console_restarted_after_a_kill_listens_where_it_did_and_its_vehicles_rejoin(
+    tmp_path: Path,
+) -> None:
+    """``kill -9`` of a console's router (its vehicle connected): the console restarted on the
+    same data directory listens on the endpoint it had, though the killed router's connections
+    linger in ``TIME_WAIT`` on that port, and the vehicle, which knows no other, is on its bus
+    again."""
+    directory = tmp_path / "bus"
+    uav1: VehicleBus | None = None
+    bus: ConsoleBus | None = None
+    # the first free port from the default is taken while the first router starts (another
+    # console's, say), and free again when the second one does
+    first_free = int(free_listen_endpoint(DEFAULT_LISTEN).rpartition(":")[2])
+    with (
+        socket.create_server(("127.0.0.1", first_free)) as held,
+        subprocess.Popen(
+            [sys.executable, "-c", ROUTER, str(directory)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        ) as proc,
+    ):
+        try:
+            assert proc.stdout is not None
+            endpoint = proc.stdout.readline().strip()
+            assert endpoint.startswith("tcp/127.0.0.1:"), endpoint
+            password = Credentials.load_or_create(directory, ["uav1"], {}, None).password(
+                "vehicle-uav1"
+            )
+            uav1 = VehicleBus([endpoint], "vehicle-uav1", password, "default", "uav1")
+            uav1.start()
+            proc.kill()
+            proc.wait()
+            held.close()
+            bus = ConsoleBus(directory, "default", ["uav1"], name="console")
+            assert bus.listen == [endpoint]
+            bus.start()
+            wait_for(bus.alive, lambda a: a == ["uav1"], 20, "uav1 alive on the restarted console")
+        finally:
+            proc.kill()
+            if uav1 is not None:
+                uav1.close()
+            if bus is not None:
+                bus.close()

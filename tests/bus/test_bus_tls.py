@@ -29,7 +29,7 @@ from server.http.tls import ensure_ca
 from server.settings import Settings
 from server.vehicles.central import bus_tls
 from server.vehicles.host import join_bus
-from tests.isolation.conftest import HOST, ROOT, serve
+from tests.isolation.conftest import ROOT, serve
 from tests.isolation.conftest import wait_for as poll
 from tests.support.loopback import free_port, fresh_address
 from tests.support.polling import wait_for
@@ -221,8 +221,7 @@ def test_serve_with_bus_tls_on_its_vehicles_and_a_script_and_an_outside_vehicle_
         child.pop("UAVC_VEHICLE_KEY", None)
         child["UAVC_DATA_DIR"] = str(tmp_path / "vehicle-data")  # no CA of its own there
         argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav7", "--drone", "sim"]
-        argv += ["--central", f"ws://{HOST}:{srv.port}/vehicle-link", "--index", "0"]
-        argv += ["--key-file", str(tmp_path / "data" / "vehicle-keys" / "uav7.key")]
+        argv += ["--index", "0", "--key-file", str(tmp_path / "data" / "vehicle-keys" / "uav7.key")]
         argv += ["--bus-connect", f"tls/127.0.0.1:{port}"]
         argv += ["--bus-ca", str(tmp_path / "data" / "tls" / "ca.pem")]
         with open(tmp_path / "uav7.log", "wb") as log:

@@ -398,14 +398,19 @@ def test_a_console_started_first_joins_the_one_it_names_when_that_one_comes(
             wait_for(lambda: not rig.flying(east), "the landing", 40)
 
 
-def test_a_vehicle_needs_a_bus_or_a_central(
+def test_a_vehicle_needs_a_bus(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from server.cli import main as cli_main
 
     monkeypatch.delenv("UAVC_BUS_CONNECT", raising=False)
     assert cli_main(["vehicle", "--name", NAME]) == 2
-    assert "--bus-connect ENDPOINT (or --central URL) is needed" in capsys.readouterr().err
+    assert "--bus-connect ENDPOINT is needed" in capsys.readouterr().err
+    # the rosbridge vehicle link is gone: one line saying what joins a console instead
+    link = ["vehicle", "--name", NAME, "--central", "ws://127.0.0.1:8000/vehicle-link"]
+    assert cli_main(link) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--bus-connect ENDPOINT" in err and "not --central" in err
 
 
 def test_a_bus_vehicle_hovers_then_lands_when_its_console_stalls(tmp_path: Path) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import socket
 import statistics
 import subprocess
 import sys
@@ -90,8 +91,7 @@ def test_a_vehicle_from_elsewhere_joins_the_bus_with_its_key(tmp_path: Path) -> 
         env.pop("UAVC_VEHICLE_KEY", None)
         env["UAVC_DATA_DIR"] = str(tmp_path / "vehicle-data")
         argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav7", "--drone", "sim"]
-        argv += ["--central", f"ws://{HOST}:{srv.port}/vehicle-link", "--index", "0"]
-        argv += ["--key-file", str(key_file), "--bus-connect", endpoint]
+        argv += ["--index", "0", "--key-file", str(key_file), "--bus-connect", endpoint]
         with open(tmp_path / "uav7.log", "wb") as log:
             proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
         try:
@@ -103,3 +103,23 @@ def test_a_vehicle_from_elsewhere_joins_the_bus_with_its_key(tmp_path: Path) -> 
         finally:
             proc.terminate()
             proc.wait(20)
+
+
+def test_serve_refuses_to_start_when_its_bus_cannot(tmp_path: Path) -> None:
+    """The vehicle processes join the console over its bus: a router that cannot listen where
+    it is told stops ``serve`` with one line saying why and what to change, before any drone
+    starts."""
+    with socket.create_server(("127.0.0.1", 0)) as held:  # a port taken by someone else
+        endpoint = f"tcp/127.0.0.1:{held.getsockname()[1]}"
+        env = {**os.environ, "UAVC_DATA_DIR": str(tmp_path / "data")}
+        argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port"]
+        argv += [str(free_port(HOST)), "--drone", "sim", "--sim-addr", fresh_address()]
+        argv += ["--vehicles", "process", "--bus-listen", endpoint]
+        out = subprocess.run(
+            argv, cwd=ROOT, env=env, capture_output=True, text=True, timeout=START_S
+        )
+    assert out.returncode == 2, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1, out.stderr
+    assert lines[0].startswith("uav-console serve: error: the bus did not start: "), lines
+    assert "--bus-listen ENDPOINT" in lines[0] and "--vehicles inline" in lines[0]

@@ -81,7 +81,6 @@ def vehicle(
     tmp: Path,
     name: str,
     index: int,
-    central: Served,
     bus: list[str],
     extra_env: dict[str, str] | None = None,
 ) -> Iterator[Any]:
@@ -91,8 +90,7 @@ def vehicle(
     env.pop("UAVC_VEHICLE_KEY", None)
     env["UAVC_DATA_DIR"] = str(tmp / f"{name}-data")
     argv = [sys.executable, "-m", "server", "vehicle", "--name", name, "--drone", "sim"]
-    argv += ["--central", f"ws://{HOST}:{central.port}/vehicle-link", "--index", str(index)]
-    argv += ["--key-file", str(key_file), "--token", PILOT]
+    argv += ["--index", str(index), "--key-file", str(key_file), "--token", PILOT]
     for endpoint in bus:
         argv += ["--bus-connect", endpoint]
     with open(tmp / f"{name}.log", "wb") as log:
@@ -160,7 +158,7 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
         assert seen["role"] == "standby" and seen["central"] == "console-a"
         assert central_of(a)["role"] == "central"  # the incumbent keeps it
         for i, name in enumerate(("uav1", "uav2")):
-            stack.enter_context(vehicle(tmp_path, name, i, a, [bus_a, bus_b]))
+            stack.enter_context(vehicle(tmp_path, name, i, [bus_a, bus_b]))
         wait_for(
             lambda: (
                 sorted(central_of(a)["on_bus"]) == ["uav1", "uav2"]

@@ -85,7 +85,7 @@ def test_a_drone_on_a_plan_flies_on_for_the_grace_then_home(tmp_path: Path) -> N
         # the vehicle starts while the console takes the central role (it joins the bus, which
         # the console opens before it answers; the site router needs the fleet's credentials)
         a = stack.enter_context(serve(tmp_path, "console-a", extra))
-        stack.enter_context(vehicle(tmp_path, "uav1", 0, a, [bus_a, bus_t], grace_env))
+        stack.enter_context(vehicle(tmp_path, "uav1", 0, [bus_a, bus_t], grace_env))
         router = SiteRouter(tmp_path / "data" / "bus", bus_t, [bus_a])
         stack.callback(router.close)
         wait_for(lambda: central_of(a)["role"] == "central", "console-a central", 30)

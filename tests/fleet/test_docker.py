@@ -41,13 +41,16 @@ def test_compose_shape() -> None:
         sim_ip = services[f"sim{k}"]["networks"]["fleet"]["ipv4_address"]
         cmd = services[f"vehicle{k}"]["command"]
         assert cmd[cmd.index("--drone") + 1] == sim_ip
-        assert cmd[cmd.index("--central") + 1] == "ws://central:8000/vehicle-link"
+        assert "--central" not in cmd  # the whole vehicle joins over the bus alone
         assert services[f"sim{k}"]["command"][2] == sim_ip
         # its own key, made by the one-shot `keys` service in the central's data volume
         assert cmd[cmd.index("--key-file") + 1] == f"/central/vehicle-keys/uav{k}.key"
         assert f"uav{k}" in services["keys"]["command"]
         assert services[f"vehicle{k}"]["volumes"] == ["central-data:/central:ro"]
-        assert cmd[cmd.index("--bus-connect") + 1] == "tcp/central:7447"
+        # the central listens off loopback, so over TLS: its CA is in its data volume
+        assert cmd[cmd.index("--bus-connect") + 1] == "tls/central:7447"
+        assert cmd[cmd.index("--bus-ca") + 1] == "/central/tls/ca.pem"
+    assert services["central"]["hostname"] == "central"  # named by its bus certificate
 
 
 @pytest.mark.parametrize("service", ["keys", "central", "sim1", "sim2", "vehicle1", "vehicle2"])

@@ -14,6 +14,7 @@ import json  # noqa: E402
 import os  # noqa: E402
 import resource  # noqa: E402
 import sys  # noqa: E402
+from typing import Any  # noqa: E402
 
 # What the vehicle process must not carry (issue 27): the web stack and the console's parts.
 ABSENT = {
@@ -31,11 +32,19 @@ async def main(addr: str, data_dir: str) -> dict[str, object]:
     from server.settings import Settings
     from server.vehicles.host import VehicleHost, VehicleOptions
 
-    settings = Settings.from_env(drone="sim", world="indoor", data_dir=data_dir)
-    settings = settings.with_(sim_base_addr=addr)
     # Port 9 (the discard service's), where no console listens: bench/lean_vehicle.py runs this
-    # probe against other checkouts too, so it imports nothing from tests/.
-    options = VehicleOptions(central="ws://127.0.0.1:9/vehicle-link", name="uav1", prefix="")
+    # probe against other checkouts too (a vehicle on the bus, or on a vehicle link before
+    # there was a bus), so it imports nothing from tests/.
+    bus: dict[str, Any] = {}
+    if "bus_connect" in Settings.model_fields:
+        bus["bus_connect"] = ("tcp/127.0.0.1:9",)
+    settings = Settings.from_env(drone="sim", world="indoor", data_dir=data_dir, **bus)
+    settings = settings.with_(sim_base_addr=addr)
+    fields = getattr(VehicleOptions, "__dataclass_fields__", {})
+    link: dict[str, Any] = {}
+    if "central" in fields:
+        link["central"] = "ws://127.0.0.1:9/vehicle-link"
+    options = VehicleOptions(name="uav1", prefix="", **link)
     host = VehicleHost(settings, options, "k" * 43, safety_token="probe-token")
     await host.start()
     started_s = time.perf_counter() - T0

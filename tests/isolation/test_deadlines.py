@@ -269,22 +269,3 @@ def test_a_take_off_queued_while_the_vehicle_is_stopped_is_dropped_by_the_vehicl
         assert srv.vehicle()["connected"]
     finally:
         pilot.close()
-
-
-def test_the_vehicle_link_moves_issued_onto_the_vehicles_clock() -> None:
-    """The link core publishes a command with its frame's ``issued`` through ``to_local``
-    (the vehicle's clock offset); a frame without one carries none."""
-    from server.graph import Graph
-    from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
-
-    graph = Graph()
-    core = GraphLinkCore(
-        graph, LinkSpec(in_topics=(TopicSpec("/cmd_vel", TWIST),)), to_local=lambda t: t - 7.0
-    )
-    seen: list[float | None] = []
-    graph.subscribe("/cmd_vel", lambda _m: seen.append(graph.issued))
-    core.receive(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": STILL, "issued": 100.0}))
-    core.receive(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": STILL}))
-    core.receive('{"op": "publish", "topic": "/cmd_vel", "msg": {}, "issued": NaN}')
-    assert seen == [93.0, None]  # the NaN-stamped one is dropped, with the reason
-    assert any("bad issued" in e for e in core.errors)

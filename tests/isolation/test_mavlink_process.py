@@ -1,6 +1,6 @@
 """MAVLink drones fly in their own process too (issue 14): ``serve --vehicles process --drone
 sim-mavlink`` spawns a vehicle that starts and owns the simulated PX4, drives it over TCP, and
-joins the web process over ``/vehicle-link``; a mixed fleet (``--drone sim,sim-mavlink``) puts
+joins the web process over the bus; a mixed fleet (``--drone sim,sim-mavlink``) puts
 each drone, AR.Drone and PX4, in a process of its own. (A single PX4 in its own process, flying,
 is checked on the server of tests/isolation/test_mavlink_safety.py, which this file's helpers
 serve too.)

@@ -250,12 +250,17 @@ def test_web_process_crash_vehicle_keeps_flying_and_is_adopted_by_the_next_serve
     tmp_path: Path,
 ) -> None:
     """kill -9 of ``serve``: its vehicle hovers on (no heartbeat), and a new ``serve`` on the same
-    port adopts the same vehicle process instead of starting a second one."""
+    port and data directory listens on the bus where the first did and adopts the same vehicle
+    process instead of starting a second one; "land" lands it."""
     addr = fresh_address()
-    env = {"UAVC_CENTRAL_LOSS_LAND_S": "60"}
+    # the bus where serve puts it by default: where it listened last, else 7447 or the next
+    env = {"UAVC_CENTRAL_LOSS_LAND_S": "60", "UAVC_BUS_LISTEN": ""}
     with SimThread(addr) as sim:
         with serve(tmp_path, addr, extra=("--vehicles", "process"), env=env) as first:
             pid = first.wait_vehicle()["pid"]
+            argv = Path(f"/proc/{pid}/cmdline").read_text().split("\0")
+            assert "--bus-connect" in argv and "--central" not in argv, argv  # the bus alone
+            endpoints = first.http.get("/api/v1/health").json()["bus"]["endpoints"]
             take_off(sim, first, localise=False)
             first.proc.kill()  # SIGKILL: no clean shutdown, the vehicle is orphaned
             first.proc.wait()
@@ -265,8 +270,10 @@ def test_web_process_crash_vehicle_keeps_flying_and_is_adopted_by_the_next_serve
         with serve(tmp_path, addr, extra=("--vehicles", "process"), env=env, port=port) as second:
             again = second.wait_vehicle()
             assert again["pid"] == pid, "the new serve should adopt the running vehicle"
+            assert second.http.get("/api/v1/health").json()["bus"]["endpoints"] == endpoints
             assert sim.truth.flying
-            land(sim, second)
+            assert second.command("land")["accepted"], second.log()
+            wait_for(lambda: not sim.truth.flying, "the adopted vehicle to land", 30)
         # the second serve stopped: it asked the adopted vehicle to stop too
         wait_for(lambda: not _alive(pid), "the adopted vehicle to exit", 30)
 

@@ -1,8 +1,8 @@
-"""Issue 13 item 11: ``uav-console vehicle --central …/vehicle-link`` processes on their own (as
-on other computers, or the docker compose services) join a central ``serve --drone none`` and
-become whole drones of it: REST telemetry, typed commands, ground truth, the fleet status. Each
-joins with the key the console's operator made for it (``uav-console vehicle-key NAME``), read
-from a file (``--key-file``)."""
+"""``uav-console vehicle --bus-connect ENDPOINT`` processes on their own (as on other computers,
+or the docker compose services) join a central ``serve --drone none`` on its bus and become
+whole drones of it: REST telemetry, typed commands, ground truth, the fleet status. Each joins
+with the key the console's operator made for it before ``serve`` started (``uav-console
+vehicle-key NAME``), read from a file (``--key-file``)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from server.cli import main as cli_main
-from tests.isolation.conftest import HOST, PILOT, ROOT, Served, serve, wait_for
+from tests.isolation.conftest import PILOT, ROOT, Served, serve, wait_for
 from tests.support.loopback import fresh_address
 
 pytestmark = pytest.mark.timeout(180)
@@ -24,14 +24,12 @@ pytestmark = pytest.mark.timeout(180)
 
 @contextlib.contextmanager
 def vehicle(srv: Served, name: str, sim_addr: str, tmp: Path) -> Iterator[subprocess.Popen[bytes]]:
-    # The operator makes the vehicle's key on the console's computer (its data directory).
-    assert cli_main(["vehicle-key", name, "--data-dir", str(tmp / "data")]) == 0
     key_file = tmp / "data" / "vehicle-keys" / f"{name}.key"
     env = {**os.environ, "UAVC_TOKEN": PILOT, "UAVC_SIM_BASE_ADDR": sim_addr}
     env.pop("UAVC_VEHICLE_KEY", None)
     env["UAVC_DATA_DIR"] = str(tmp / "data")
-    url = f"ws://{HOST}:{srv.port}/vehicle-link"
-    argv = [sys.executable, "-m", "server", "vehicle", "--central", url, "--name", name]
+    bus = srv.http.get("/api/v1/health").json()["bus"]["endpoints"][0]
+    argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", bus, "--name", name]
     argv += ["--world", "outdoor", "--drone", "sim", "--index", "0", "--key-file", str(key_file)]
     with open(tmp / f"{name}.log", "wb") as log:
         proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
@@ -47,6 +45,8 @@ def vehicle(srv: Served, name: str, sim_addr: str, tmp: Path) -> Iterator[subpro
 
 
 def test_remote_vehicles_join_a_central_server_as_whole_drones(tmp_path: Path) -> None:
+    # The operator makes the vehicles' keys on the console's computer (its data directory).
+    assert cli_main(["vehicle-key", "uav1", "uav2", "--data-dir", str(tmp_path / "data")]) == 0
     with (
         serve(tmp_path, "none", extra=("--world", "outdoor")) as srv,
         vehicle(srv, "uav1", fresh_address(), tmp_path),

@@ -82,10 +82,10 @@ def test_two_consoles_fly_their_own_drones(tmp_path: Path) -> None:
             )
 
             # a vehicle whose simulator address was taken between the look and the start
-            link = f"ws://127.0.0.1:{first.port}/vehicle-link"
+            bus = first.http.get("/api/v1/health").json()["bus"]["endpoints"][0]
             argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav1", "--index", "0"]
             vehicle = subprocess.run(
-                [*argv, "--central", link, "--world", "indoor"],
+                [*argv, "--bus-connect", bus, "--world", "indoor"],
                 cwd=ROOT,
                 env={
                     **os.environ,

@@ -1,12 +1,9 @@
 """Unit tests of the isolation parts: the central-loss watch, the safety door's URLs and
-origins (the door itself: test_door.py), the graph link's frames, the children's environment."""
+origins (the door itself: test_door.py), the children's environment."""
 
 from __future__ import annotations
 
-import asyncio
-import json
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -14,7 +11,6 @@ from server.graph import Graph
 from server.settings import Settings, SettingsError
 from server.vehicles.central import child_env
 from server.vehicles.door import advertised_url, page_origin
-from server.vehicles.link_core import GraphLinkCore, LinkSpec, TopicSpec
 from server.vehicles.watch import CentralWatch, LossAction
 
 # ------------------------------------------------------------------------------ CentralWatch
@@ -69,115 +65,6 @@ def test_the_console_page_on_the_requested_host_is_an_allowed_origin() -> None:
     assert not page_origin("http://evil.example:8000", "evil.example:5001", 8000)
     assert not page_origin("https://192.168.1.7:8000", None, 8000)
     assert not page_origin("https://192.168.1.7:8000.evil", "192.168.1.7:5001", 8000)
-
-
-# ------------------------------------------------------------------------------ graph link
-
-
-def make_core() -> tuple[Graph, GraphLinkCore]:
-    g = Graph()
-    spec = LinkSpec(
-        out_topics=(TopicSpec("/uav/task", "std_msgs/String", latch=True),),
-        in_topics=(TopicSpec("/cmd_vel", "geometry_msgs/Twist"),),
-        out_services=(("/uav1/vehicle/control", "uav_console/VehicleControl"),),
-    )
-    g.advertise("/uav/task", "std_msgs/String", latch=True)
-    return g, GraphLinkCore(g, spec)
-
-
-def ops(frames: list[str]) -> list[tuple[str, str]]:
-    out = []
-    for f in frames:
-        o = json.loads(f)
-        out.append((o["op"], o.get("topic") or o.get("service") or ""))
-    return out
-
-
-def test_link_hello_declares_everything_and_resends_latched() -> None:
-    g, core = make_core()
-    g.publish("/uav/task", {"data": "idle"})
-    assert core.drain() == []  # not connected: nothing queued
-    assert ops(core.hello()) == [
-        ("advertise", "/uav/task"),
-        ("advertise_service", "/uav1/vehicle/control"),
-        ("subscribe", "/cmd_vel"),
-        ("publish", "/uav/task"),
-    ]
-    g.publish("/uav/task", {"data": "flying"})
-    [frame] = core.drain()
-    assert json.loads(frame)["msg"] == {"data": "flying"}
-
-
-def test_a_topic_left_out_of_the_link_is_neither_sent_nor_advertised() -> None:
-    """The camera of a vehicle on the bus: the link carries the rest, not its frames."""
-    g = Graph()
-    image = "/uav1/ardrone/image_raw/compressed"
-    spec = LinkSpec(
-        out_topics=(
-            TopicSpec("/uav/task", "std_msgs/String"),
-            TopicSpec(image, "sensor_msgs/CompressedImage"),
-        )
-    )
-    for t in spec.out_topics:
-        g.advertise(t.name, t.type)
-    core = GraphLinkCore(g, spec)
-    core.leave_out({image})
-    assert ops(core.hello()) == [("advertise", "/uav/task")]
-    g.publish(image, {"format": "jpeg", "data": b"\xff\xd8"})
-    g.publish("/uav/task", {"data": "idle"})
-    assert ops(core.drain()) == [("publish", "/uav/task")]
-    core.close()
-
-
-def test_link_delivers_server_messages_and_counts_bad_frames() -> None:
-    g, core = make_core()
-    got: list[dict[str, Any]] = []
-    g.subscribe("/cmd_vel", got.append)
-    core.hello()
-    twist = {"linear": {"x": 0.1}}
-    core.receive(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": twist}))
-    assert got == [twist]
-    for bad in ("{", "[]", json.dumps({"op": "publish", "topic": 3, "msg": {}})):
-        core.receive(bad)
-    assert len(core.errors) == 3
-
-
-async def test_link_answers_calls_of_local_services() -> None:
-    g, core = make_core()
-
-    async def control(args: dict[str, Any]) -> dict[str, Any]:
-        if args.get("op") == "boom":
-            raise RuntimeError("no such op")
-        return {"detail": f"{args['action']} sent"}
-
-    g.advertise_service("/uav1/vehicle/control", "uav_console/VehicleControl", control)
-    core.hello()
-    call = {"op": "call_service", "service": "/uav1/vehicle/control", "id": "c1"}
-    core.receive(json.dumps({**call, "args": {"op": "direct", "action": "land"}}))
-    core.receive(json.dumps({**call, "id": "c2", "args": {"op": "boom"}}))
-    core.receive(json.dumps({**call, "id": "c3", "service": "/other"}))
-    for _ in range(5):
-        await asyncio.sleep(0)
-    replies = {o["id"]: o for o in map(json.loads, core.drain())}
-    assert replies["c1"]["result"] and replies["c1"]["values"] == {"detail": "land sent"}
-    assert not replies["c2"]["result"] and "no such op" in replies["c2"]["values"]
-    assert not replies["c3"]["result"]
-
-
-async def test_link_calls_the_server_and_fails_cleanly_on_disconnect() -> None:
-    _, core = make_core()
-    core.hello()
-    call = asyncio.create_task(core.call("/console/describe", {"drone": "uav1"}))
-    await asyncio.sleep(0)
-    [frame] = core.drain()
-    sent = json.loads(frame)
-    core.receive(json.dumps({"op": "service_response", "id": sent["id"], "values": {"text": "a"}}))
-    assert await call == {"text": "a"}
-    pending = asyncio.create_task(core.call("/console/describe", {}))
-    await asyncio.sleep(0)
-    core.disconnected()
-    with pytest.raises(Exception, match="closed"):
-        await pending
 
 
 # ------------------------------------------------------------------------------ settings

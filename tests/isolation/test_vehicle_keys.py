@@ -2,12 +2,12 @@
 --vehicles process`` (each vehicle process owns its simulated AR.Drone) with real WebSocket and
 HTTP clients on loopback:
 
-- the vehicles join ``/vehicle-link`` with their own keys, handed over out of ``ps``'s sight;
-- the pilot token (or the observer's) no longer opens ``/vehicle-link``: a second pilot without
-  the lease moved a flying drone 0.8 m through it and made observers hear a fake "Battery
-  critical at 2 percent" reply;
-- a vehicle key publishes only its own drone's topics, never another's, a command, or
-  ``/console/*``; its dialog's replies reach observers through the console's check;
+- the vehicles join the bus with their own keys, handed over out of ``ps``'s sight;
+- the pilot token (or the observer's) does not open the bus as a vehicle: a second pilot
+  posing as one moved a flying drone 0.8 m and made observers hear a fake "Battery critical at
+  2 percent" reply;
+- a vehicle key shows only its own drone's topics, never another's, a command, or
+  ``/console/*``; its nodes' replies reach observers through the console's check;
 - every door into commands judges a pilot without the lease the same way: a jog (or take-off,
   a move, a patrol) refused; land, hover and emergency go through (DESIGN §5).
 """
@@ -19,16 +19,19 @@ import json
 import os
 import stat
 import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
-from websockets.exceptions import InvalidStatus
+import zenoh
 from websockets.sync.client import ClientConnection, connect
 
+from drone.bus import keys
+from drone.bus.config import client_config
+from drone.bus.errors import BusConfigError
+from drone.bus.session import open_session
 from tests.isolation.conftest import PILOT, Served, serve, wait_for
 from tests.support.loopback import fresh_address
 
@@ -125,10 +128,6 @@ def rosbridge(srv: Served) -> str:
     return f"ws://{srv.host}:{srv.port}/rosbridge"
 
 
-def link(srv: Served) -> str:
-    return f"ws://{srv.host}:{srv.port}/vehicle-link"
-
-
 def data_dir(srv: Served) -> Path:
     return srv.log_path.parent / "data"
 
@@ -194,155 +193,76 @@ def test_a_vehicles_replies_state_and_interpreter_reach_clients_through_the_cons
         assert out["result"] is True and "takeoff" in json.dumps(out["values"]), out
 
 
-def test_the_pilot_token_does_not_open_the_vehicle_link(srv: Served) -> None:
-    """Finding 5: a second pilot connection without the lease published ``/cmd_vel`` on
-    ``/vehicle-link`` and moved the drone 0.8 m, and a fake reply observers received."""
-    r = srv.http.post("/api/v1/drones/uav1/takeoff")
-    assert r.status_code == 200 and r.json()["accepted"], r.text
-    wait_for(lambda: truth(srv, "uav1")["z"] > 0.6, "uav1 to take off", 40)
-    with (
-        client(rosbridge(srv), PILOT) as holder,
-        client(rosbridge(srv), OBSERVER) as obs,
-    ):
-        assert holder.call("/console/lease", {"action": "acquire"})["values"]["held_by_me"]
-        obs.send({"op": "subscribe", "topic": "/console/reply", "type": "uav_console/Reply"})
-        obs.call("/rosapi/topics")  # subscribed before anything is published
-        before = truth(srv, "uav1")
-        opened = []
-        for token in (PILOT, OBSERVER):
-            try:
-                attacker = Client(link(srv), token)
-            except InvalidStatus as exc:
-                assert exc.response.status_code == 403
-                continue
-            opened.append(token)
-            try:  # what the finding did, should the door open
-                attacker.send({"op": "advertise", "topic": "/uav1/cmd_vel",
-                               "type": "geometry_msgs/Twist"})  # fmt: skip
-                for _ in range(15):
-                    attacker.send({"op": "publish", "topic": "/uav1/cmd_vel", "msg": JOG})
-                    time.sleep(0.1)  # a jog at the page's 10 Hz
-                attacker.send({"op": "publish", "topic": "/uav1/cmd_vel", "msg": ZERO})
-                msg = {"text": FAKE, "level": "alert", "speak": True, "drone": "uav1"}
-                attacker.send({"op": "publish", "topic": "/console/reply", "msg": msg})
-                time.sleep(1.0)  # deliberate: a second for the forged jog to (not) move it
-            finally:
-                attacker.close()
-        after = truth(srv, "uav1")
-        moved = abs(after["x"] - before["x"]) + abs(after["y"] - before["y"])
-        assert not opened, f"/vehicle-link opened with {opened} (the drone moved {moved:.2f} m)"
-        obs.call("/rosapi/topics")
-        assert not [m for m in obs.replies() if FAKE in m["text"]]
-    srv.http.post("/api/v1/drones/uav1/land")
-    wait_for(lambda: not truth(srv, "uav1")["flying"], "uav1 to land", 40)
+def vehicle_session(srv: Served, name: str, password: str) -> zenoh.Session:
+    """A Zenoh client on the console's bus as ``vehicle-NAME`` with ``password``."""
+    endpoint = srv.http.get("/api/v1/health").json()["bus"]["endpoints"][0]
+    config = client_config(connect=[endpoint], user=f"vehicle-{name}", password=password)
+    return open_session(config)
 
 
-def test_a_vehicle_key_publishes_only_its_own_drones_topics(srv: Served) -> None:
-    with (
-        client(link(srv), key_of(srv, "uav1")) as rogue,
-        client(rosbridge(srv), OBSERVER) as obs,
-    ):
+def test_the_pilot_token_does_not_open_the_bus_as_a_vehicle(srv: Served) -> None:
+    """Finding 5 was a pilot connection posing as a vehicle: neither token is a vehicle's
+    password on the bus, and a garbage one neither."""
+    for token in (PILOT, OBSERVER, "uavk_" + "x" * 43):
+        with pytest.raises(BusConfigError):
+            vehicle_session(srv, "uav1", token).close()  # type: ignore[no-untyped-call]
+
+
+def test_a_vehicle_key_shows_only_its_own_drones_topics(srv: Served) -> None:
+    """uav1's key on the bus: another drone's keys reach nobody (the router's access control),
+    a topic that is not its own is not shown (the console), and its own reply and alarm are
+    said only as uav1's words, whatever drone they name (the console's relay)."""
+    reply = {"text": FAKE, "level": "alert", "speak": True, "drone": "uav1"}
+    session = vehicle_session(srv, "uav1", key_of(srv, "uav1"))
+    with client(rosbridge(srv), OBSERVER) as obs:
         obs.send({"op": "subscribe", "topic": "/console/reply", "type": "uav_console/Reply"})
         obs.send({"op": "subscribe", "topic": "/uav2/ardrone/navdata"})
         obs.send({"op": "subscribe", "topic": "/rosout"})  # the console's log lines
         obs.call("/rosapi/topics")
-        reply = {"text": FAKE, "level": "alert", "speak": True, "drone": "uav1"}
-        refused = {
-            "/console/reply": ("uav_console/Reply", reply),
-            "/uav2/vehicle/reply": ("uav_console/Reply", {**reply, "drone": "uav2"}),
-            "/uav2/vehicle/alarm": ("std_msgs/String", {"data": "{}"}),
-            "/uav2/ardrone/navdata": ("ardrone_autonomy/Navdata", {"batteryPercent": 2.0}),
-            "/uav2/cmd_vel": ("geometry_msgs/Twist", JOG),
-            "/uav1/cmd_vel": ("geometry_msgs/Twist", JOG),
-            "/uav1/ardrone/takeoff": ("std_msgs/Empty", {}),
-            "/fleet/status": ("uav_console/FleetStatus", {}),
-            "/vehicles/heartbeat": ("std_msgs/String", {"data": "0"}),
-        }
-        for topic, (typ, msg) in refused.items():
-            errors = rogue.errors_of({"op": "advertise", "topic": topic, "type": typ})
-            errors += rogue.errors_of({"op": "publish", "topic": topic, "msg": msg})
-            assert len(errors) == 2, (topic, errors)
-            assert errors[1].startswith(f"vehicle uav1 may not publish to {topic}: "), errors
-        errors = rogue.errors_of(
-            {"op": "advertise_service", "service": "/uav2/vehicle/control",
-             "type": "uav_console/VehicleControl"}
-        )  # fmt: skip
-        assert errors and "may not provide the service /uav2/vehicle/control" in errors[0]
-        out = rogue.call("/uav2/vehicle/control", {"op": "direct", "action": "takeoff"})
-        assert out["result"] is False and "vehicle uav1 may not call" in out["values"]
-        # Its own reply topic: re-published only as its own drone's words.
-        own = "/uav1/vehicle/reply"
-        assert not rogue.errors_of({"op": "advertise", "topic": own, "type": "uav_console/Reply"})
-        assert not rogue.errors_of(
-            {"op": "publish", "topic": own, "msg": {**reply, "drone": "uav2"}}
-        )
-        mine = {**reply, "text": "uav1 speaking for itself", "drone": ""}
-        assert not rogue.errors_of({"op": "publish", "topic": own, "msg": mine})
-        said = wait_for(lambda: [m for m in obs.replies() if "for itself" in m["text"]], "relay")
-        assert said[0]["drone"] == "uav1"
-        # Its own alarm topic: said by the console's dialog for uav1, whatever drone it names.
-        alarm = {"drone": "uav2", "monitor": "link", "severity": "warn",
-                 "text": "uav1 alarmed for itself", "action": None}  # fmt: skip
-        topic = "/uav1/vehicle/alarm"
-        assert not rogue.errors_of({"op": "advertise", "topic": topic, "type": "std_msgs/String"})
-        assert not rogue.errors_of({"op": "publish", "topic": topic,
-                                    "msg": {"data": json.dumps(alarm)}})  # fmt: skip
-        said = wait_for(lambda: [m for m in obs.replies() if "alarmed for" in m["text"]], "alarm")
-        assert said[0]["drone"] == "uav1" and said[0]["alarm"] == "link"
-        assert not [m for m in obs.replies() if FAKE in m["text"]]
-        assert not [f for f in list(obs.frames) if f.get("topic") == "/uav2/ardrone/navdata"
-                    and f["msg"].get("batteryPercent") == 2.0]  # fmt: skip
+
+        def put(drone: str, topic: str, msg: dict[str, Any]) -> None:
+            session.put(keys.graph("default", drone, topic), json.dumps(msg))
 
         def logged(text: str) -> list[str]:
             lines = [str(f["msg"]["msg"]) for f in list(obs.frames) if f.get("topic") == "/rosout"]
             return [line for line in lines if text in line]
 
-        line = wait_for(lambda: logged("vehicle uav1 may not publish to /console/reply"), "log")
-        assert line[0].startswith("refused on /vehicle-link (1×): ")
-        wait_for(lambda: logged("uav1: reply from its vehicle not re-published: it names drone"),
-                 "the relay's refusal in the log")  # fmt: skip
-
-
-def test_a_vehicle_from_elsewhere_joins_with_a_key_made_while_serve_runs(srv: Served) -> None:
-    """``uav-console vehicle-key uav3`` on the console's computer, then uav3 joins (here a bare
-    rosbridge client in its place): announced under its own prefix it becomes a drone; one that
-    claims another drone's prefix is not registered, and the log says why."""
-    from server.cli import main as cli_main
-
-    assert cli_main(["vehicle-key", "uav3", "uav4", "--data-dir", str(data_dir(srv))]) == 0
-
-    def info(name: str, prefix: str) -> dict[str, Any]:
-        data = {"name": name, "prefix": prefix, "simulated": True, "safety_url": "", "pid": 1}
-        return {
-            "op": "publish",
-            "topic": f"/{name}/vehicle/info",
-            "msg": {"data": json.dumps(data)},
-        }
-
-    def registered(name: str) -> bool:  # a drone of the console (503 until it reports), or 404
-        return srv.http.get(f"/api/v1/drones/{name}").status_code != 404
-
-    with (
-        client(rosbridge(srv), OBSERVER) as obs,
-        client(link(srv), key_of(srv, "uav4")) as uav4,
-    ):
-        obs.send({"op": "subscribe", "topic": "/rosout"})
-        obs.call("/rosapi/topics")
-        uav4.send({"op": "advertise", "topic": "/uav4/vehicle/info", "type": "std_msgs/String",
-                   "latch": True})  # fmt: skip
-        assert not uav4.errors_of(info("uav4", "/uav1"))  # its own topic, a stolen prefix
-        wait_for(
-            lambda: [f for f in list(obs.frames) if f.get("topic") == "/rosout"
-                     and "vehicle uav4 announced itself" in f["msg"]["msg"]],
-            "the refusal in the log",
-        )  # fmt: skip
-        assert not registered("uav4")
-        with client(link(srv), key_of(srv, "uav3")) as uav3:
-            uav3.send({"op": "advertise", "topic": "/uav3/vehicle/info",
-                       "type": "std_msgs/String", "latch": True})  # fmt: skip
-            assert not uav3.errors_of(info("uav3", "/uav3"))
-            wait_for(lambda: registered("uav3"), "uav3 to be registered")
-        assert not registered("uav4")
+        try:
+            # another drone's: refused by the router, heard by nobody
+            put("uav2", "/uav2/vehicle/reply", {**reply, "drone": "uav2"})
+            put("uav2", "/uav2/ardrone/navdata", {"batteryPercent": 2.0})
+            put("uav2", "/uav2/vehicle/alarm", {"data": "{}"})
+            # under its own name but not its own topic: not shown
+            put("uav1", "/console/reply", reply)
+            put("uav1", "/uav1/cmd_vel", JOG)
+            wait_for(lambda: logged("uav1: its topic /console/reply is not shown here"), "log")
+            # its own reply topic: re-published only as its own drone's words
+            put("uav1", "/uav1/vehicle/reply", {**reply, "drone": "uav2"})
+            wait_for(
+                lambda: logged("uav1: reply from its vehicle not re-published: it names drone"),
+                "the relay's refusal in the log",
+            )
+            mine = {**reply, "text": "uav1 speaking for itself", "drone": ""}
+            put("uav1", "/uav1/vehicle/reply", mine)
+            said = wait_for(
+                lambda: [m for m in obs.replies() if "for itself" in m["text"]], "relay"
+            )
+            assert said[0]["drone"] == "uav1"
+            # its own alarm topic: said by the console's dialog for uav1, whatever it names
+            alarm = {"drone": "uav2", "monitor": "link", "severity": "warn",
+                     "text": "uav1 alarmed for itself", "action": None}  # fmt: skip
+            put("uav1", "/uav1/vehicle/alarm", {"data": json.dumps(alarm)})
+            said = wait_for(
+                lambda: [m for m in obs.replies() if "alarmed for" in m["text"]], "alarm"
+            )
+            assert said[0]["drone"] == "uav1" and said[0]["alarm"] == "link"
+            obs.call("/rosapi/topics")
+            assert not [m for m in obs.replies() if FAKE in m["text"]]
+            assert not [f for f in list(obs.frames) if f.get("topic") == "/uav2/ardrone/navdata"
+                        and f["msg"].get("batteryPercent") == 2.0]  # fmt: skip
+            assert not truth(srv, "uav1")["flying"]  # its own cmd_vel is a console's to send
+        finally:
+            session.close()  # type: ignore[no-untyped-call]
 
 
 def test_every_door_judges_a_pilot_without_the_lease_alike(srv: Served) -> None:

@@ -1,7 +1,7 @@
-"""Vehicle keys, each vehicle's scope on ``/vehicle-link``, the reply check, and the lease rule
-that judges what a pilot sends whatever door it enters by (issue 26 "Vehicles have their own
-credentials"). Real files in a temporary data directory; no sockets (see
-test_vehicle_link_ws.py and test_vehicle_keys.py for those)."""
+"""Vehicle keys, what a console shows of each vehicle, the reply check, and the lease rule that
+judges what a pilot sends whatever door it enters by (issue 26 "Vehicles have their own
+credentials"). Real files in a temporary data directory; no sockets (see test_vehicle_keys.py
+and tests/bus for those)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from server.cli import main as cli_main
 from server.http.security import CONTROL_TOPIC_RE, SERVER_TOPIC_RE, Role, Security, TokenStore
 from server.settings import Settings
-from server.vehicles.access import VehicleLinkSecurity, scope_for
+from server.vehicles.central import bus_topics
 from server.vehicles.errors import VehicleKeyError
 from server.vehicles.keys import (
     KEY_ENV,
@@ -148,7 +148,7 @@ def test_a_vehicle_without_its_key_stops_with_the_way_to_get_one(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.delenv(KEY_ENV, raising=False)
-    argv = ["vehicle", "--central", f"ws://127.0.0.1:{free_port()}/vehicle-link", "--name", "uav1"]
+    argv = ["vehicle", "--bus-connect", f"tcp/127.0.0.1:{free_port()}", "--name", "uav1"]
     assert cli_main(argv) == 2
     assert "vehicle-key NAME" in capsys.readouterr().err
     pilot = TokenStore(tmp_path).pilot_token
@@ -161,61 +161,23 @@ def test_a_vehicle_without_its_key_stops_with_the_way_to_get_one(
 
 
 @pytest.mark.parametrize(("name", "prefix"), [("uav1", ""), ("uav2", "/uav2")])
-def test_a_vehicles_scope_is_its_own_drone_and_nothing_of_the_server(
+def test_what_a_vehicle_shows_is_its_own_drone_and_nothing_of_the_server(
     name: str, prefix: str
 ) -> None:
-    scope = scope_for(name, prefix)
-    assert {f"{prefix}/ardrone/navdata", f"{prefix}/mavros/state", f"{prefix}/uav/pose"} <= (
-        scope.topics
-    )
+    """The topics a console shows of a vehicle on the bus (any other is dropped): its own
+    drone's and its own ``/NAME/vehicle/*``, never a server topic or a command."""
+    topics = set(bus_topics(name, prefix))
+    assert {f"{prefix}/ardrone/navdata", f"{prefix}/mavros/state", f"{prefix}/uav/pose"} <= topics
     own = {"alarm", "task_event", "reply", "info", "telemetry"}
-    assert {f"/{name}/vehicle/{t}" for t in own} <= scope.topics
-    assert f"/{name}/vehicle/state" not in scope.topics  # it runs no dialog
-    assert f"/{name}/fleet/ltm_status" in scope.topics
-    for topic in scope.topics:
+    assert {f"/{name}/vehicle/{t}" for t in own} <= topics
+    assert f"/{name}/vehicle/state" not in topics  # it runs no dialog
+    assert f"/{name}/fleet/ltm_status" in topics
+    for topic in topics:
         assert not SERVER_TOPIC_RE.match(topic), topic
         assert topic.startswith((f"/{name}/", f"{prefix}/"))
     commands = {f"{prefix}/cmd_vel", f"{prefix}/ardrone/takeoff", f"{prefix}/ardrone/land"}
-    assert not commands & scope.topics
+    assert not commands & topics
     assert all(CONTROL_TOPIC_RE.match(c) for c in commands)
-    assert scope.services == {f"/{name}/vehicle/control", f"/{name}/fleet/flight_plan"}
-    assert scope.calls == set()  # the captioner and the patrol are the console dialog's
-
-
-def test_vehicle_link_security_grants_only_keys_and_only_the_scope(tmp_path: Path) -> None:
-    tokens = TokenStore(tmp_path)
-    keys = VehicleKeys(tmp_path)
-    k1 = keys.ensure("uav1")
-    sec = VehicleLinkSecurity(Settings(data_dir=tmp_path), tokens, keys)
-    assert sec.role_for(tokens.pilot_token) is None
-    assert sec.role_for(tokens.observer_token) is None
-    assert sec.role_for(k1.secret) is Role.VEHICLE and sec.identify(k1.secret) == "uav1"
-    v = Role.VEHICLE
-    assert sec.can_publish(v, "uav1/vehicle/alarm", "uav1")
-    assert not sec.can_publish(v, "/uav2/vehicle/alarm", "uav1")
-    assert not sec.can_publish(v, "/console/reply", "uav1")
-    assert not sec.can_publish(v, "/uav1/cmd_vel", "uav1")
-    assert not sec.can_publish(v, "/uav1/vehicle/alarm", None)
-    assert not sec.can_publish(Role.PILOT, "/uav1/vehicle/alarm", "uav1")
-    assert sec.can_provide(v, "/uav1/vehicle/control", "uav1")
-    assert not sec.can_provide(v, "/uav2/vehicle/control", "uav1")
-    assert not sec.can_provide(v, "/console/describe", "uav1")
-    assert not sec.can_call(v, "/fleet/patrol", "uav1")
-    assert not sec.can_call(v, "/console/describe", "uav1")
-    assert not sec.can_call(v, "/uav2/vehicle/control", "uav1")
-    assert not sec.can_call(v, "/console/lease", "uav1")
-    assert sec.refusal(v, "publish to", "/console/reply", "uav1") == (
-        "vehicle uav1 may not publish to /console/reply: "
-        "a vehicle publishes only its own drone's topics (/uav1/…)"
-    )
-    assert sec.refusal(v, "call", "/uav2/vehicle/control", "uav1").endswith(
-        "a vehicle calls none of the server's services"
-    )
-    single = VehicleLinkSecurity(Settings(data_dir=tmp_path), tokens, keys, prefix_of=lambda n: "")
-    assert single.refusal(v, "publish to", "/x", "uav1").endswith("(/… and /uav1/…)")
-    assert sec.refusal(Role.PILOT, "publish to", "/x").endswith(
-        "/vehicle-link takes only a vehicle key (uav-console vehicle-key NAME)"
-    )
 
 
 def test_pilots_may_not_speak_or_answer_as_a_vehicle(tmp_path: Path) -> None:
