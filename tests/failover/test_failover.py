@@ -48,22 +48,18 @@ LAPS_AFTER = 2
 # product judges a link's loss (timewarp.guard_s); the visits carry the vehicles' wall-clock
 # stamps, and the revisit bound is a ratio of two such spans.
 CLOCK_SPEED = 4.0
-FAST = {"UAVC_CLOCK_SPEED": f"{CLOCK_SPEED:g}"}
 
 
 START_S = 120.0  # a serve's start on a loaded 2-core machine took 34 s
 
 
 @contextlib.contextmanager
-def serve(
-    tmp: Path, name: str, extra: tuple[str, ...], extra_env: dict[str, str] | None = None
-) -> Iterator[Served]:
+def serve(tmp: Path, name: str, extra: tuple[str, ...]) -> Iterator[Served]:
     """``uav-console serve`` named ``name`` on the bus, its data directory shared (one fleet's
     credentials and vehicle keys)."""
     port = free_port(HOST)
     log_path = tmp / f"{name}.log"
-    env = {**os.environ, **(extra_env or {})}
-    env.update({"UAVC_DATA_DIR": str(tmp / "data"), "UAVC_CONSOLE_NAME": name})
+    env = {**os.environ, "UAVC_DATA_DIR": str(tmp / "data"), "UAVC_CONSOLE_NAME": name}
     env["UAVC_RECORDER"] = "false"
     env["UAVC_ASR_PRELOAD"] = "false"  # nobody speaks: no speech model loaded beside the start
     argv = [sys.executable, "-m", "server", "serve", "--host", HOST, "--port", str(port)]
@@ -153,22 +149,25 @@ def central_of(srv: Served) -> dict[str, Any]:
     return dict(srv.http.get("/api/v1/central").json())
 
 
-def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
+def test_kill_9_of_the_central_console_mid_patrol(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     for name in ("uav1", "uav2"):
         assert cli_main(["vehicle-key", name, "--data-dir", str(tmp_path / "data")]) == 0
     bus_a, bus_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     common = ("--vehicles", "process", "--fleet", "0")
     extra_a = (*common, "--bus-listen", bus_a)
     extra_b = (*common, "--bus-listen", bus_b, "--bus-connect", bus_a)  # b joins a
+    monkeypatch.setenv("UAVC_CLOCK_SPEED", f"{CLOCK_SPEED:g}")  # for every process started here
     t0 = time.monotonic()
 
     def phase(what: str) -> None:
         print(f"phase: {what} {time.monotonic() - t0:.1f} s into the test")
 
     with contextlib.ExitStack() as stack:
-        a = stack.enter_context(serve(tmp_path, "console-a", extra_a, FAST))
+        a = stack.enter_context(serve(tmp_path, "console-a", extra_a))
         wait_for(lambda: central_of(a)["role"] == "central", "console-a central", 30)
-        b = stack.enter_context(serve(tmp_path, "console-b", extra_b, FAST))
+        b = stack.enter_context(serve(tmp_path, "console-b", extra_b))
         seen = wait_for(
             lambda: (c := central_of(b))["consoles"] == ["console-a", "console-b"] and c,
             "console-b sees both consoles",
@@ -177,7 +176,7 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
         assert seen["role"] == "standby" and seen["central"] == "console-a"
         assert central_of(a)["role"] == "central"  # the incumbent keeps it
         for i, name in enumerate(("uav1", "uav2")):
-            stack.enter_context(vehicle(tmp_path, name, i, a, [bus_a, bus_b], FAST))
+            stack.enter_context(vehicle(tmp_path, name, i, a, [bus_a, bus_b]))
         wait_for(
             lambda: (
                 sorted(central_of(a)["on_bus"]) == ["uav1", "uav2"]

@@ -37,7 +37,6 @@ pytestmark = [pytest.mark.slow, pytest.mark.serial, pytest.mark.timeout(600)]
 # the flights to the route and home take half the wall time. The grace is the LTM's, in clock
 # seconds (judged so); the console's watch of its link (hover after 1 s) is in wall seconds.
 CLOCK_SPEED = 2.0
-FAST = {"UAVC_CLOCK_SPEED": f"{CLOCK_SPEED:g}"}
 GRACE_S = 16.0  # UAVC_CENTRAL_GRACE_S for the vehicle (60 s by default), in clock seconds
 GRACE_WALL_S = GRACE_S / CLOCK_SPEED  # the same grace on the wall clock (the stamps')
 STATION = Enu(1.0, 3.0, 0.0)  # worlds/indoor.yaml: home1, uav1's pad
@@ -82,15 +81,18 @@ class SiteRouter:
         self.session.close()
 
 
-def test_a_drone_on_a_plan_flies_on_for_the_grace_then_home(tmp_path: Path) -> None:
+def test_a_drone_on_a_plan_flies_on_for_the_grace_then_home(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     assert cli_main(["vehicle-key", "uav1", "--data-dir", str(tmp_path / "data")]) == 0
     bus_a, bus_t = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     extra = ("--vehicles", "process", "--fleet", "0", "--bus-listen", bus_a)
-    grace_env = {**FAST, "UAVC_CENTRAL_GRACE_S": str(GRACE_S)}
+    grace_env = {"UAVC_CENTRAL_GRACE_S": str(GRACE_S)}
+    monkeypatch.setenv("UAVC_CLOCK_SPEED", f"{CLOCK_SPEED:g}")  # for every process started here
     with contextlib.ExitStack() as stack:
         # the vehicle starts while the console takes the central role (it joins the bus, which
         # the console opens before it answers; the site router needs the fleet's credentials)
-        a = stack.enter_context(serve(tmp_path, "console-a", extra, FAST))
+        a = stack.enter_context(serve(tmp_path, "console-a", extra))
         stack.enter_context(vehicle(tmp_path, "uav1", 0, a, [bus_a, bus_t], grace_env))
         router = SiteRouter(tmp_path / "data" / "bus", bus_t, [bus_a])
         stack.callback(router.close)
