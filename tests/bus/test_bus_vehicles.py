@@ -31,6 +31,8 @@ from tests.support.loopback import free_port, fresh_address
 pytestmark = pytest.mark.serial
 
 NAME = "uav7"
+# the shared rig's vehicle lands after this long without its console (20 s by default)
+LAND_AFTER = {"UAVC_CENTRAL_LOSS_LAND_S": "4"}
 
 
 @dataclass
@@ -129,7 +131,7 @@ def shared_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rig]:
     extra = ("--fleet", "0", "--bus-listen", endpoint)
     with (
         serve(tmp, "sim", extra=extra) as srv,
-        bus_vehicle(tmp, endpoint, key) as (proc, log_path),
+        bus_vehicle(tmp, endpoint, key, LAND_AFTER) as (proc, log_path),
     ):
         yield Rig(srv, endpoint, data, proc, log_path)
 
@@ -413,27 +415,17 @@ def test_a_vehicle_needs_a_bus(
     assert err.count("\n") == 1 and "--bus-connect ENDPOINT" in err and "not --central" in err
 
 
-def test_a_bus_vehicle_hovers_then_lands_when_its_console_stalls(tmp_path: Path) -> None:
+def test_a_bus_vehicle_hovers_then_lands_when_its_console_stalls(rig: Rig) -> None:
     """Its console's heartbeat stops (``serve`` stopped, SIGSTOP): the vehicle on the bus hovers
     after ``heartbeat_timeout_s`` and lands after ``central_loss_land_s``, on its own."""
-    data = tmp_path / "data"
-    key = vehicle_key(data, NAME)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    extra = ("--fleet", "0", "--bus-listen", endpoint)
-    land_after = {"UAVC_CENTRAL_LOSS_LAND_S": "4"}
-    with (
-        serve(tmp_path, "sim", extra=extra) as srv,
-        bus_vehicle(tmp_path, endpoint, key, land_after) as (proc, log_path),
-    ):
-        rig = Rig(srv, endpoint, data, proc, log_path)
-        rig.wait_joined()
-        assert rig.act("takeoff")["accepted"]
-        wait_for(lambda: rig.flying(), "the take-off", 40)
-        srv.pause()
-        try:
-            wait_for(lambda: re.search(r"silent for [\d.]+ s: land", rig.vlog()), "the land", 30)
-            assert re.search(r"silent for [\d.]+ s: hover", rig.vlog())
-        finally:
-            srv.resume()
-        wait_for(lambda: not rig.flying(), "the drone on the ground", 40)
-        assert srv.drone(NAME)["central_loss"]["actions"][-2:] == ["hover", "land"]
+    srv = rig.srv
+    assert rig.act("takeoff")["accepted"]
+    wait_for(lambda: rig.flying(), "the take-off", 40)
+    srv.pause()
+    try:
+        wait_for(lambda: re.search(r"silent for [\d.]+ s: land", rig.vlog()), "the land", 30)
+        assert re.search(r"silent for [\d.]+ s: hover", rig.vlog())
+    finally:
+        srv.resume()
+    wait_for(lambda: not rig.flying(), "the drone on the ground", 40)
+    assert srv.drone(NAME)["central_loss"]["actions"][-2:] == ["hover", "land"]

@@ -3,7 +3,8 @@ its own bus router, joined to each other; two vehicles on both routers; a patrol
 the central console's process mid-patrol. The standby takes the central role, shows every drone,
 and the patrol goes on where it stood (the same mission, the same drone, the same plan), with no
 waypoint waiting longer than about a normal revisit (measured from the vehicles' own telemetry on
-the bus, as a third-party script would)."""
+the bus, as a third-party script would). The fleet runs on a clock four times faster than the wall
+clock (``UAVC_CLOCK_SPEED``), so that its laps take a quarter of the wall time."""
 
 from __future__ import annotations
 
@@ -40,6 +41,13 @@ TAKEOVER_BOUND_S = 3.0  # the issue's bound for the standby to hold the central 
 REVISIT_RATIO_BOUND = 1.5
 LAPS_BEFORE = 2  # revisits measured before the kill (the "normal revisit")
 LAPS_AFTER = 2
+# The fleet (both consoles, the vehicles, their simulators) on a clock this many times faster
+# than the wall clock (server/timewarp.py): a lap of the indoor patrol, ~30 s of the drones'
+# time, takes ~7.5 s. The camera stays on (indoors the drones localise on its markers; a
+# simulator behind on its frames drops them). The takeover is judged in wall seconds, as the
+# product judges a link's loss (timewarp.guard_s); the visits carry the vehicles' wall-clock
+# stamps, and the revisit bound is a ratio of two such spans.
+CLOCK_SPEED = 4.0
 
 
 START_S = 120.0  # a serve's start on a loaded 2-core machine took 34 s
@@ -139,13 +147,21 @@ def central_of(srv: Served) -> dict[str, Any]:
     return dict(srv.http.get("/api/v1/central").json())
 
 
-def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
+def test_kill_9_of_the_central_console_mid_patrol(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     for name in ("uav1", "uav2"):
         assert cli_main(["vehicle-key", name, "--data-dir", str(tmp_path / "data")]) == 0
     bus_a, bus_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     common = ("--vehicles", "process", "--fleet", "0")
     extra_a = (*common, "--bus-listen", bus_a)
     extra_b = (*common, "--bus-listen", bus_b, "--bus-connect", bus_a)  # b joins a
+    monkeypatch.setenv("UAVC_CLOCK_SPEED", f"{CLOCK_SPEED:g}")  # for every process started here
+    t0 = time.monotonic()
+
+    def phase(what: str) -> None:
+        print(f"phase: {what} {time.monotonic() - t0:.1f} s into the test")
+
     with contextlib.ExitStack() as stack:
         a = stack.enter_context(serve(tmp_path, "console-a", extra_a))
         wait_for(lambda: central_of(a)["role"] == "central", "console-a central", 30)
@@ -167,6 +183,7 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
             "both vehicles' LTMs on both consoles",
             90,
         )
+        phase("both consoles and both vehicles up")
         r = a.http.post("/api/v1/patrol", json={})
         assert r.status_code == 200, r.text
         mission = r.json()["mission"]["id"]
@@ -178,6 +195,7 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
             "the patrol running",
             90,
         )
+        phase("the patrol running")
         route = tuple(
             Enu(w["x"], w["y"], w["z"]) for w in patrol["mission"]["coverage"]["waypoints"]
         )
@@ -191,6 +209,7 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
             180,
             period=0.5,
         )
+        phase(f"{LAPS_BEFORE} laps flown")
         before = b.http.get("/api/v1/patrol").json()  # the standby's copy
         assert before["mission"]["id"] == mission
         active = before["mission"]["active"]
@@ -230,6 +249,7 @@ def test_kill_9_of_the_central_console_mid_patrol(tmp_path: Path) -> None:
             180,
             period=0.5,
         )
+        phase(f"{LAPS_AFTER} laps after the kill")
         final = b.http.get("/api/v1/patrol").json()
         assert final["mission"]["id"] == mission and final["state"] == "running"
         assert final["mission"]["active"] == active  # the same drone flies on

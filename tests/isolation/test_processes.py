@@ -104,16 +104,21 @@ def leave_emergency(sim: SimThread, srv: Served) -> None:
 
 def assert_control_thread_scheduling(pid: int, controller: dict[str, Any]) -> None:
     """The vehicle's control thread asked for SCHED_FIFO 10 (``control_rt_priority``) and its
-    other threads for SCHED_RR 5 (``vehicle_rt_priority``): what the loop reports is what the OS
-    says of the process's threads (granted where privileged, e.g. root; else refused and said,
-    and then no thread of the vehicle runs real-time). The numeric libraries' worker threads
-    (OpenBLAS, OpenCV), started at import before the vehicle asks, stay normal."""
+    other threads for SCHED_RR 5 (``vehicle_rt_priority``), unless the environment asks for none
+    (``UAVC_CONTROL_RT_PRIORITY=0``): what the loop reports is what the OS says of the process's
+    threads (granted where privileged, e.g. root; else refused and said, and then no thread of
+    the vehicle runs real-time). The numeric libraries' worker threads (OpenBLAS, OpenCV),
+    started at import before the vehicle asks, stay normal."""
     threads = {
         int(tid): (os.sched_getscheduler(int(tid)), os.sched_getparam(int(tid)).sched_priority)
         for tid in os.listdir(f"/proc/{pid}/task")
     }
     control = [tid for tid, policy in threads.items() if policy == (os.SCHED_FIFO, 10)]
-    if controller["scheduling"] == "SCHED_FIFO 10":
+    if os.environ.get("UAVC_CONTROL_RT_PRIORITY", "").strip() == "0":  # none asked (a shared
+        # machine's runs): the control thread keeps normal scheduling, no thread is real-time
+        assert controller["scheduling"] == "normal", controller
+        assert all(policy != os.SCHED_FIFO for policy, _ in threads.values()), threads
+    elif controller["scheduling"] == "SCHED_FIFO 10":
         assert len(control) == 1, threads
         assert threads[pid] == (os.SCHED_RR, 5), threads  # the asyncio (main) thread
         others = {policy for tid, policy in threads.items() if tid != control[0]}
