@@ -3,8 +3,8 @@ its own bus router, joined to each other; two vehicles on both routers; a patrol
 the central console's process mid-patrol. The standby takes the central role, shows every drone,
 and the patrol goes on where it stood (the same mission, the same drone, the same plan), with no
 waypoint waiting longer than about a normal revisit (measured from the vehicles' own telemetry on
-the bus, as a third-party script would). The fleet runs on a clock four times faster than the wall
-clock (``UAVC_CLOCK_SPEED``), so that its laps take a quarter of the wall time."""
+the bus, as a third-party script would). The fleet runs on a clock twice as fast as the wall
+clock (``UAVC_CLOCK_SPEED``), so that its laps take half the wall time."""
 
 from __future__ import annotations
 
@@ -43,11 +43,11 @@ LAPS_BEFORE = 2  # revisits measured before the kill (the "normal revisit")
 LAPS_AFTER = 2
 # The fleet (both consoles, the vehicles, their simulators) on a clock this many times faster
 # than the wall clock (server/timewarp.py): a lap of the indoor patrol, ~30 s of the drones'
-# time, takes ~7.5 s. The camera stays on (indoors the drones localise on its markers; a
+# time, takes ~15 s. The camera stays on (indoors the drones localise on its markers; a
 # simulator behind on its frames drops them). The takeover is judged in wall seconds, as the
 # product judges a link's loss (timewarp.guard_s); the visits carry the vehicles' wall-clock
 # stamps, and the revisit bound is a ratio of two such spans.
-CLOCK_SPEED = 4.0
+CLOCK_SPEED = 2.0
 
 
 START_S = 120.0  # a serve's start on a loaded 2-core machine took 34 s
