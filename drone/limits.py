@@ -98,6 +98,20 @@ class FlightLimits:
             return f"a height of {z:.1f} m is below the lowest safe height of {self.floor_m:g} m"
         return None
 
+    def vertical_violation(self, z_from: float, z_to: float) -> str | None:
+        """Why a straight climb or descent from ``z_from`` to ``z_to`` is refused; None when
+        allowed. The fence is not judged (a vertical move never crosses it), and a move towards
+        the allowed heights is allowed even where it ends short of them: a drone above the
+        ceiling may always descend, one below the floor limit always climb."""
+        why = self.height_violation(z_to)
+        if why is None:
+            return None
+        if z_to > self.ceiling_m and z_to < z_from:
+            return None
+        if z_to < self.floor_m and z_to > z_from:
+            return None
+        return why
+
     def clamp_jog(
         self,
         x: float,

@@ -9,7 +9,7 @@ from drone.commands import DIRECTIONS, Move, Turn
 from drone.control.pid import Setpoint, wrap_angle
 from drone.vehicle import VehicleSnapshot
 from server.tasks.base import Context, PlanState, check_inside, need_flying
-from server.tasks.errors import CommandError
+from server.tasks.errors import CommandError, RefusedError
 from server.tasks.legs import LegsTask
 
 DEFAULT_MOVE_M = 1.0
@@ -47,6 +47,7 @@ class MoveTask(LegsTask):
             raise CommandError(f"'move' needs 'direction' in {', '.join(DIRECTIONS)}; got {d!r}")
         self.direction = d
         self.distance = float(DEFAULT_MOVE_M if command.distance is None else command.distance)
+        self._from_z = 0.0  # the height the legs start from (legs())
         if not 0 < self.distance <= MAX_MOVE_M:
             raise CommandError(
                 f"move distance must be in (0, {MAX_MOVE_M:.0f}] m, got {self.distance}"
@@ -57,12 +58,24 @@ class MoveTask(LegsTask):
         need_flying(p, what)
         dx, dy, dz = _offset(self.direction, self.distance, p.yaw_rad)
         x, y, z = p.x + dx, p.y + dy, max(p.z, 0.8) + dz if dz else p.z
-        check_inside(ctx, x, y, z if dz else max(z, ctx.limits.floor_m), what, p.located)
+        if self.vertical:  # never across the fence; towards the allowed heights always
+            why = ctx.limits.vertical_violation(max(p.z, 0.8), z)
+            if why is not None:
+                raise RefusedError(f"I can't {what}: {why}.")
+        else:
+            check_inside(ctx, x, y, z if dz else max(z, ctx.limits.floor_m), what, p.located)
         return replace(p, x=x, y=y, z=z)
+
+    @property
+    def vertical(self) -> bool:
+        return self.direction in ("up", "down")
 
     def check_legs(self, ctx: Context, legs: list[Setpoint]) -> str | None:
         sp = legs[-1]
-        why = ctx.limits.violation(sp.x, sp.y, sp.z)
+        if self.vertical:
+            why = ctx.limits.vertical_violation(self._from_z, sp.z)
+        else:
+            why = ctx.limits.violation(sp.x, sp.y, sp.z)
         return None if why is None else f"I can't {self.describe()}: {why}"
 
     def legs(self, ctx: Context, s: VehicleSnapshot) -> tuple[list[Setpoint], list[str]]:
@@ -71,6 +84,7 @@ class MoveTask(LegsTask):
             (base.x, base.y, base.z, base.yaw_rad) if base else (s.x, s.y, s.z, s.yaw_rad)
         )
         dx, dy, dz = _offset(self.direction, self.distance, yaw)
+        self._from_z = z
         return [Setpoint(x + dx, y + dy, z + dz, yaw)], [f"{self.distance:g} m {self.direction}"]
 
     def describe(self) -> str:

@@ -52,3 +52,34 @@ def test_violations_say_why() -> None:
     assert lim.violation(4.0, 3.0, 0.1) == (
         "a height of 0.1 m is below the lowest safe height of 0.3 m"
     )
+
+
+def test_a_vertical_move_is_judged_on_height_alone_and_towards_safety_always_allowed() -> None:
+    """A climb or descent never crosses the fence, so a drone whose estimate is outside it may
+    still descend; and one above the ceiling may always descend (the altitude monitor's
+    corrective "move down" was refused by the fence and the drone held above the ceiling)."""
+    from types import SimpleNamespace
+
+    from drone.commands import Move
+    from server.tasks.base import PlanState
+    from server.tasks.errors import RefusedError
+    from server.tasks.motion import MoveTask
+
+    lim = limits_of(load_world("indoor"))  # ceiling 2.7 m, floor limit 0.3 m
+    assert lim.vertical_violation(3.5, 3.0) is None  # descending from above the ceiling
+    assert lim.vertical_violation(2.0, 1.0) is None
+    assert "ceiling" in (lim.vertical_violation(2.0, 3.0) or "")  # climbing through it
+    assert "ceiling" in (lim.vertical_violation(3.0, 3.5) or "")  # climbing above it
+    assert lim.vertical_violation(0.1, 0.2) is None  # climbing from below the floor limit
+    assert "lowest safe height" in (lim.vertical_violation(1.0, 0.2) or "")
+
+    ctx = SimpleNamespace(limits=lim)
+    outside = PlanState(flying=True, x=3.6, y=13.5, z=3.2, yaw_rad=0.0)  # estimate off the room
+    down = MoveTask(Move(action="move", direction="down", distance=0.8))
+    assert down.plan(outside, ctx).z == 3.2 - 0.8  # type: ignore[arg-type]
+    up = MoveTask(Move(action="move", direction="up", distance=0.5))
+    with pytest.raises(RefusedError, match="ceiling"):
+        up.plan(outside, ctx)  # type: ignore[arg-type]
+    forward = MoveTask(Move(action="move", direction="forward", distance=0.5))
+    with pytest.raises(RefusedError, match="outside the"):
+        forward.plan(outside, ctx)  # type: ignore[arg-type]
