@@ -409,7 +409,7 @@ def test_a_vehicle_needs_a_bus(
     assert cli_main(["vehicle", "--name", NAME]) == 2
     assert "--bus-connect ENDPOINT is needed" in capsys.readouterr().err
     # the rosbridge vehicle link is gone: one line saying what joins a console instead
-    link = ["vehicle", "--name", NAME, "--central", "ws://127.0.0.1:8000/vehicle-link"]
+    link = ["vehicle", "--name", NAME, "--central", "ws://console.invalid/vehicle-link"]
     assert cli_main(link) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--bus-connect ENDPOINT" in err and "not --central" in err
