@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -20,8 +19,9 @@ from typing import Any
 
 import pytest
 
-from tests.isolation.conftest import ROOT, Served, serve, wait_for
+from tests.isolation.conftest import Served, serve, wait_for
 from tests.support.loopback import free_port, fresh_address
+from tests.support.processes import running, vehicle_key
 
 # serial: a console and a vehicle process on wall-clock deadlines
 pytestmark = pytest.mark.serial
@@ -51,18 +51,6 @@ class Rig:
         return self.vehicle_log.read_text(errors="replace")
 
 
-def vehicle_key(data: Path) -> str:
-    out = subprocess.run(
-        [sys.executable, "-m", "server", "vehicle-key", NAME, "--data-dir", str(data), "--print"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        check=True,
-        timeout=60,
-    )
-    return out.stdout.strip()
-
-
 @contextlib.contextmanager
 def vehicle(tmp: Path, endpoint: str, key: str) -> Iterator[Path]:
     """``uav-console vehicle --bus-connect`` with its own data directory and deadline."""
@@ -76,22 +64,13 @@ def vehicle(tmp: Path, endpoint: str, key: str) -> Iterator[Path]:
     }
     env.pop("UAVC_TOKEN", None)
     argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", NAME]
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
-    try:
+    with running(argv, log_path, env):
         yield log_path
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 @pytest.fixture
 def rig(tmp_path: Path) -> Iterator[Rig]:
-    key = vehicle_key(tmp_path / "data")
+    key = vehicle_key(tmp_path / "data", NAME)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     extra = ("--fleet", "0", "--bus-listen", endpoint)
     env = {"UAVC_COMMAND_DEADLINE_S": str(CONSOLE_DEADLINE_S)}

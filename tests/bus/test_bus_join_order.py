@@ -18,8 +18,9 @@ from drone.bus.commander import BusCommander
 from drone.bus.commands import CommandReply
 from drone.bus.console import ConsoleBus
 from server.vehicles.keys import new_key
-from tests.isolation.conftest import ROOT, wait_for
+from tests.isolation.conftest import wait_for
 from tests.support.loopback import free_port, fresh_address
+from tests.support.processes import running
 
 # serial: a vehicle process whose start a second test run on the same 2 cores slows
 pytestmark = pytest.mark.serial
@@ -38,17 +39,8 @@ def vehicle(tmp: Path, endpoint: str, key: str) -> Iterator[tuple[subprocess.Pop
     }
     env.pop("UAVC_TOKEN", None)
     argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", NAME]
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
-    try:
+    with running(argv, log_path, env) as proc:
         yield proc, log_path
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 async def ask_telemetry(console: ConsoleBus) -> CommandReply:

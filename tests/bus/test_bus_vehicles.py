@@ -22,9 +22,10 @@ from typing import Any
 import pytest
 from websockets.sync.client import connect as ws_connect
 
-from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
+from tests.isolation.conftest import HOST, PILOT, Served, wait_for
 from tests.isolation.conftest import serve as serve_quick
 from tests.support.loopback import free_port, fresh_address
+from tests.support.processes import running, vehicle_key
 
 # serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
 # is refused), which a second test run on the same 2 cores made them miss
@@ -81,18 +82,6 @@ def serve(
         yield srv
 
 
-def vehicle_key(data: Path, name: str) -> str:
-    out = subprocess.run(
-        [sys.executable, "-m", "server", "vehicle-key", name, "--data-dir", str(data), "--print"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        check=True,
-        timeout=60,
-    )
-    return out.stdout.strip()
-
-
 @contextlib.contextmanager
 def bus_vehicle(
     tmp: Path, endpoint: str, key: str, extra_env: dict[str, str] | None = None
@@ -107,17 +96,8 @@ def bus_vehicle(
     }
     env.pop("UAVC_TOKEN", None)
     argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", NAME]
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
-    try:
+    with running(argv, log_path, env) as proc:
         yield proc, log_path
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 @pytest.fixture(scope="module")

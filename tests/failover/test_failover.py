@@ -30,6 +30,7 @@ from server.fleet.continuity import CoverageTracker
 from server.fleet.geo import Enu
 from tests.isolation.conftest import HOST, PILOT, ROOT, Served, wait_for
 from tests.support.loopback import free_port, fresh_address
+from tests.support.processes import running
 
 # serial: real consoles and vehicles on wall-clock deadlines, which a second test run on the
 # same 2 cores made them miss
@@ -101,17 +102,8 @@ def vehicle(
     argv += ["--index", str(index), "--key-file", str(key_file), "--token", PILOT]
     for endpoint in bus:
         argv += ["--bus-connect", endpoint]
-    with open(tmp / f"{name}.log", "wb") as log:
-        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
-    try:
+    with running(argv, tmp / f"{name}.log", env) as proc:
         yield proc
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 class Watcher:

@@ -16,8 +16,9 @@ from pathlib import Path
 import pytest
 
 from server.cli import main as cli_main
-from tests.isolation.conftest import PILOT, ROOT, Served, serve, wait_for
+from tests.isolation.conftest import PILOT, Served, serve, wait_for
 from tests.support.loopback import fresh_address
+from tests.support.processes import running
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -31,17 +32,8 @@ def vehicle(srv: Served, name: str, sim_addr: str, tmp: Path) -> Iterator[subpro
     bus = srv.http.get("/api/v1/health").json()["bus"]["endpoints"][0]
     argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", bus, "--name", name]
     argv += ["--world", "outdoor", "--drone", "sim", "--index", "0", "--key-file", str(key_file)]
-    with open(tmp / f"{name}.log", "wb") as log:
-        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=log, stderr=log)
-    try:
+    with running(argv, tmp / f"{name}.log", env) as proc:
         yield proc
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 def test_remote_vehicles_join_a_central_server_as_whole_drones(tmp_path: Path) -> None:
