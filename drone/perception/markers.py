@@ -83,6 +83,21 @@ class FrameResult:
     process_s: float  # wall time spent detecting + solving
 
 
+def aruco_detector() -> cv2.aruco.ArucoDetector:
+    """The detector of the worlds' markers (4x4, dictionary 50), SUBPIX corners; shared by the
+    localiser and the captioner's marker sightings, so both see the same markers."""
+    dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    # Two adaptive-threshold windows (7 and 23 px) instead of OpenCV's three (3, 13, 23):
+    # the markers seen at 0.5-5 m in a 640x360 frame are found by both, at 0.7x the time
+    # (bench/autonomy.py; every marker of the room at 1, 1.8 and 2.8 m still detected).
+    params.adaptiveThreshWinSizeMin = 7
+    params.adaptiveThreshWinSizeMax = 23
+    params.adaptiveThreshWinSizeStep = 16
+    return cv2.aruco.ArucoDetector(dictionary, params)
+
+
 class MarkerLocaliser:
     """Detect markers and turn each into a drone pose fix. Not thread-safe; one per worker."""
 
@@ -106,16 +121,7 @@ class MarkerLocaliser:
         if self.K.shape != (3, 3) or self.B.shape != (3, 3) or not np.all(np.isfinite(self.K)):
             raise CameraModelError("camera matrix and body_to_camera must be finite 3×3 matrices")
         self.markers = {m.id: m for m in world.markers}
-        dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
-        params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        # Two adaptive-threshold windows (7 and 23 px) instead of OpenCV's three (3, 13, 23):
-        # the markers seen at 0.5-5 m in a 640x360 frame are found by both, at 0.7x the time
-        # (bench/autonomy.py; every marker of the room at 1, 1.8 and 2.8 m still detected).
-        params.adaptiveThreshWinSizeMin = 7
-        params.adaptiveThreshWinSizeMax = 23
-        params.adaptiveThreshWinSizeStep = 16
-        self.detector = cv2.aruco.ArucoDetector(dictionary, params)
+        self.detector = aruco_detector()
         # (grey image, corners, ids) of the last few distinct frames, newest first
         self._recent: list[tuple[np.ndarray, Sequence[np.ndarray], np.ndarray | None]] = []
         self.detections_run = 0  # frames the detector ran on

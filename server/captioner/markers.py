@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from drone.camera import CameraModel
+from drone.perception.markers import aruco_detector
 from server.captioner.grounding import SeenMarker
 
 _CAMERA = CameraModel()  # AR.Drone 2.0 front camera: 640×360, 92° diagonal
@@ -36,13 +37,7 @@ class MarkerDetector:
     """``cv2.aruco`` with the localiser's parameters; not thread-safe (one per worker)."""
 
     def __init__(self) -> None:
-        params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        params.adaptiveThreshWinSizeMin = 7
-        params.adaptiveThreshWinSizeMax = 23
-        params.adaptiveThreshWinSizeStep = 16
-        dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
-        self._detector = cv2.aruco.ArucoDetector(dictionary, params)
+        self._detector = aruco_detector()
 
     def detect(self, frame_bgr: npt.NDArray[np.uint8]) -> list[MarkerSighting]:
         """Markers in a BGR frame, left to right; bearings use the front camera's optics
