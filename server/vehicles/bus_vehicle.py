@@ -34,7 +34,7 @@ from server.vehicles.errors import VehicleError
 if TYPE_CHECKING:
     from drone.bus.vehicle import VehicleBus
     from server.vehicles.host import VehicleHost
-    from server.vehicles.spec import LinkSpec
+    from server.vehicles.spec import TopicSpec
 
 log = logging.getLogger("uav_console.vehicle")
 
@@ -48,7 +48,7 @@ TOPIC_ACTIONS = ("takeoff", "land", "reset")  # the AR.Drone's /ardrone/<action>
 class BusVehicleSide:
     """See the module docstring; ``step(now)`` from the host's periodic loop."""
 
-    def __init__(self, host: VehicleHost, bus: VehicleBus, spec: LinkSpec) -> None:
+    def __init__(self, host: VehicleHost, bus: VehicleBus, topics: tuple[TopicSpec, ...]) -> None:
         from server.vehicles import names
 
         assert bus.session is not None
@@ -85,13 +85,13 @@ class BusVehicleSide:
         self._next_status = 0.0
         self._next_latched = 0.0
         self.commanded.start()
-        self.camera_topics = [t for t in spec.out_topics if t.name.endswith(CAMERA_TOPIC)]
+        self.camera_topics = [t for t in topics if t.name.endswith(CAMERA_TOPIC)]
         self._camera_subs = [
             host.graph.subscribe(t.name, self._on_image, type=t.type, owner="bus")
             for t in self.camera_topics
         ]
         # the vehicle's own topics, for the consoles' graphs (the camera has its own key)
-        self._mirrored = [t for t in spec.out_topics if not t.name.endswith(CAMERA_TOPIC)]
+        self._mirrored = [t for t in topics if not t.name.endswith(CAMERA_TOPIC)]
         self._graph_pubs: dict[str, zenoh.Publisher] = {}
         self._graph_subs = []
         for topic in self._mirrored:

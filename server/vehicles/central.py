@@ -262,15 +262,15 @@ class VehicleCentral:
         for index in range(count):
             name = f"uav{index + 1}"
             prefix = "" if count == 1 else f"/{name}"
-            argv = [sys.executable, "-m", "server", "vehicle", *self._bus_argv(name)]
-            argv += ["--name", name]
+            bus_argv, bus_env = self._bus_join(name)
+            argv = [sys.executable, "-m", "server", "vehicle", *bus_argv, "--name", name]
             kind = drone_kind(s.drone, index)  # its own entry of a comma-separated --drone
             argv += ["--prefix", prefix, "--index", str(index), "--drone", kind]
             argv += ["--world", s.world, *safety, "--parent-pid", str(os.getpid())]
             self.door_ports[name] = free_door_port(s.host)
             argv += ["--safety-port", str(self.door_ports[name])]
             self.prefixes[name] = prefix
-            child = {**vehicle_env(env, self.keys, name), **self._bus_env(name)}
+            child = {**vehicle_env(env, self.keys, name), **bus_env}
             child["UAVC_DOOR_SECRET"] = self.door_secrets.get_or_create(name).hex()
             self.processes[name] = VehicleProcess(argv, child, name)
             self._register(name, prefix, simulated=kind in ("sim", SIM_MAVLINK))
@@ -320,22 +320,17 @@ class VehicleCentral:
         why = why.removeprefix("the bus could not start: ")
         self.bus_error = re.sub(r" at /\S+\.rs:\d+\.?", "", why)
 
-    def _bus_argv(self, name: str) -> list[str]:
-        """``--bus-connect`` for vehicle ``name``: our router first, then the routers we join
-        (the vehicle fails over to them)."""
+    def _bus_join(self, name: str) -> tuple[list[str], dict[str, str]]:
+        """How vehicle ``name`` joins the bus: ``--bus-connect`` (our router first, then the
+        routers we join: the vehicle fails over to them) and the rest of it in its environment
+        (its password is its vehicle key, there already)."""
         assert self.bus is not None
         cred = self.bus.vehicle_credential(name)
-        return ["--bus-connect", ",".join([*cred.connect, *self.runtime.settings.bus_connect])]
-
-    def _bus_env(self, name: str) -> dict[str, str]:
-        """The rest of what vehicle ``name`` joins the bus with (its password is its vehicle
-        key, in its environment already)."""
-        assert self.bus is not None
-        cred = self.bus.vehicle_credential(name)
-        return {
-            "UAVC_FLEET_NAME": self.runtime.settings.fleet_name,
-            **({"UAVC_BUS_CA": cred.ca} if cred.ca is not None else {}),
-        }
+        argv = ["--bus-connect", ",".join([*cred.connect, *self.runtime.settings.bus_connect])]
+        env = {"UAVC_FLEET_NAME": self.runtime.settings.fleet_name}
+        if cred.ca is not None:
+            env["UAVC_BUS_CA"] = cred.ca
+        return argv, env
 
     def door_ticket(self, name: str, now: float | None = None) -> str | None:
         """A pilot's ticket for ``name``'s safety door (None: a vehicle we gave no secret)."""
@@ -584,11 +579,11 @@ def bus_topics(name: str, prefix: str) -> dict[str, Any]:
     """The graph topics vehicle ``name`` may show on this console over the bus: its drone's
     (AR.Drone, with GPS navdata, or MAVLink) under its prefix, and its own ``/NAME/vehicle/*``
     (the camera comes on its own key)."""
-    from server.vehicles.host import link_spec
+    from server.vehicles.host import shared_topics
 
     out: dict[str, Any] = {}
     for mavlink in (False, True):
-        for topic in link_spec(name, prefix, mavlink=mavlink, gps=True).out_topics:
+        for topic in shared_topics(name, prefix, mavlink=mavlink, gps=True):
             if not topic.name.endswith("/image_raw/compressed"):
                 out[topic.name] = topic
     return out

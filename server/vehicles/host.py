@@ -68,7 +68,7 @@ from server.vehicles.door_protocol import (
 )
 from server.vehicles.errors import CannotStart, DoorProtocolError, VehicleError
 from server.vehicles.relay import replies_out
-from server.vehicles.spec import LinkSpec, TopicSpec
+from server.vehicles.spec import TopicSpec
 from server.vehicles.task_ops import TASK_OPS, notice_message, run_task_op
 from server.vehicles.watch import CentralWatch, LossAction
 
@@ -107,7 +107,9 @@ class VehicleOptions:
     parent_pid: int | None = None  # the supervising serve (None: a standalone vehicle)
 
 
-def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = False) -> LinkSpec:
+def shared_topics(
+    name: str, prefix: str, *, mavlink: bool = False, gps: bool = False
+) -> tuple[TopicSpec, ...]:
     """The topics a whole vehicle shares with its consoles on the bus: an AR.Drone's navdata
     (and GPS navdata in a ``gps`` world) and camera, or a MAVLink drone's ``/mavros/*`` topics
     (no camera over MAVLink).
@@ -132,7 +134,7 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
             *((TopicSpec(f"{p}/ardrone/navdata_gps", NAVDATA_GPS),) if gps else ()),
             TopicSpec(f"{p}/ardrone/image_raw/compressed", IMAGE),
         )
-    out = (
+    return (
         *drone,
         TopicSpec(f"{p}/uav/pose", POSE),
         TopicSpec(f"{p}/uav/markers", MARKERS),
@@ -144,7 +146,6 @@ def link_spec(name: str, prefix: str, *, mavlink: bool = False, gps: bool = Fals
         TopicSpec(names.telemetry_topic(name), names.STRING),
         TopicSpec(names.alarm_topic(name), names.STRING),
     )
-    return LinkSpec(out)
 
 
 class VehicleHost:
@@ -207,7 +208,7 @@ class VehicleHost:
         assert tasks is not None and self.stack.node is not None
         await self.stack.node.start()
         gps = getattr(self.world, "gps_origin", None) is not None
-        spec = link_spec(self.name, o.prefix, mavlink=self.mavlink, gps=gps)
+        topics = shared_topics(self.name, o.prefix, mavlink=self.mavlink, gps=gps)
         # audit rows carry the id of the consoles' flight recording (their bus heartbeats)
         self.recording_id = ""
         self.audit.recording = lambda: self.recording_id
@@ -275,7 +276,7 @@ class VehicleHost:
         self.bus = bus_for(s, self.name, self.key)
         if self.bus is None:
             raise VehicleError(f"{self.name}: no bus to join (--bus-connect ENDPOINT)")
-        self._join_bus(self.bus, spec)
+        self._join_bus(self.bus, topics)
         self.graph.publish(names.info_topic(self.name), {"data": json.dumps(self.info())})
         supervisor = self.stack.supervisor
         assert supervisor is not None
@@ -286,7 +287,7 @@ class VehicleHost:
             asyncio.create_task(self._periodic(), name=f"vehicle-periodic:{self.name}"),
         ]
 
-    def _join_bus(self, bus: VehicleBus, spec: LinkSpec) -> None:
+    def _join_bus(self, bus: VehicleBus, topics: tuple[TopicSpec, ...]) -> None:
         """Join the bus now, or, when its router is not up (yet: the vehicle may start first),
         as soon as it is; said in the log either way."""
         where = ", ".join(self.settings.bus_connect)
@@ -298,18 +299,18 @@ class VehicleHost:
             )
             loop = asyncio.get_running_loop()
             bus.join_later(
-                lambda: loop.call_soon_threadsafe(self._on_bus, bus, spec),
+                lambda: loop.call_soon_threadsafe(self._on_bus, bus, topics),
                 lambda why: log.warning("%s: the bus at %s: %s", self.name, where, why),
             )
             return
-        self._on_bus(bus, spec)
+        self._on_bus(bus, topics)
 
-    def _on_bus(self, bus: VehicleBus, spec: LinkSpec) -> None:
+    def _on_bus(self, bus: VehicleBus, topics: tuple[TopicSpec, ...]) -> None:
         """Joined: answer commands, publish status, take plans from any central."""
         if bus.session is None or self.bus_side is not None:  # stopped meanwhile
             return
         log.info("%s: on the bus at %s", self.name, ", ".join(self.settings.bus_connect))
-        self.bus_side = BusVehicleSide(self, bus, spec)
+        self.bus_side = BusVehicleSide(self, bus, topics)
         self.ltm.join_bus(bus.session, self.settings.fleet_name)
 
     def _publish_alarm(self, alarm: Alarm) -> None:

@@ -14,10 +14,3 @@ class TopicSpec:
     name: str
     type: str
     latch: bool = False
-
-
-@dataclass(frozen=True)
-class LinkSpec:
-    """The topics a vehicle publishes for its consoles (:func:`server.vehicles.host.link_spec`)."""
-
-    out_topics: tuple[TopicSpec, ...] = ()

@@ -178,16 +178,16 @@ def test_the_vehicle_publishes_navdata_gps_per_fix_with_ardrone_autonomy_fields(
 def test_indoors_there_is_no_navdata_gps() -> None:
     from server.graph import Graph
     from server.nodes.vehicle_node import VehicleNode
-    from server.vehicles.host import link_spec
+    from server.vehicles.host import shared_topics
     from tests.autonomy.flight import Flight
 
     f = Flight.make(load_world("indoor"), seed=4, camera=False)
     g = Graph()
     VehicleNode(g, f.rig.vehicle, f.tm, "uav1", "", clock=f.rig.clock.now)
     assert "/ardrone/navdata_gps" not in g.topics()
-    assert "/ardrone/navdata_gps" not in {t.name for t in link_spec("uav1", "").out_topics}
-    spec = link_spec("uav2", "/uav2", gps=True)
-    assert {t.name: t.type for t in spec.out_topics}["/uav2/ardrone/navdata_gps"] == (
+    assert "/ardrone/navdata_gps" not in {t.name for t in shared_topics("uav1", "")}
+    topics = shared_topics("uav2", "/uav2", gps=True)
+    assert {t.name: t.type for t in topics}["/uav2/ardrone/navdata_gps"] == (
         "ardrone_autonomy/navdata_gps"
     )
 

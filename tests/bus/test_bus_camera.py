@@ -30,7 +30,7 @@ from server.nodes.vehicle_node import IMAGE
 from server.rosbridge.context import JsonCache
 from server.vehicles.bus_remote import BusDroneStack
 from server.vehicles.bus_vehicle import BusVehicleSide
-from server.vehicles.spec import LinkSpec, TopicSpec
+from server.vehicles.spec import TopicSpec
 from tests.support.loopback import free_port
 from tests.support.polling import until_async
 
@@ -149,9 +149,7 @@ def test_a_vehicle_sends_each_frame_as_made_and_the_console_shows_its_stamp(
         )
         host.graph.bind_loop(asyncio.get_running_loop())
         host.graph.advertise(TOPIC, IMAGE)
-        vehicle = BusVehicleSide(
-            cast(Any, host), bus, LinkSpec(out_topics=(TopicSpec(TOPIC, IMAGE),))
-        )
+        vehicle = BusVehicleSide(cast(Any, host), bus, (TopicSpec(TOPIC, IMAGE),))
         try:
             frame, made = jpeg(200), 1_700_000_000.25
 

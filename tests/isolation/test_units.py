@@ -95,11 +95,10 @@ def test_serve_says_where_each_flight_stack_runs() -> None:
 
 
 def test_a_mavlink_vehicle_shares_mavros_topics_not_a_camera() -> None:
-    from server.vehicles.host import link_spec
+    from server.vehicles.host import shared_topics
 
-    ardrone = {t.name for t in link_spec("uav2", "/uav2").out_topics}
-    spec = link_spec("uav2", "/uav2", mavlink=True)
-    mavlink = {t.name: t for t in spec.out_topics}
+    ardrone = {t.name for t in shared_topics("uav2", "/uav2")}
+    mavlink = {t.name: t for t in shared_topics("uav2", "/uav2", mavlink=True)}
     assert "/uav2/ardrone/image_raw/compressed" in ardrone
     assert "/uav2/ardrone/image_raw/compressed" not in mavlink
     assert "/uav2/ardrone/navdata" not in mavlink

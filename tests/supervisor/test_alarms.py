@@ -12,7 +12,7 @@ import httpx
 
 from drone.supervisor import Action, ActionKind, Alarm, Severity
 from server.vehicles import names
-from server.vehicles.host import link_spec
+from server.vehicles.host import shared_topics
 from tests.app_client import app_fixture
 
 
@@ -32,8 +32,7 @@ def test_an_alarm_says_its_monitor_severity_text_and_the_command_it_ran() -> Non
 
 
 def test_a_vehicle_shares_its_alarms_with_the_console() -> None:
-    spec = link_spec("uav3", "/uav3")
-    out = {t.name: t.type for t in spec.out_topics}
+    out = {t.name: t.type for t in shared_topics("uav3", "/uav3")}
     assert out[names.alarm_topic("uav3")] == names.STRING
     assert names.alarm_topic("uav3") == "/uav3/vehicle/alarm"
 
