@@ -10,6 +10,8 @@ import time
 
 import httpx
 
+from tests.support.polling import until_async
+
 
 def _expired(client: httpx.AsyncClient) -> list[str]:
     audit = client.app.state.runtime.audit  # type: ignore[attr-defined]
@@ -34,8 +36,11 @@ async def test_late_rest_commands_are_not_flown_and_a_stop_is_never_held_back(
         "/api/v1/missions", json={"markers": [1, 2]}, headers={"X-Command-Issued": late}
     )
     assert r.status_code == 409 and r.json()["accepted"] is False and r.json()["expired"], r.text
-    assert len(_expired(api)) == 3
-    assert all(o.startswith("expired: delivered 5.") for o in _expired(api))
+    # the rows are written on the audit log's own writer thread, after the answers
+    rows = await until_async(
+        lambda: len(_expired(api)) == 3 and _expired(api), 10.0, "three expired audit rows"
+    )
+    assert all(o.startswith("expired: delivered 5.") for o in rows), rows
     # a stamp that is not Unix seconds: a take-off is refused, a stop goes through
     r = await api.post("/api/v1/drones/uav1/takeoff", headers={"X-Command-Issued": "soon"})
     assert r.status_code == 422 and "Unix seconds" in r.text
