@@ -50,21 +50,25 @@ node-deps: tests/node/node_modules/.installed
 run: $(VENV)/.installed-run
 	$(VENV)/bin/uav-console serve --host $(HOST) --port $(PORT) $(ARGS)
 
-# The whole suite is two pytest runs: every file but the browser tests and the tests marked
-# `serial` in two worker processes, one test file per worker at a time (pytest-xdist; fixtures
-# that several files share take loopback addresses of their worker's own, tests/support/loopback.py),
-# handed out longest file first by the last run's seconds (tests/conftest.py; xdist's own reorder,
-# by test count, is off), then those alone: they are CPU-bound or real-time, and failed when a
-# second run shared the 2 cores with them. Both run even if the first fails. With ARGS, one
-# serial pytest run.
+# The whole suite is three pytest runs. First every file but the browser tests and the tests
+# marked `serial` in two worker processes, one test file per worker at a time (pytest-xdist;
+# fixtures that several files share take loopback addresses of their worker's own,
+# tests/support/loopback.py), handed out longest file first by the last run's seconds
+# (tests/conftest.py; xdist's own reorder, by test count, is off). Then the browser tests, the
+# same way: each worker has a server and a Chromium of its own, and a browser file waits on
+# flights in real time about as much as it computes. Last the `serial` tests alone: they run
+# real-time loops and failed when a second run shared the 2 cores with them. All three run even
+# if one fails. With ARGS, one serial pytest run.
 PARALLEL := -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial'
+BROWSER := -n 2 --dist loadfile --no-loadscope-reorder tests/browser -m browser
+SERIAL := -m 'serial and not browser'
 test: $(VENV)/.installed-test node-deps
 ifeq ($(strip $(ARGS)),)
 	@status=0; \
-	echo "$(PY) -m pytest $(PARALLEL)"; \
-	$(PY) -m pytest $(PARALLEL) || status=$$?; \
-	echo "$(PY) -m pytest -m 'serial or browser'"; \
-	$(PY) -m pytest -m 'serial or browser' || status=$$?; \
+	for stage in "$(PARALLEL)" "$(BROWSER)" "$(SERIAL)"; do \
+		echo "$(PY) -m pytest $$stage"; \
+		eval "$(PY) -m pytest $$stage" || status=$$?; \
+	done; \
 	exit $$status
 else
 	$(PY) -m pytest $(ARGS)

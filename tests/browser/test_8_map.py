@@ -134,6 +134,10 @@ def test_outdoor_map_reads_on_a_phone(browser: Any, outdoor_fleet: ServerProcess
         m1, z1 = scale_m_per_px(page), zoom(page)
         assert z1 > z0 and m1 < 0.8 * m0, (m0, m1, z0, z1)
         assert overlapping(page.evaluate(LABEL_BOXES)) == []
+        # where the map is now (a banner or a scroll since may have moved it)
+        page.locator("#map").scroll_into_view_if_needed()
+        box = page.locator("#map").bounding_box()
+        assert box is not None
         centre = (box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
         page.mouse.move(*centre)
         page.mouse.wheel(0, 400)  # out (Leaflet gathers wheel events for 40 ms first)
