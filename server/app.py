@@ -71,9 +71,9 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     )
     app.state.runtime = runtime
     app.state.replays = replays
-    # Intent/outcome audit rows of REST actions, inside the guard (issue 14).
+    # Intent/outcome audit rows of REST actions, inside the guard.
     app.add_middleware(RestAuditMiddleware, security=runtime.security, trail=runtime.trail)
-    # Host allowlist, body limits before parsing, security headers, the token cookie (issue 14).
+    # Host allowlist, body limits before parsing, security headers, the token cookie.
     app.add_middleware(HttpGuard, security=runtime.security)
     strict.install(app)  # 422s that echo NaN or lone surrogates stay 422s
     add_command_schemas(app)  # /docs shows the commands' union
@@ -110,7 +110,7 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     ):
         app.include_router(router, prefix="/api/v1")
     app.include_router(replay_live.router, prefix="/api/v1")
-    for router in (speech.router, tls.router):  # issue 15: speech, HTTPS for phones
+    for router in (speech.router, tls.router):  # speech, HTTPS for phones
         app.include_router(router, prefix="/api/v1")
     fleet_deps = [Depends(fleet_access), Depends(fleet_deadline)]
     app.include_router(runtime.fleet.router(dependencies=fleet_deps), prefix="/api/v1")

@@ -32,7 +32,7 @@ WORLDS_DIR = share_dir("worlds")
 """Directory holding the named worlds (``indoor``, ``outdoor``)."""
 
 ARUCO_DICTIONARY = "DICT_4X4_50"
-"""The only dictionary the worlds use (issue 3): ids 0..49."""
+"""The only dictionary the worlds use: ids 0..49."""
 ARUCO_MAX_ID = 49
 
 OBJECT_KINDS = frozenset(

@@ -48,7 +48,7 @@ def add_command_schemas(app: FastAPI) -> None:
 
 
 # Wind a simulator fault may blow: well beyond what an AR.Drone survives (Beaufort 11,
-# ~30 m/s), finite (issue 14: [1e308, 1e308] was accepted).
+# ~30 m/s), finite (a wind of [1e308, 1e308] is refused).
 MAX_WIND_MPS = 30.0
 WindComponent = Annotated[float, Field(ge=-MAX_WIND_MPS, le=MAX_WIND_MPS)]
 

@@ -2,14 +2,14 @@
 
 Two jobs, both pure functions of the LTM statuses the CTM already receives:
 
-* **Where a relief joins** (:func:`choose_join`). A relief used to enter the route at the
-  waypoint nearest its own station, wherever the tired drone was, so the stretch between the
-  two was flown twice and the waypoints behind the entry waited up to a whole lap longer at
-  every handoff. Now the CTM locates the patrolling drone on the route (:func:`locate`: arc
-  length along the polyline), predicts when it will reach each waypoint ahead of it (from the
-  lap time observed so far), and sends the relief to the *first* waypoint it can reach before
-  the patrolling drone does: the relief continues the sequence exactly where the tired drone
-  would have gone next, so the patrol's progress carries over. The tired drone is released
+* **Where a relief joins** (:func:`choose_join`). The CTM locates the patrolling drone on the
+  route (:func:`locate`: arc length along the polyline), predicts when it will reach each
+  waypoint ahead of it (from the lap time observed so far), and sends the relief to the *first*
+  waypoint it can reach before the patrolling drone does: the relief continues the sequence
+  exactly where the tired drone would have gone next, so the patrol's progress carries over.
+  (A relief entering at the waypoint nearest its own station, wherever the tired drone was,
+  would fly the stretch between the two twice, and the waypoints behind the entry would wait up
+  to a whole lap longer at every handoff.) The tired drone is released
   once it has flown the waypoints before the join (:func:`owes_waypoints`), not merely when
   the relief reaches the route: the relief's arrival is a prediction. After a failure there is no
   drone to meet; the replacement goes to the waypoint after the lost drone's last known

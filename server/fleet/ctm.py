@@ -6,7 +6,7 @@ answers a plan, ``add_mission``/``mission_from_request``. Output: ``step(now)`` 
 ``uav_console/FleetStatus`` message. No sockets, no clock of its own: the in-process node, the
 rosbridge server and the lockstep experiment all drive the same object.
 
-Per mission (issue 8): one drone *patrols*; when its battery will reach the mission's threshold
+Per mission: one drone *patrols*; when its battery will reach the mission's threshold
 within the lead time of the best idle drone (planner.lead_time_s), that drone is sent
 (*relieving*) on the same patrol plan from the route point nearest its station; the moment it
 is on the route the tired drone gets a return plan (*returning*), lands at its station
@@ -280,7 +280,7 @@ class CentralTaskManager:
 
     def _check_limits(self, route: Sequence[Enu]) -> None:
         """Refuse up front a route outside the world's limits (fence, floor, ceiling): a mission
-        is never cut short in mid-air by a limit it was bound to meet (issue 13 §2). The return
+        is never cut short in mid-air by a limit it was bound to meet. The return
         layer (``RETURN_LAYER_M`` above the route) is kept under the ceiling by ``_send_home``
         (in a room it is the ceiling itself)."""
         if self.world is None or not hasattr(self.world, "bounds"):
@@ -316,7 +316,7 @@ class CentralTaskManager:
                     raise MissionError(f"unknown marker id {mid}") from None
                 # In front of the marker, as "go to marker" flies (GotoMarkerTask.standoff_m):
                 # a marker hangs on a wall or a post, so its own position is not flyable (and
-                # lies outside the world's limits, issue 13).
+                # lies outside the world's limits).
                 p = marker.standoff(MARKER_STANDOFF_M)
                 route.append(Enu(float(p.x), float(p.y), req.altitude_m))
         return self.add_mission(

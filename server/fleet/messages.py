@@ -335,8 +335,8 @@ class FlightPlan:
         )
 
 
-# Bounds of a mission request (issue 14: a mission named "a/b" or 100 KB long could not be
-# stopped; routes and mission counts were unbounded). A name is a URL path segment.
+# Bounds of a mission request. A name is a URL path segment (a mission named "a/b" or 100 KB
+# long could not be stopped by name); routes and mission counts are bounded too.
 MISSION_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 MAX_ROUTE_POINTS = 200
 
