@@ -25,7 +25,7 @@ from server.recorder import replay_live
 from server.recorder.replay_live import ReplayHub
 from server.runtime import Runtime
 from server.settings import Settings
-from server.vehicles.deadlines import CommandExpired
+from server.vehicles.deadlines import RestCommandExpired
 from server.vehicles.door import advertised_url
 from server.vehicles.errors import VehicleUnavailable
 
@@ -88,8 +88,8 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         headers = {"Retry-After": str(exc.retry_after_s)}
         return JSONResponse(body, status_code=503, headers=headers)
 
-    @app.exception_handler(CommandExpired)
-    async def command_expired(request: Request, exc: CommandExpired) -> JSONResponse:
+    @app.exception_handler(RestCommandExpired)
+    async def command_expired(request: Request, exc: RestCommandExpired) -> JSONResponse:
         # Not flown: the command reached us past its deadline (drone/deadline.py).
         body = {
             "accepted": False,

@@ -8,6 +8,7 @@ import ast
 import io
 import re
 import tokenize
+from collections import defaultdict
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -122,3 +123,57 @@ def test_every_complexity_exemption_says_why() -> None:
         stray += [f"{name}:{n}" for n in marks]
     assert not silent, f"noqa: C901 without a 'Complexity:' reason in the docstring: {silent}"
     assert not stray, f"noqa: C901 on no function's header: {stray}"
+
+
+# Class names defined in more than one module of the product, each with why it is one thing under
+# one name. Besides these: names private to their module (``_Link``) and the exceptions of each
+# package's ``errors.py`` (STYLE: one exception tree per package, caught by its package's name).
+SAME_THING = {
+    "Auth": "the ``auth`` op of two wire protocols (rosbridge, the safety door), named after the "
+    "op as its sibling ops are",
+    "LinkLost": "the link-lost event of the AR.Drone and the MAVLink protocol cores, each with "
+    "what its protocol knows",
+    "LinkRestored": "the link-restored event of the AR.Drone and the MAVLink protocol cores",
+}
+
+
+def class_modules(files: list[Path]) -> dict[str, list[str]]:
+    """Class name → the modules (paths relative to ROOT) defining a class of that name."""
+    found: defaultdict[str, list[str]] = defaultdict(list)
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef):
+                found[node.name].append(path.relative_to(ROOT).as_posix())
+    return found
+
+
+def name_clashes(found: dict[str, list[str]]) -> dict[str, list[str]]:
+    """The names defined twice or more, less the module-private ones and each package's
+    ``errors.py`` exceptions."""
+    return {
+        name: paths
+        for name, paths in sorted(found.items())
+        if len(paths) > 1
+        and not name.startswith("_")
+        and not all(p.endswith("/errors.py") for p in paths)
+    }
+
+
+def test_name_clashes_skip_private_names_and_exception_trees() -> None:
+    found = {
+        "Telemetry": ["drone/bus/payloads.py", "drone/mavlink/gcs/events.py"],
+        "FrameError": ["drone/mavlink/errors.py", "server/rosbridge/errors.py"],
+        "CommandExpired": ["server/vehicles/deadlines.py", "server/vehicles/errors.py"],
+        "_Udp": ["drone/mavlink/driver.py", "drone/mavlink/simserver.py"],
+        "Vehicle": ["drone/vehicle.py"],
+    }
+    assert sorted(name_clashes(found)) == ["CommandExpired", "Telemetry"]
+
+
+def test_one_name_per_class() -> None:
+    """Two classes under one name make a reader (and an import) pick the wrong one: a name
+    means one thing across ``server`` and ``drone``."""
+    clashes = name_clashes(class_modules(product_files()))
+    unexplained = {n: p for n, p in clashes.items() if n not in SAME_THING}
+    assert not unexplained, f"class names defined in several modules: {unexplained}"
+    assert sorted(set(SAME_THING) - set(clashes)) == [], "SAME_THING: names one module defines"

@@ -145,7 +145,7 @@ class ActionResult(BaseModel):
     late_s: float | None = None
 
 
-class Describe(BaseModel):
+class DescribeResponse(BaseModel):
     drone: str
     text: str
     ms: float | None = None
@@ -177,7 +177,7 @@ class WorldInfo(OpenResponse):
     stations: list[dict[str, Any]] = Field(description="home and charging stations")
 
 
-class VehicleProcess(OpenResponse):
+class VehicleProcessInfo(OpenResponse):
     """Where a drone runs in its own vehicle process: its link and its safety door."""
 
     mode: str
@@ -196,7 +196,7 @@ class DroneInfo(OpenResponse):
     simulated: bool
     link_ok: bool | None = Field(description="None: not known yet (a replay before its navdata)")
     task: dict[str, Any] | None = Field(default=None, description="the running task")
-    vehicle: VehicleProcess | None = None
+    vehicle: VehicleProcessInfo | None = None
 
 
 class SimTruth(OpenResponse):

@@ -49,8 +49,8 @@ from server.dialog.ports import (
     DescribePort,
     DroneView,
     FleetPort,
-    TaskEvent,
     TaskPort,
+    TaskReport,
     VehiclePort,
 )
 from server.dialog.states import MOTION, STATELESS, State, next_state
@@ -617,7 +617,7 @@ class DialogManager:
             return f"I cannot describe the scene: {exc}"
 
     # -- task events --------------------------------------------------------------------------
-    def _on_task_event(self, ev: TaskEvent) -> None:
+    def _on_task_event(self, ev: TaskReport) -> None:
         kind = ev.kind
         if kind == "done" and ev.command:
             self._reply(ev.detail or replies.result(ev.command))

@@ -42,7 +42,7 @@ PATROL_SERVICE_TYPE = "uav_console/Patrol"
 MAX_WORD = 64  # a status's free-text words (``operator``)
 
 
-class Role(enum.Enum):
+class DroneRole(enum.Enum):
     """What the CTM has a drone doing (``/fleet/status`` roles)."""
 
     PATROLLING = "patrolling"
