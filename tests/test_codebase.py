@@ -177,3 +177,23 @@ def test_one_name_per_class() -> None:
     unexplained = {n: p for n, p in clashes.items() if n not in SAME_THING}
     assert not unexplained, f"class names defined in several modules: {unexplained}"
     assert sorted(set(SAME_THING) - set(clashes)) == [], "SAME_THING: names one module defines"
+
+
+def test_no_issue_references_in_the_page_and_the_docs() -> None:
+    """The page's scripts and the user docs (``docs/``) say what is true now, as the code does;
+    history is the CHANGELOG's."""
+    files = sorted(
+        [
+            *(ROOT / "web").rglob("*.js"),
+            *(ROOT / "web").rglob("*.html"),
+            *(ROOT / "docs").glob("*.md"),
+        ]
+    )
+    found = [
+        f"{path.relative_to(ROOT)}:{n}: {line.strip()}"
+        for path in files
+        if "vendor" not in path.parts
+        for n, line in enumerate(path.read_text().splitlines(), 1)
+        if ISSUE_REF.search(line)
+    ]
+    assert not found, "issue references:\n" + "\n".join(found)
