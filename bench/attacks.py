@@ -11,9 +11,9 @@ the worst tick lateness and the p95 of ``/health`` in that window are taken. Eac
 median of ``--rounds`` windows; the idle loop (the same window, no attack) is the baseline of
 the same run.
 
-Decode attacks (issue 26 finding 2, and the expensive frames of issue 14), sent uncompressed
+Decode attacks (the frames that are expensive to decode), sent uncompressed
 unless named "deflate" (permessage-deflate, RFC 7692, as browsers and Node's ``ws`` send):
-  PNG 1 px × 4 M rows     the 21 857-byte frame of the finding: 16 MB of 1-pixel rows.
+  PNG 1 px × 4 M rows     a 21 857-byte frame: 16 MB of 1-pixel rows.
   PNG 1000 px, 4 MB       the largest PNG within the budget: decoded by a worker.
   PNG zlib bomb           a 10×10 header over 64 MB of zeros: inflation stops at 310 bytes.
   PNG 900k chunks         ~900 000 one-byte IDAT chunks: refused at the chunk cap.
@@ -29,9 +29,9 @@ frames and messages of at most 64 KB), pilot without the lease.
 
 Then: the attacks that reach a worker, with the pool's processes against threads (the GIL:
 ``json.loads`` holds it for a whole call); the permessage-deflate attacks with the transport's
-inflation metered and not (``server.http.ws_guard.InflateLimits``); the 16 MB pre-auth floods of
-issue 14 against the capped and the plain transport; and, outside the server, the per-row PNG
-decoder of before (rows sliced one by one in Python) against the linear one, at width 1 and
+inflation metered and not (``server.http.ws_guard.InflateLimits``); the 16 MB pre-auth floods
+against the capped and the plain transport; and, outside the server, a per-row PNG decoder
+(rows sliced one by one in Python, the baseline) against the linear one, at width 1 and
 1000.
 
 Usage: ``python bench/attacks.py [--quick] [--rounds N] [--window S]``. Figures depend on the
@@ -586,7 +586,7 @@ def main() -> int:
         print(f"{'idle (baseline)':<36} {'':<16} {label:<10} {fmt(base, base)}")
         for attack, role, row in rows:
             print(f"{attack.name:<36} {role:<16} {label:<10} {fmt(row, base)}")
-    print("\n16 MB frames before auth (issue 14): the transport's cap against uvicorn's plain one.")
+    print("\n16 MB frames before auth: the transport's cap against uvicorn's plain one.")
     print(f"{'flood':<36} {'transport':<10} {HEAD}")
     for capped, base, row in flood_rows:
         label = "capped" if capped else "plain"

@@ -11,7 +11,7 @@ Rows (server in its own process, clients in 1-4 worker processes, all on loopbac
                           op in, base64 validated, re-encoded out). Target < 50 ms.
   call_service RTT        sequential calls of an in-process service; baseline: request/reply on
                           the bare relay. Target p50 <= 1 ms.
-Anchors (issue 2): rosbridge_suite ~5 000 msg/s, 12 ms median service call, 6-22 s latency for a
+Anchors: rosbridge_suite ~5 000 msg/s, 12 ms median service call, 6-22 s latency for a
 640x360 15 fps image stream (rosboard with JPEG: 96 ms).
 
 Usage: ``python bench/bridge.py [--quick] [--seconds S]``. The server runs with a raised

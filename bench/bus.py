@@ -8,8 +8,8 @@ camera) with its own credential, publishing telemetry at 10 Hz and a status (the
 the console's embedded router with its access control (``drone.bus.console.ConsoleBus``, which
 subscribes to every drone's telemetry); an observer (a Zenoh session with the console's
 ``client.json5``) stamps each telemetry on arrival. The baseline, the same N over the rosbridge
-vehicle link that the bus replaced, is no longer runnable; its figures are in docs/bus.md
-("Scale"). Figures:
+vehicle link that the bus replaced, needs a checkout that has that link; its figures are in
+docs/bus.md ("Scale"). Figures:
 
 - telemetry end to end (vehicle's stamp → the observer, one machine, one clock): p50 / p99;
 - the central's CPU (``/proc/<pid>/stat`` of the central process / of ``serve``: CPU seconds per

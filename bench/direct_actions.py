@@ -1,9 +1,9 @@
-"""What the checks and the audit cost a direct action (issue 18), measured on the real stack.
+"""What the checks and the audit cost a direct action, measured on the real stack.
 
-``POST /api/v1/drones/uav1/emergency`` now goes through ``server.vehicles.direct_actions.perform``:
+``POST /api/v1/drones/uav1/emergency`` goes through ``server.vehicles.direct_actions.perform``:
 preflight check, the command to the driver, the dialog told, an audit row written (SQLite,
-``synchronous=FULL``). The baseline, in the same run on the same app, is what the endpoint did
-before: ``DroneStack.direct`` alone. Both are timed from the call to (a) the return and (b) the
+``synchronous=FULL``). The baseline, in the same run on the same app, is ``DroneStack.direct``
+alone. Both are timed from the call to (a) the return and (b) the
 drone's emergency bit in navdata (the simulator over the real AR.Drone protocol on loopback),
 alternating, with a reset in between.
 

@@ -1,11 +1,12 @@
-"""What the estimator fixes of issue 13 §1 cost and give, each against its "before" in one run.
+"""What the estimator's per-component gating and vertical noise cost and give, each against its
+baseline (the joint-gate filter) in one run.
 
-1. Cost of one navdata update: per-component gating (now: altitude and vertical speed as direct
-   scalar updates, planar velocity as a 2-dof update) against the joint 4-dof gated update the
-   filter used before (run here through the same filter's general update).
+1. Cost of one navdata update: per-component gating (altitude and vertical speed as direct
+   scalar updates, planar velocity as a 2-dof update) against the joint 4-dof gated update of
+   the baseline (run here through the same filter's general update).
 2. The climb reversal in lockstep (camera off): ``move up 1.5``, then ``move down 0.5`` replacing
    it at ~0.65 m/s: the lowest true height, the worst height error of the estimate and the
-   navdata rejected — with the filter as it is, and with its former settings (joint gate,
+   navdata rejected — with the filter as it is, and with the baseline's settings (joint gate,
    σa,z 0.5 m/s², no re-initialisation from navdata).
 
     python bench/estimator.py [--quick] [--json out.json]
@@ -33,7 +34,7 @@ from server.tasks import TaskManager  # noqa: E402
 
 
 class JointGateEkf(E.ExtendedKalmanFilter):
-    """The filter before issue 13: one joint χ²(4) gate on the whole navdata packet."""
+    """The baseline filter: one joint χ²(4) gate on the whole navdata packet."""
 
     def _apply_navdata(self, nav: E.NavdataInput) -> bool:
         c = self.cfg

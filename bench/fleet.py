@@ -12,7 +12,7 @@ Table 2, the CTM alone with 100 simulated LTMs reporting at 1 Hz (statuses from 
 stand-in, since the CTM only sees statuses): CPU seconds per simulated second, and the latency
 of one decision round (median and p99); baseline: ingesting the statuses without deciding.
 
-Table 3, handoff continuity (issue 13): three drones, the patrolling one fails (motors cut) a
+Table 3, handoff continuity: three drones, the patrolling one fails (motors cut) a
 third of the way in, flown twice in the same run, with the relief joining at the waypoint
 nearest its station (before, the baseline) and where the patrolling drone goes next (after).
 Coverage and longest coverage gap as ``uav-console patrol`` measures them, and the revisit

@@ -10,8 +10,8 @@ and, for each drone in turn, selects it and samples what the page shows for ``--
 
 Baselines in the same run: one drone (``--fleets 1,2``), and with ``--before CHECKOUT`` the
 same fleets on another checkout's server and page (e.g. ``git worktree add /tmp/main main``),
-back to back; the last column is each row's display latency over its baseline's. Targets
-(issue 29): with two drones each camera keeps >= 10 fps and <= 200 ms ("target" column). The
+back to back; the last column is each row's display latency over its baseline's. Targets:
+with two drones each camera keeps >= 10 fps and <= 200 ms ("target" column). The
 stamp is taken when the vehicle has encoded the JPEG (server/nodes/vehicle_node.py; over the bus
 it travels as the frame's attachment), so the bus, the console and the page are included,
 rendering and perception are not. "throttle at end" is the page's camera throttle
@@ -41,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 CHROMIUM = os.environ.get("UAVC_CHROMIUM", "/usr/bin/chromium")
 TOKEN = "bench-fleet-camera"
-TARGET_FPS, TARGET_MS = 10.0, 200.0  # issue 29, with two drones
+TARGET_FPS, TARGET_MS = 10.0, 200.0  # with two drones
 
 # Collects, in the page, the arrival and display latency of every frame of the selected drone.
 PROBE = """

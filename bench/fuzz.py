@@ -1,6 +1,6 @@
-"""Fuzz campaign over every parser of untrusted input (issue 14); a benchmark, not a test.
+"""Fuzz campaign over every parser of untrusted input; a benchmark, not a test.
 
-    .venv/bin/python bench/fuzz.py               # 100 000 inputs per parser (the issue's bar)
+    .venv/bin/python bench/fuzz.py               # 100 000 inputs per parser (the target)
     .venv/bin/python bench/fuzz.py --n 5000      # a quick pass
     .venv/bin/python bench/fuzz.py --only navdata --seed 7
 

@@ -1,4 +1,4 @@
-"""Flight-critical isolation (issue 14): emergency latency to the wire and control-loop timing,
+"""Flight-critical isolation: emergency latency to the wire and control-loop timing,
 the flight stack in the web process (``--vehicles inline``, the baseline) vs in its own process
 (``--vehicles process``), measured in the same run.
 
@@ -12,7 +12,7 @@ Rows:
                           on the vehicle's safety door, held open) -> AT*REF emergency bit.
   emergency under attack  the same while the web process decodes a ``png`` rosbridge frame sent
                           *before authenticating* whose PNG has N one-byte IDAT chunks (the
-                          quadratic ``png_decode`` of issue 14; N = 900 000 froze the loop 12 s);
+                          quadratic PNG decoder; N = 900 000 froze its loop 12 s);
                           or while 4 unauthenticated connections send back-to-back 16 MB frames.
   control loop            the 100 Hz controller's period error p99 (its own TimingRecorder) with
                           10 WebSocket clients streaming the camera and navdata, the captioner
@@ -92,7 +92,7 @@ def serve(mode: str, sim_addr: str, tmp: Path) -> Iterator[tuple[int, httpx.Clie
 
 # ---------------------------------------------------------------------------------- attacks
 def png_bomb(chunks: int) -> str:
-    """A ``png`` op whose PNG has ``chunks`` one-byte IDAT chunks (issue 14's first finding)."""
+    """A ``png`` op whose PNG has ``chunks`` one-byte IDAT chunks."""
     data = zlib.compress(b"\x00" * 4)
     head = b"\x89PNG\r\n\x1a\n"
     ihdr = struct.pack(">IIBBBBB", 1, 1, 8, 2, 0, 0, 0)

@@ -1,4 +1,4 @@
-"""The vehicle process's weight (issue 27): start-up time and peak RSS of one whole vehicle
+"""The vehicle process's weight: start-up time and peak RSS of one whole vehicle
 (simulator, driver, vehicle, task executor, supervisor, LTM, safety door) started in a fresh
 interpreter, and which web-stack modules it loaded; a baseline checkout and this one, runs
 interleaved in the same session, medians printed with their ratio.

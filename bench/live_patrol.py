@@ -7,7 +7,7 @@ drone's simulator truth) every ``--every`` seconds for ``--duration`` seconds. E
 appended to a JSONL file as it comes (a run cut short still gives its figures: ``--report FILE``
 reads one back). At the end it prints the console's coverage, longest coverage gap, handoffs and
 lowest battery, the same figures from the lockstep experiment (``uav-console patrol``) of the same
-length and seed, and the differences (the issue's bar: 1 percentage point of coverage, 5 s of
+length and seed, and the differences (the target: 1 percentage point of coverage, 5 s of
 longest gap), with the CPU the run used (serve and its vehicle processes, Chromium, this script).
 
 Coverage here is the console's own (``mission.coverage.route`` of ``GET /api/v1/patrol``: the
@@ -53,7 +53,7 @@ CHROMIUM_ARGS = [
 ]
 TOKEN = "live-patrol-bench-token"
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-COVERAGE_PP = 1.0  # the bar: coverage within 1 percentage point of the lockstep's
+COVERAGE_PP = 1.0  # the target: coverage within 1 percentage point of the lockstep's
 GAP_S = 5.0  # and the longest gap within 5 s
 
 

@@ -1,4 +1,4 @@
-"""MAVLink benchmarks (issue 16); prints tables of medians and ratios.
+"""MAVLink benchmarks; prints tables of medians and ratios.
 
 Table 1, command round trip: ``COMMAND_LONG`` (MAV_CMD_DO_CHANGE_SPEED, which the simulated
 autopilot only acknowledges) → ``COMMAND_ACK`` over TCP loopback to the MAVLink simulator in a

@@ -18,7 +18,7 @@ grammar guidance, and what decoding costs the 100 Hz control loop.
      moves the drone (not a question or a description): the dangerous outcome;
    * latency = end of speech (the whole clip handed over) -> commands: VAD + decode + snap + NLU;
    * RTF = that time / clip duration.
-   Targets (issue 15): >= 90 % exact clean, >= 80 % at 10 dB, p50 <= 400 ms.
+   Targets: >= 90 % exact clean, >= 80 % at 10 dB, p50 <= 400 ms.
 2. The microphone stream, end of speech -> command: clips fed in real time (20 ms chunks)
    through the stream session and a one-decoder pool as the server's stream route does;
    push-to-talk released 0.5 s after the speech ends, and hands-free; with the end-pointer's
@@ -91,7 +91,7 @@ from tests.speech.conftest import HIBARI_VOICES, synthesise  # noqa: E402
 
 VOICES = ["en-us", "en-gb", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us+f3", "en-us-nyc"]
 # --tts flite: Debian's CMU Flite, whose voices are less robotic than espeak-ng's formant
-# synthesis (the issue's set is espeak-ng's; this one tells what the voices cost).
+# synthesis (the accuracy set is espeak-ng's; this one tells what the voices cost).
 FLITE_VOICES = ["slt", "rms", "awb", "kal16"]
 TTS_VOICES = {"espeak-ng": VOICES, "flite": FLITE_VOICES, "hibari": list(HIBARI_VOICES)}
 SPEEDS = [130, 160, 190]
@@ -555,8 +555,8 @@ def _loop_child(seconds: float, out: Any) -> None:
 
 
 def _loop_in_process(seconds: float, busy: Any | None) -> dict[str, Any]:
-    """The loop in a process of its own, as `serve` runs each drone's flight stack by default
-    (issue 14), while ``busy`` decodes in this one."""
+    """The loop in a process of its own, as `serve` runs each drone's flight stack by default,
+    while ``busy`` decodes in this one."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")
@@ -648,7 +648,7 @@ def main(argv: list[str] | None = None) -> int:
         "--tts",
         choices=list(TTS_VOICES),
         default="espeak-ng",
-        help="voices of the accuracy clips: espeak-ng's (the issue's set), flite's or hibari's",
+        help="voices of the accuracy clips: espeak-ng's (the accuracy set), flite's or hibari's",
     )
     ap.add_argument("--json", type=Path)
     ap.add_argument("--skip-loop", action="store_true")

@@ -87,7 +87,7 @@ TAKEOFFS = ["take off", "please take off", "take off now", "could you take off"]
 LANDINGS = ["land", "please land", "land now", "land the drone"]
 LEAD_S = 2.0  # silence before the first utterance (the microphone starting)
 GAP_S = 6.0  # silence after each: the take-off or landing completes, the reply is spoken
-TARGET_P50_MS = 600.0  # issue 29: end of speech -> the drone acting, median, in the browser
+TARGET_P50_MS = 600.0  # end of speech -> the drone acting, median, in the browser
 SILENT = 2.0**-10  # -60 dBFS: below this a sample is silence (the end-of-speech threshold)
 SEND_LOG = """
 (() => {
@@ -605,7 +605,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"spoken p50, before / now: {ratio:.1f}x")
     if allms:
         met = "met" if statistics.median(allms) <= TARGET_P50_MS else "NOT met"
-        print(f"target (issue 29): spoken p50 <= {TARGET_P50_MS:.0f} ms: {met}")
+        print(f"target: spoken p50 <= {TARGET_P50_MS:.0f} ms: {met}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0

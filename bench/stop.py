@@ -135,7 +135,8 @@ def flood(door_url: str) -> Iterator[None]:
 
 
 def _png_observer(host: str, port: int) -> None:
-    """One observer sending the frame of issue 26 finding 2 again and again, reading answers."""
+    """One observer sending the 1 px × 4 M rows PNG frame (bench/attacks.py) again and again,
+    reading answers."""
     import asyncio
 
     import websockets

@@ -29,7 +29,7 @@ from typing import Any
 WALL_MARGIN_M = 0.35
 FLOOR_M = 0.3
 CEILING_CLEARANCE_M = 0.3
-PERSON_DISTANCE_M = 2.0  # keep-away from people unless the world says otherwise (issue 28)
+PERSON_DISTANCE_M = 2.0  # keep-away from people unless the world says otherwise
 JOG_SLOW_ZONE_M = 1.0  # within this distance of a limit the jog towards it is scaled down
 JOG_STOP_M = 0.15  # this close to a limit the jog towards it stops (and brakes)
 JOG_AT_STOP_M = 0.05  # this near the stop line the jog is said to have stopped

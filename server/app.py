@@ -25,7 +25,7 @@ from server.recorder import replay_live
 from server.recorder.replay_live import ReplayHub
 from server.runtime import Runtime
 from server.settings import Settings
-from server.vehicles.deadlines import CommandExpired
+from server.vehicles.deadlines import RestCommandExpired
 from server.vehicles.door import advertised_url
 from server.vehicles.errors import VehicleUnavailable
 
@@ -71,9 +71,9 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     )
     app.state.runtime = runtime
     app.state.replays = replays
-    # Intent/outcome audit rows of REST actions, inside the guard (issue 14).
+    # Intent/outcome audit rows of REST actions, inside the guard.
     app.add_middleware(RestAuditMiddleware, security=runtime.security, trail=runtime.trail)
-    # Host allowlist, body limits before parsing, security headers, the token cookie (issue 14).
+    # Host allowlist, body limits before parsing, security headers, the token cookie.
     app.add_middleware(HttpGuard, security=runtime.security)
     strict.install(app)  # 422s that echo NaN or lone surrogates stay 422s
     add_command_schemas(app)  # /docs shows the commands' union
@@ -88,8 +88,8 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
         headers = {"Retry-After": str(exc.retry_after_s)}
         return JSONResponse(body, status_code=503, headers=headers)
 
-    @app.exception_handler(CommandExpired)
-    async def command_expired(request: Request, exc: CommandExpired) -> JSONResponse:
+    @app.exception_handler(RestCommandExpired)
+    async def command_expired(request: Request, exc: RestCommandExpired) -> JSONResponse:
         # Not flown: the command reached us past its deadline (drone/deadline.py).
         body = {
             "accepted": False,
@@ -110,7 +110,7 @@ def create_app(settings: Settings | None = None, *, announce: bool = False) -> F
     ):
         app.include_router(router, prefix="/api/v1")
     app.include_router(replay_live.router, prefix="/api/v1")
-    for router in (speech.router, tls.router):  # issue 15: speech, HTTPS for phones
+    for router in (speech.router, tls.router):  # speech, HTTPS for phones
         app.include_router(router, prefix="/api/v1")
     fleet_deps = [Depends(fleet_access), Depends(fleet_deadline)]
     app.include_router(runtime.fleet.router(dependencies=fleet_deps), prefix="/api/v1")

@@ -329,11 +329,11 @@ def _serve(args: argparse.Namespace, settings: Settings) -> int:
         log_level="warning",
         # uvicorn cuts off absurd frames; below this the endpoint answers with a status error.
         ws_max_size=4 * settings.max_frame_bytes,
-        # before auth, 4 KB: refused at the frame header, unread (issue 14)
+        # before auth, 4 KB: refused at the frame header, unread
         ws=preauth_capped_ws(),
         ssl_certfile=str(tls_files.cert) if tls_files else None,
         ssl_keyfile=str(tls_files.key) if tls_files else None,
-        # per-IP connection cap and a header deadline (slowloris; issue 14)
+        # per-IP connection cap and a header deadline (slowloris)
         http=guarded_h11(ConnectionLimits()),
         timeout_keep_alive=KEEP_ALIVE_S,
         # a faster clock (server/timewarp.py) scales asyncio's selector loop, not uvloop's

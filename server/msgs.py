@@ -226,7 +226,7 @@ MESSAGES: dict[str, tuple[Field, ...]] = {
 }
 
 
-MESSAGES.update(MAVROS_MESSAGES)  # /mavros/... topics of MAVLink drones (issue 16)
+MESSAGES.update(MAVROS_MESSAGES)  # /mavros/... topics of MAVLink drones
 
 
 def is_array(field_type: str) -> bool:

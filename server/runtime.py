@@ -72,7 +72,7 @@ class Runtime:
         self.bridge = BridgeContext(self.graph, self.security, s)
         self.nlu = default_nlu(str(s.grammar_dir))
         self.audit = AuditLog(s.data_dir / "audit.db")
-        self.trail = AuditTrail(self.audit)  # intent/outcome rows of direct actions (issue 14)
+        self.trail = AuditTrail(self.audit)  # intent/outcome rows of direct actions
         self.bridge.audit = self.trail
         self.security.lease.on_change = self._lease_changed
         self.security.actions_of = self.actions_of  # lease judged by what an utterance asks

@@ -43,11 +43,11 @@ from drone.mavlink.gcs.events import (
     CommandResult,
     LinkLost,
     LinkRestored,
+    MavlinkTelemetry,
     MissionItemReached,
     MissionResult,
     OtherVehicle,
     StatusText,
-    Telemetry,
     VehicleFound,
 )
 from drone.mavlink.gcs.protocol import GcsProtocol
@@ -109,7 +109,7 @@ class MavlinkVehicle:
         self._setpoint: Setpoint | None = None
         self._jogging = False
         self._jog_listeners: list[Callable[[], None]] = []
-        self._telemetry_listeners: list[Callable[[Telemetry, float], None]] = []
+        self._telemetry_listeners: list[Callable[[MavlinkTelemetry, float], None]] = []
         self._notices: deque[Notice] = deque(maxlen=64)
         self._driver: Any | None = None
         self._pending: dict[int, str] = {}  # token -> what the operator asked
@@ -138,7 +138,7 @@ class MavlinkVehicle:
     def add_jog_listener(self, cb: Callable[[], None]) -> None:
         self._jog_listeners.append(cb)
 
-    def add_telemetry_listener(self, cb: Callable[[Telemetry, float], None]) -> None:
+    def add_telemetry_listener(self, cb: Callable[[MavlinkTelemetry, float], None]) -> None:
         """``cb(telemetry, now)`` after each message batch from the vehicle."""
         self._telemetry_listeners.append(cb)
 

@@ -10,7 +10,7 @@ discrete white-noise-acceleration model (Bar-Shalom, *Estimation with Applicatio
 Tracking*, §6.3.3). Its vertical acceleration level is the drone's own, not a smoothing knob:
 the onboard controller reaches ``control_vz_max`` (0.7 m/s indoor, 1 m/s outdoor) with a lag
 of ~0.25 s, so a climb-to-descent reversal accelerates at up to ~5 m/s²; σa,z = 3 m/s² covers
-it (a σ of 0.5 m/s² made every navdata packet of such a reversal an "outlier", issue 13 §1).
+it (with a σ of 0.5 m/s² every navdata packet of such a reversal would be an "outlier").
 Navdata update: z = [v_forward, v_left, v_up, altitude] with h(x) = [R(ψ)ᵀ v_xy, vz, pz]
 (ardrone_autonomy's body-frame velocities; altitude from ultrasound over a flat floor), fused
 component by component — planar velocity (2 dof), vertical speed (1), altitude (1) — each with

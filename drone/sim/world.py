@@ -32,7 +32,7 @@ WORLDS_DIR = share_dir("worlds")
 """Directory holding the named worlds (``indoor``, ``outdoor``)."""
 
 ARUCO_DICTIONARY = "DICT_4X4_50"
-"""The only dictionary the worlds use (issue 3): ids 0..49."""
+"""The only dictionary the worlds use: ids 0..49."""
 ARUCO_MAX_ID = 49
 
 OBJECT_KINDS = frozenset(
@@ -224,7 +224,7 @@ class Station:
 
 
 @dataclass(frozen=True)
-class Waypoint:
+class NamedWaypoint:
     """A named waypoint: map-frame (local ENU) position, and its geodetic point if known."""
 
     id: str
@@ -254,7 +254,7 @@ class World:
     objects: tuple[SceneObject, ...] = ()
     stations: tuple[Station, ...] = ()
     gps_origin: GeoPoint | None = None
-    waypoints: tuple[Waypoint, ...] = ()
+    waypoints: tuple[NamedWaypoint, ...] = ()
     start: PlanarPose = PlanarPose(0.0, 0.0, 0.0, 0.0)
     surfaces: Surfaces = field(default_factory=Surfaces)
     source: str = ""
@@ -646,7 +646,7 @@ def parse_world(data: Any, source: str = "<memory>") -> World:  # noqa: C901
             pos = _geo_to_enu(gps, geo)
         else:
             raise c.fail(where, "missing field 'position' (or 'lat'/'lon')")
-        waypoints.append(Waypoint(id=wid, position=pos, geo=geo))
+        waypoints.append(NamedWaypoint(id=wid, position=pos, geo=geo))
 
     start = PlanarPose(0.0, 0.0, 0.0, 0.0)
     if "start" in d:

@@ -5,16 +5,16 @@ One module per monitor; :mod:`~drone.supervisor.core` runs them, :mod:`~drone.su
 assembles a drone's. It imports nothing from ``server``: it runs in the vehicle process.
 """
 
-from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.build import SupervisorParams, default_monitors, keep_away_of, supervise
 from drone.supervisor.core import Monitor, Supervisor
 from drone.supervisor.phase import FLYING, Phase, phase_of
 
 __all__ = [
     "FLYING",
-    "Action",
     "ActionKind",
     "Alarm",
+    "AlarmAction",
     "Monitor",
     "Phase",
     "Severity",

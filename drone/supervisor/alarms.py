@@ -35,7 +35,7 @@ class BadAlarm(ValueError):
 
 
 @dataclass(frozen=True)
-class Action:
+class AlarmAction:
     """One action the supervisor took; :meth:`command` is it as a DESIGN §4 command."""
 
     kind: ActionKind
@@ -53,7 +53,7 @@ class Action:
         return {"action": self.kind.value}
 
     @classmethod
-    def from_command(cls, command: dict[str, Any]) -> Action:
+    def from_command(cls, command: dict[str, Any]) -> AlarmAction:
         """The action :meth:`command` made ``command`` of.
 
         Raises:
@@ -86,7 +86,7 @@ class Alarm:
     monitor: str
     severity: Severity
     text: str
-    action: Action | None = None
+    action: AlarmAction | None = None
 
     def as_message(self, drone: str = "") -> dict[str, Any]:
         """JSON-ready, for the graph and the bus."""
@@ -117,5 +117,8 @@ class Alarm:
         if action is not None and not isinstance(action, dict):
             raise BadAlarm("an alarm's action is a command object or null")
         return cls(
-            monitor, severity, text, Action.from_command(action) if action is not None else None
+            monitor,
+            severity,
+            text,
+            AlarmAction.from_command(action) if action is not None else None,
         )

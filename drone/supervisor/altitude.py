@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.phase import Phase
 from drone.vehicle import VehicleSnapshot
 
@@ -60,5 +60,5 @@ class AltitudeMonitor:
             Severity.WARN,
             f"Altitude {snap.altitude_m:.1f} meters is above the ceiling of "
             f"{self.ceiling_m:g} meters. Descending.",
-            Action(ActionKind.DESCEND, distance_m=down),
+            AlarmAction(ActionKind.DESCEND, distance_m=down),
         )

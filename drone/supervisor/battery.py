@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.phase import FLYING, Phase
 from drone.vehicle import VehicleSnapshot
 
@@ -80,7 +80,7 @@ class BatteryMonitor:
                 self.name,
                 Severity.ALERT,
                 f"Battery critical at {b:.0f} percent. Landing now.",
-                Action(ActionKind.LAND),
+                AlarmAction(ActionKind.LAND),
             )
         if phase is Phase.RETURNING:
             return None
@@ -88,5 +88,5 @@ class BatteryMonitor:
             self.name,
             Severity.WARN,
             f"Battery low at {b:.0f} percent. Returning home.",
-            Action(ActionKind.RETURN_HOME),
+            AlarmAction(ActionKind.RETURN_HOME),
         )

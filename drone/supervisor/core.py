@@ -18,7 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from drone.supervisor.alarms import PREEMPTING, Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import PREEMPTING, ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.phase import Phase, phase_of
 from drone.vehicle import VehicleSnapshot
 
@@ -45,11 +45,11 @@ class Executor(Protocol):
     def submit(self, commands: Sequence[Mapping[str, Any]], *, replace: bool = False) -> Any: ...
 
 
-def act_on(executor: Executor) -> Callable[[Action, str], None]:
+def act_on(executor: Executor) -> Callable[[AlarmAction, str], None]:
     """The supervisor's hands on a task executor: stops preempt everything, a descent or a
     back-off replaces what runs."""
 
-    def act(action: Action, by: str) -> None:
+    def act(action: AlarmAction, by: str) -> None:
         if action.kind in PREEMPTING:
             executor.preempt(action.kind.value, by=by)
             return
@@ -88,7 +88,7 @@ class Supervisor:
     monitors: Sequence[Monitor]
     snapshot: Callable[[], VehicleSnapshot]
     phase: Callable[[VehicleSnapshot], Phase]
-    act: Callable[[Action, str], None] | None = None
+    act: Callable[[AlarmAction, str], None] | None = None
     _due: dict[str, float] = field(default_factory=dict)
     _heard: bool = False  # the drone has answered at least once
     _listeners: list[Callable[[Alarm], None]] = field(default_factory=list)

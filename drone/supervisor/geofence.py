@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.phase import FLYING, Phase
 from drone.vehicle import VehicleSnapshot
 
@@ -40,7 +40,7 @@ class GeofenceMonitor:
                 Severity.ALERT,
                 f"Geofence: I am outside the limits at x {snap.x:.1f}, y {snap.y:.1f} "
                 "meters. Holding position; fly me back inside or land.",
-                Action(ActionKind.HOVER),
+                AlarmAction(ActionKind.HOVER),
             )
         if not outside and self._out:
             self._out = False

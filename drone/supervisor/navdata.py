@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.phase import FLYING, Phase
 from drone.vehicle import VehicleSnapshot
 
@@ -38,7 +38,7 @@ class NavdataMonitor:
                 Severity.ALERT,
                 f"{DOUBT_TEXT}: {doubt}. I am hovering and will not act on these readings. "
                 "Say land to bring me down here, or tell me what to do.",
-                Action(ActionKind.HOVER),
+                AlarmAction(ActionKind.HOVER),
             )
         if doubt and not self._told:
             self._told = "ground"

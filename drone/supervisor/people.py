@@ -24,7 +24,7 @@ from typing import Protocol
 
 from drone.control.pid import Setpoint
 from drone.limits import FlightLimits
-from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.phase import FLYING, Phase
 from drone.vehicle import VehicleSnapshot
 
@@ -246,11 +246,11 @@ class KeepAwayMonitor:
                 self.name,
                 Severity.ALERT,
                 f"{why}, and there is no room to back off. Holding position.",
-                Action(ActionKind.HOVER),
+                AlarmAction(ActionKind.HOVER),
             )
         return Alarm(
             self.name,
             Severity.ALERT,
             f"{why}. Backing off.",
-            Action(ActionKind.BACK_OFF, to=(to[0], to[1], snap.z)),
+            AlarmAction(ActionKind.BACK_OFF, to=(to[0], to[1], snap.z)),
         )

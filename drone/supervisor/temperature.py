@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from drone.supervisor.alarms import Action, ActionKind, Alarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, Severity
 from drone.supervisor.phase import FLYING, Phase
 from drone.vehicle import VehicleSnapshot
 
@@ -46,7 +46,7 @@ class TemperatureMonitor:
                     Severity.ALERT,
                     f"Temperature {t:.0f} degrees inside the drone, at the {self.land_c:g} degree "
                     "limit of its battery. Landing now to let it cool.",
-                    Action(ActionKind.LAND),
+                    AlarmAction(ActionKind.LAND),
                 )
             return Alarm(
                 self.name,

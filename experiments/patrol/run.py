@@ -14,7 +14,7 @@ from experiments.patrol.report import PatrolReport
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import Enu, origin_of, to_geo
 from server.fleet.ltm import LocalTaskManager
-from server.fleet.messages import GeoWaypoint, Handoff, Mission, MissionRequest, Role
+from server.fleet.messages import DroneRole, GeoWaypoint, Handoff, Mission, MissionRequest
 from server.fleet.planner import FlightModel, StationModel, coverage_bound
 from server.fleet.stations import station_positions
 
@@ -246,7 +246,7 @@ class PatrolExperiment:
 
     def _role(self, name: str) -> str:
         """The CTM's role for drone ``name`` (idle before it knows the drone)."""
-        return self.ctm.drones[name].role.value if name in self.ctm.drones else Role.IDLE.value
+        return self.ctm.drones[name].role.value if name in self.ctm.drones else DroneRole.IDLE.value
 
     def _report(
         self,

@@ -162,7 +162,7 @@ async def fleet_deadline(
             source="rest",
             utterance=f"POST {request.url.path}",
         )
-        raise deadlines.CommandExpired(text, verdict)
+        raise deadlines.RestCommandExpired(text, verdict)
 
 
 def drone_stack(drone_id: str, runtime: Annotated[Runtime, Depends(get_runtime)]) -> DroneStack:

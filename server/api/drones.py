@@ -11,7 +11,7 @@ from fastapi.responses import StreamingResponse
 
 from drone.commands import DirectAction
 from server.api.deps import DroneDep, IssuedDep, PilotDep, RoleDep, RuntimeDep, check_lease
-from server.api.models import BINARY, ActionBody, ActionResult, Describe, DroneInfo
+from server.api.models import BINARY, ActionBody, ActionResult, DescribeResponse, DroneInfo
 from server.runtime import Runtime
 from server.vehicles.direct_actions import command_source, perform_async, perform_stop_async
 from server.vehicles.door import advertised_url
@@ -56,14 +56,14 @@ def get_drone(
     return _for_caller(stack.telemetry(), request, runtime, role)
 
 
-@router.post("/{drone_id}/describe", response_model=Describe)
-async def describe(stack: DroneDep, runtime: RuntimeDep, _role: RoleDep) -> Describe:
+@router.post("/{drone_id}/describe", response_model=DescribeResponse)
+async def describe(stack: DroneDep, runtime: RuntimeDep, _role: RoleDep) -> DescribeResponse:
     """Caption the latest camera frame with the ONNX captioner (503 when it is unavailable)."""
     status = runtime.captioner_status()
     if status != "ready":
         raise HTTPException(status_code=503, detail=status)
     text, ms = await runtime.describe(stack.name)
-    return Describe(drone=stack.name, text=text, ms=ms)
+    return DescribeResponse(drone=stack.name, text=text, ms=ms)
 
 
 @router.post("/{drone_id}/{action}", response_model=ActionResult)

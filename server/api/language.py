@@ -43,7 +43,7 @@ async def command(
     name = body.drone or runtime.default_drone
     if name not in runtime.dialogs:
         raise HTTPException(status_code=404, detail=f"no drone '{name}'")
-    # "uav2 take off", "all drones land": the sentence names its drones (issue 18).
+    # "uav2 take off", "all drones land": the sentence names its drones.
     targets = recipients(address, name, list(runtime.dialogs))
     if not targets:
         named = ", ".join(address.names or ())

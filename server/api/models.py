@@ -48,7 +48,7 @@ def add_command_schemas(app: FastAPI) -> None:
 
 
 # Wind a simulator fault may blow: well beyond what an AR.Drone survives (Beaufort 11,
-# ~30 m/s), finite (issue 14: [1e308, 1e308] was accepted).
+# ~30 m/s), finite (a wind of [1e308, 1e308] is refused).
 MAX_WIND_MPS = 30.0
 WindComponent = Annotated[float, Field(ge=-MAX_WIND_MPS, le=MAX_WIND_MPS)]
 
@@ -145,7 +145,7 @@ class ActionResult(BaseModel):
     late_s: float | None = None
 
 
-class Describe(BaseModel):
+class DescribeResponse(BaseModel):
     drone: str
     text: str
     ms: float | None = None
@@ -177,7 +177,7 @@ class WorldInfo(OpenResponse):
     stations: list[dict[str, Any]] = Field(description="home and charging stations")
 
 
-class VehicleProcess(OpenResponse):
+class VehicleProcessInfo(OpenResponse):
     """Where a drone runs in its own vehicle process: its link and its safety door."""
 
     mode: str
@@ -196,7 +196,7 @@ class DroneInfo(OpenResponse):
     simulated: bool
     link_ok: bool | None = Field(description="None: not known yet (a replay before its navdata)")
     task: dict[str, Any] | None = Field(default=None, description="the running task")
-    vehicle: VehicleProcess | None = None
+    vehicle: VehicleProcessInfo | None = None
 
 
 class SimTruth(OpenResponse):

@@ -207,7 +207,7 @@ async def speech_stream(websocket: WebSocket) -> None:
     if role != Role.PILOT:
         await _refuse(websocket, CLOSE_POLICY, f"role '{role}' may not speak commands")
         return
-    # The same credential REST checks (issue 14: holder ids are secret, the key is what the
+    # The same credential REST checks (holder ids are secret, the key is what the
     # holder is told); a pilot without it may not speak while another holds the lease.
     lease = security.lease
     if lease.state.holder is not None and not lease.key_matches(q.get("lease")):

@@ -203,7 +203,7 @@ def said(text: str, kinds: Iterable[str], colours: Iterable[str]) -> list[Said]:
 
 @dataclass(frozen=True)
 class TruthItem:
-    """A visible thing as the scorer sees it (``server.captioner.evalset.Truth`` fits)."""
+    """A visible thing as the scorer sees it (``server.captioner.evalset.TruthLabel`` fits)."""
 
     kind: str
     colour: str | None

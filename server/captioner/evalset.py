@@ -71,7 +71,7 @@ _PALETTE = (
 
 
 @dataclass(frozen=True)
-class Truth:
+class TruthLabel:
     """One visible thing: kind, colour (None for markers), side, share of the image, id."""
 
     kind: str
@@ -95,12 +95,12 @@ class Sample:
     variant: Variant
     pose: tuple[float, float, float, float, float, float]
     frame: npt.NDArray[np.uint8]
-    truth: tuple[Truth, ...]
+    truth: tuple[TruthLabel, ...]
 
 
-def _truth(visible: list[Visible]) -> tuple[Truth, ...]:
+def _truth(visible: list[Visible]) -> tuple[TruthLabel, ...]:
     return tuple(
-        Truth(
+        TruthLabel(
             kind=v.kind,
             colour=None if v.kind == "marker" else v.colour,
             side=v.side,

@@ -11,7 +11,7 @@ from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import Any
 
 from drone.vehicle import Vehicle
-from server.dialog.ports import DroneView, TaskDecision, TaskEvent
+from server.dialog.ports import DroneView, TaskDecision, TaskReport
 
 SAFETY_ACTIONS = ("land", "emergency", "return_home", "hover")
 
@@ -38,7 +38,7 @@ class TaskManagerPort:
         else:  # e.g. the ANS altitude ceiling: "move down 0.4 m" replacing everything
             self.tm.submit([dict(command)], replace=True)
 
-    def on_event(self, callback: Callable[[TaskEvent], None]) -> None:
+    def on_event(self, callback: Callable[[TaskReport], None]) -> None:
         def translate(notice: Any) -> None:
             for event in task_events(str(notice.kind), str(notice.task or ""), notice.text):
                 callback(event)
@@ -48,12 +48,12 @@ class TaskManagerPort:
                     and status.state == "idle"
                     and not status.queued
                 ):
-                    callback(TaskEvent("idle"))
+                    callback(TaskReport("idle"))
 
         self.tm.on_event(translate)
 
 
-def task_events(kind: str, task: str, text: str | None) -> list[TaskEvent]:
+def task_events(kind: str, task: str, text: str | None) -> list[TaskReport]:
     """A task manager's notice (its ``kind`` and ``task``) as the dialog's events: none for
     a cancelled or preempted task (the dialog made that change itself), else one."""
     cmd = {"action": task} if task else {}
@@ -67,7 +67,7 @@ def task_events(kind: str, task: str, text: str | None) -> list[TaskEvent]:
         kind = "marker_lost"
     elif kind in ("cancelled", "preempted"):
         return []
-    return [TaskEvent(kind, cmd, str(text or ""))]
+    return [TaskReport(kind, cmd, str(text or ""))]
 
 
 class VehicleAdapter:

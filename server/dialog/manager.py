@@ -49,8 +49,8 @@ from server.dialog.ports import (
     DescribePort,
     DroneView,
     FleetPort,
-    TaskEvent,
     TaskPort,
+    TaskReport,
     VehiclePort,
 )
 from server.dialog.states import MOTION, STATELESS, State, next_state
@@ -67,7 +67,7 @@ PREEMPTING = ("emergency", "land", "hover")
 RECONCILE_PERIOD_S = 0.25  # how soon the dialog follows a change it did not make
 # the whole fleet's (server/fleet/central.py), not this drone's state
 FLEET_ACTIONS = ("patrol_start", "patrol_stop", "patrol_pause", "patrol_resume")
-# Task-manager notices the operator hears (issue 13 item 8) and their levels; "failed" covers
+# Task-manager notices the operator hears and their levels; "failed" covers
 # a search that gave up.
 NOTICES = {"marker_lost": "warn", "marker_found": "info", "progress": "info"}
 
@@ -248,7 +248,7 @@ class DialogManager:
         row = {"drone": self.drone, "state": self._state.value, "now": None, **kw}
         later = getattr(self.store, "append_later", None)
         # A spoken stop must reach the wire before the fsync of its audit row: the driver sends
-        # from this loop (issue 18; bench/direct_actions.py measures the same for buttons).
+        # from this loop (bench/direct_actions.py measures the same for buttons).
         if later is not None and any(c.get("action") in PREEMPTING for c in kw["commands"]):
             later(**row)
         else:
@@ -321,7 +321,7 @@ class DialogManager:
         issued: float | None = None,
     ) -> DialogResult:
         """Interpret, check, execute and answer one utterance (also logged to the audit log:
-        an intent row before acting, the outcome after; issue 14).
+        an intent row before acting, the outcome after).
 
         A sentence that names its drone ("uav2, land") is answered with the drone's name; the
         caller has already routed it here (``addressing.recipients``). ``issued`` (Unix
@@ -617,7 +617,7 @@ class DialogManager:
             return f"I cannot describe the scene: {exc}"
 
     # -- task events --------------------------------------------------------------------------
-    def _on_task_event(self, ev: TaskEvent) -> None:
+    def _on_task_event(self, ev: TaskReport) -> None:
         kind = ev.kind
         if kind == "done" and ev.command:
             self._reply(ev.detail or replies.result(ev.command))
@@ -625,7 +625,7 @@ class DialogManager:
             why = f": {ev.detail}" if ev.detail else ""
             what = "the task" if ev.detail or not ev.command else replies.confirmation(ev.command)
             if ev.command.get("action") == "search":
-                what = "the search"  # the search gave up (issue 13 item 8)
+                what = "the search"  # the search gave up
             self._reply(
                 f"I could not finish {what.lower()}{why}.",
                 "warn",

@@ -42,7 +42,7 @@ class TaskDecision:
 
 
 @dataclass(frozen=True)
-class TaskEvent:
+class TaskReport:
     """Something the task manager reports: kind is one of
     started, took_off, landed, landing, done, failed, idle, marker_lost, marker_found."""
 
@@ -68,7 +68,7 @@ class TaskPort(Protocol):
         ``by`` names the safety monitor that acted ("" for the operator)."""
         ...
 
-    def on_event(self, callback: Callable[[TaskEvent], None]) -> None:
+    def on_event(self, callback: Callable[[TaskReport], None]) -> None:
         """Call ``callback`` for every task event."""
         ...
 

@@ -32,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.errors import MissionError
 from server.fleet.geo import Enu
-from server.fleet.messages import Handoff, Role
+from server.fleet.messages import DroneRole, Handoff
 from server.fleet.states import MissionState
 
 STANDOFF_M = 1.0  # indoors: as GotoMarkerTask.standoff_m, where the marker fills the camera
@@ -121,7 +121,7 @@ class CentralPatrol:
             return PatrolReply(False, f"I cannot start the patrol: {exc}.")
         if self.on_change is not None:
             self.on_change()
-        drones = [r for r in self.ctm.drones.values() if r.role is not Role.LOST]
+        drones = [r for r in self.ctm.drones.values() if r.role is not DroneRole.LOST]
         reactive = handoff is Handoff.REACTIVE
         if not drones:
             text = (
@@ -129,7 +129,7 @@ class CentralPatrol:
                 "yet; it starts when one does."
             )
         else:
-            ready = [r for r in drones if r.role is Role.IDLE]
+            ready = [r for r in drones if r.role is DroneRole.IDLE]
             text = (
                 f"Starting the patrol of {len(route)} waypoints with {len(drones)} "
                 f"drone{'s' if len(drones) != 1 else ''}; they hand over at "

@@ -2,14 +2,14 @@
 
 Two jobs, both pure functions of the LTM statuses the CTM already receives:
 
-* **Where a relief joins** (:func:`choose_join`). A relief used to enter the route at the
-  waypoint nearest its own station, wherever the tired drone was, so the stretch between the
-  two was flown twice and the waypoints behind the entry waited up to a whole lap longer at
-  every handoff. Now the CTM locates the patrolling drone on the route (:func:`locate`: arc
-  length along the polyline), predicts when it will reach each waypoint ahead of it (from the
-  lap time observed so far), and sends the relief to the *first* waypoint it can reach before
-  the patrolling drone does: the relief continues the sequence exactly where the tired drone
-  would have gone next, so the patrol's progress carries over. The tired drone is released
+* **Where a relief joins** (:func:`choose_join`). The CTM locates the patrolling drone on the
+  route (:func:`locate`: arc length along the polyline), predicts when it will reach each
+  waypoint ahead of it (from the lap time observed so far), and sends the relief to the *first*
+  waypoint it can reach before the patrolling drone does: the relief continues the sequence
+  exactly where the tired drone would have gone next, so the patrol's progress carries over.
+  (A relief entering at the waypoint nearest its own station, wherever the tired drone was,
+  would fly the stretch between the two twice, and the waypoints behind the entry would wait up
+  to a whole lap longer at every handoff.) The tired drone is released
   once it has flown the waypoints before the join (:func:`owes_waypoints`), not merely when
   the relief reaches the route: the relief's arrival is a prediction. After a failure there is no
   drone to meet; the replacement goes to the waypoint after the lost drone's last known
@@ -100,7 +100,7 @@ def arc_ahead_m(pos: RoutePosition, k: int, route: Sequence[Enu], loop: bool) ->
 
 
 @dataclass(frozen=True)
-class Join:
+class JoinPoint:
     """Where and when a relief meets the patrol: waypoint ``index``, the relief there after
     ``relief_eta_s``, the patrolling drone after ``active_eta_s`` (None: nobody to meet)."""
 
@@ -119,7 +119,7 @@ def choose_join(
     lap_s: float,
     *,
     last_known: Enu | None = None,
-) -> Join:
+) -> JoinPoint:
     """The waypoint a relief should join the route at (see the module docstring).
 
     Args:
@@ -134,18 +134,18 @@ def choose_join(
     ref = active if active is not None else last_known
     if ref is None:
         k = min(range(n), key=lambda i: relief_eta_s[i])
-        return Join(k, relief_eta_s[k], None)
+        return JoinPoint(k, relief_eta_s[k], None)
     pos = locate(ref, route, loop)
     nxt = _flying_to(pos, n, loop)
     if active is None:
-        return Join(nxt, relief_eta_s[nxt], None)
+        return JoinPoint(nxt, relief_eta_s[nxt], None)
     total = perimeter_m(route, loop)
     speed = total / lap_s if lap_s > 0 and total > 0 else 0.0
-    fallback: Join | None = None
+    fallback: JoinPoint | None = None
     for j in range(n):
         k = (nxt + j) % n
         t_active = arc_ahead_m(pos, k, route, loop) / speed if speed > 0 else math.inf
-        join = Join(k, relief_eta_s[k], t_active, after=nxt)
+        join = JoinPoint(k, relief_eta_s[k], t_active, after=nxt)
         if t_active >= relief_eta_s[k]:
             return join
         # none reachable in time within a lap: the smallest lateness
@@ -165,7 +165,7 @@ def _flying_to(pos: RoutePosition, n: int, loop: bool) -> int:
 def owes_waypoints(
     route: Sequence[Enu],
     loop: bool,
-    join: Join,
+    join: JoinPoint,
     active: Enu,
     visited: Collection[int] = (),
 ) -> bool:

@@ -6,7 +6,7 @@ answers a plan, ``add_mission``/``mission_from_request``. Output: ``step(now)`` 
 ``uav_console/FleetStatus`` message. No sockets, no clock of its own: the in-process node, the
 rosbridge server and the lockstep experiment all drive the same object.
 
-Per mission (issue 8): one drone *patrols*; when its battery will reach the mission's threshold
+Per mission: one drone *patrols*; when its battery will reach the mission's threshold
 within the lead time of the best idle drone (planner.lead_time_s), that drone is sent
 (*relieving*) on the same patrol plan from the route point nearest its station; the moment it
 is on the route the tired drone gets a return plan (*returning*), lands at its station
@@ -34,7 +34,7 @@ from typing import Any
 from server.fleet.accuracy import GPS_ARRIVAL_RADIUS_M
 from server.fleet.continuity import (
     CoverageTracker,
-    Join,
+    JoinPoint,
     choose_join,
     entry_on_leg,
     owes_waypoints,
@@ -46,13 +46,13 @@ from server.fleet.ltm import HELD
 from server.fleet.messages import (
     MAX_ROUTE_POINTS,
     MISSION_NAME_PATTERN,
+    DroneRole,
     FlightPlan,
     Handoff,
     LtmStatus,
     Mission,
     MissionRequest,
     PlanKind,
-    Role,
 )
 from server.fleet.planner import (
     FlightModel,
@@ -88,12 +88,12 @@ class DroneRecord:
     name: str
     status: LtmStatus | None = None
     last_heard: float = -math.inf
-    role: Role = Role.IDLE
+    role: DroneRole = DroneRole.IDLE
     mission: str = ""
     plan: FlightPlan | None = None
     plan_sent_t: float = -math.inf
     lost_reason: str = ""
-    lost_from: Role = Role.IDLE  # the role it had when it was lost
+    lost_from: DroneRole = DroneRole.IDLE  # the role it had when it was lost
     charging_since: float = -math.inf  # when it landed at its station to charge
     samples: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=400))
 
@@ -124,7 +124,7 @@ class MissionRecord:
     paused: dict[str, str] = field(default_factory=dict)
     paused_by: dict[str, str] = field(default_factory=dict)
     coverage: CoverageTracker | None = None  # live visits of the waypoints (continuity.py)
-    join: Join | None = None  # where the relief in flight joins the route
+    join: JoinPoint | None = None  # where the relief in flight joins the route
     join_sent_t: float = 0.0  # when that relief was sent
     relief_on_route_t: float | None = None  # when it reached the route (the handoff's time)
     last_known: Enu | None = None  # the last position of an active drone lost (or paused)
@@ -280,7 +280,7 @@ class CentralTaskManager:
 
     def _check_limits(self, route: Sequence[Enu]) -> None:
         """Refuse up front a route outside the world's limits (fence, floor, ceiling): a mission
-        is never cut short in mid-air by a limit it was bound to meet (issue 13 §2). The return
+        is never cut short in mid-air by a limit it was bound to meet. The return
         layer (``RETURN_LAYER_M`` above the route) is kept under the ceiling by ``_send_home``
         (in a room it is the ceiling itself)."""
         if self.world is None or not hasattr(self.world, "bounds"):
@@ -316,7 +316,7 @@ class CentralTaskManager:
                     raise MissionError(f"unknown marker id {mid}") from None
                 # In front of the marker, as "go to marker" flies (GotoMarkerTask.standoff_m):
                 # a marker hangs on a wall or a post, so its own position is not flyable (and
-                # lies outside the world's limits, issue 13).
+                # lies outside the world's limits).
                 p = marker.standoff(MARKER_STANDOFF_M)
                 route.append(Enu(float(p.x), float(p.y), req.altitude_m))
         return self.add_mission(
@@ -392,9 +392,9 @@ class CentralTaskManager:
             ms.paused[name] = rec.role.value
             if ms.coverage is not None:
                 ms.coverage.forget(name)
-            if rec.role is Role.LOST:
+            if rec.role is DroneRole.LOST:
                 continue
-            rec.role = Role.PAUSED
+            rec.role = DroneRole.PAUSED
             if name == taken:
                 ms.paused_by[name] = action
             elif rec.status is not None and rec.status.flying:
@@ -414,7 +414,7 @@ class CentralTaskManager:
         self._set(ms, MissionEvent.RESUME, now, "resumed by the operator: waiting for a drone")
         for name in ms.paused:
             rec = self.drones.get(name)
-            if rec is not None and rec.role is Role.PAUSED:
+            if rec is not None and rec.role is DroneRole.PAUSED:
                 self._free(rec)
             if rec is not None and rec.mission == mission_id:
                 rec.mission = ""
@@ -437,7 +437,7 @@ class CentralTaskManager:
             if name is None or name not in self.drones:
                 continue
             rec = self.drones[name]
-            if rec.role is Role.LOST:
+            if rec.role is DroneRole.LOST:
                 rec.mission = ""
             elif rec.status is not None and rec.status.flying:
                 self._send_home(rec, now, ms.mission)
@@ -453,12 +453,12 @@ class CentralTaskManager:
         st = rec.status
         rec.mission = ""
         if st is not None and st.flying:
-            rec.role = Role.IDLE
+            rec.role = DroneRole.IDLE
         elif st is not None and st.battery_pct < self.stations.ready_pct:
-            rec.role = Role.CHARGING
+            rec.role = DroneRole.CHARGING
             rec.charging_since = self._now
         else:
-            rec.role = Role.IDLE
+            rec.role = DroneRole.IDLE
 
     def expire_ended(self, now: float) -> None:
         """Forget missions ended more than ``ended_keep_s`` ago."""
@@ -501,7 +501,7 @@ class CentralTaskManager:
         out = []
         for name, was in ms.paused.items():
             rec = self.drones.get(name)
-            role = rec.role.value if rec is not None else Role.LOST.value
+            role = rec.role.value if rec is not None else DroneRole.LOST.value
             out.append(
                 {"name": name, "role": role, "was": was, "operator": ms.paused_by.get(name, "")}
             )
@@ -541,7 +541,7 @@ class CentralTaskManager:
             if (
                 plan is not None
                 and st is not None
-                and rec.role is not Role.LOST
+                and rec.role is not DroneRole.LOST
                 and st.plan_id != plan.plan_id
                 and now - rec.plan_sent_t >= self.resend_s
                 and all(d.drone != rec.name for d in out)
@@ -557,7 +557,7 @@ class CentralTaskManager:
             r.status.position
             for r in self.drones.values()
             if r.status is not None
-            and r.role is not Role.LOST
+            and r.role is not DroneRole.LOST
             and r.status.flying
             and not r.status.emergency
         ]
@@ -582,7 +582,7 @@ class CentralTaskManager:
         if (
             st is not None
             and st.operator
-            and rec.role in (Role.PATROLLING, Role.RELIEVING)
+            and rec.role in (DroneRole.PATROLLING, DroneRole.RELIEVING)
             and rec.plan is not None
             and st.plan_id == rec.plan.plan_id
             and rec.mission in self.missions
@@ -593,7 +593,7 @@ class CentralTaskManager:
         elif (
             st is not None
             and st.held
-            and rec.role in (Role.PATROLLING, Role.RELIEVING)
+            and rec.role in (DroneRole.PATROLLING, DroneRole.RELIEVING)
             and rec.plan is not None
             and st.plan_id == rec.plan.plan_id
             and rec.mission in self.missions
@@ -603,32 +603,36 @@ class CentralTaskManager:
             self.pause_mission(rec.mission, now, st.held, taken=rec.name, detail=why)
         why = self._failure(rec, now)
         if why:
-            if rec.role is not Role.LOST:
+            if rec.role is not DroneRole.LOST:
                 self.event(now, f"{rec.name} lost ({why})")
-                rec.lost_from, rec.role, rec.lost_reason = rec.role, Role.LOST, why
+                rec.lost_from, rec.role, rec.lost_reason = rec.role, DroneRole.LOST, why
             return
         st = rec.status
         assert st is not None
-        if rec.role is Role.LOST:
+        if rec.role is DroneRole.LOST:
             self.event(now, f"{rec.name} back ({rec.lost_reason} over)")
             rec.lost_reason = ""
             rec.mission = ""
-            on_duty = rec.lost_from in (Role.PATROLLING, Role.RELIEVING, Role.RETURNING)
+            on_duty = rec.lost_from in (
+                DroneRole.PATROLLING,
+                DroneRole.RELIEVING,
+                DroneRole.RETURNING,
+            )
             if st.flying and on_duty:
                 self._send_home(rec, now, None, out)  # its post has been given to another
             else:
                 # Landed, or someone's manual flight (never the CTM's to end): not taken over.
-                rec.role = Role.IDLE if st.flying else Role.CHARGING
+                rec.role = DroneRole.IDLE if st.flying else DroneRole.CHARGING
                 rec.charging_since = now
             return
-        if rec.role is Role.RETURNING and not st.flying and st.state in ("LANDED", "DEFAULT"):
-            rec.role, rec.charging_since = Role.CHARGING, now
+        if rec.role is DroneRole.RETURNING and not st.flying and st.state in ("LANDED", "DEFAULT"):
+            rec.role, rec.charging_since = DroneRole.CHARGING, now
             self.event(now, f"{rec.name} landed at its station ({st.battery_pct:.0f} %)")
-        elif rec.role is Role.CHARGING and st.battery_pct >= self.stations.ready_pct:
-            rec.role = Role.IDLE
+        elif rec.role is DroneRole.CHARGING and st.battery_pct >= self.stations.ready_pct:
+            rec.role = DroneRole.IDLE
             self.event(now, f"{rec.name} ready ({st.battery_pct:.0f} %)")
         elif (
-            rec.role is Role.RETURNING
+            rec.role is DroneRole.RETURNING
             and st.flying
             and st.autonomous.startswith(f"{HELD}hover")
             and rec.plan is not None
@@ -643,7 +647,7 @@ class CentralTaskManager:
             out.append(Dispatch(rec.name, plan))
         if (
             st.autonomous
-            and rec.role in (Role.PATROLLING, Role.RELIEVING)
+            and rec.role in (DroneRole.PATROLLING, DroneRole.RELIEVING)
             and (rec.plan is None or st.plan_id == rec.plan.plan_id)
         ):
             # the LTM flew home on its own (CTM silent, battery reserve), it was sent home, or
@@ -651,7 +655,7 @@ class CentralTaskManager:
             # A held drone is free for a mission again (the same one, once able).
             self.event(now, f"{rec.name} left on its own ({st.autonomous})")
             self._release(rec, now)
-            rec.role = Role.IDLE if st.autonomous.startswith(HELD) else Role.RETURNING
+            rec.role = DroneRole.IDLE if st.autonomous.startswith(HELD) else DroneRole.RETURNING
 
     def _home_if_unused(self, rec: DroneRecord, now: float, out: list[Dispatch]) -> None:
         """A fleet drone flying with nothing left to do (its post went to another, its mission
@@ -659,7 +663,7 @@ class CentralTaskManager:
         their drones, so a drone still in the air is used before it is sent home. A drone the
         CTM never sent anywhere is someone's manual flight: left alone."""
         st = rec.status
-        if st is None or rec.role is not Role.IDLE or not st.flying or rec.mission:
+        if st is None or rec.role is not DroneRole.IDLE or not st.flying or rec.mission:
             return
         # held in a hover by its own safety and given no post again: home too (a drone its
         # safety is landing is left to land)
@@ -687,7 +691,7 @@ class CentralTaskManager:
             r
             for r in self.drones.values()
             if r.status is not None
-            and (r.role is Role.IDLE or (r.role is Role.CHARGING and not r.status.flying))
+            and (r.role is DroneRole.IDLE or (r.role is DroneRole.CHARGING and not r.status.flying))
         ]
 
     def _takeoff_s(self, rec: DroneRecord) -> float:
@@ -734,10 +738,10 @@ class CentralTaskManager:
         m = self.model
         for r in self.drones.values():
             st = r.status
-            if st is None or r.role not in (Role.CHARGING, Role.RETURNING):
+            if st is None or r.role not in (DroneRole.CHARGING, DroneRole.RETURNING):
                 continue
             need = self._need_pct(ms, lead_time_s(st.station, ms.mission.route[0], m))
-            if r.role is Role.RETURNING:
+            if r.role is DroneRole.RETURNING:
                 home = transit_s(st.position, st.station, m) + m.land_s
                 landed = st.battery_pct - home * m.drain_pct_s
                 t = home + self.stations.time_to_s(landed, need, 0.0)
@@ -753,7 +757,7 @@ class CentralTaskManager:
         m = ms.mission
         for slot in ("active", "relief"):
             name = getattr(ms, slot)
-            if name is not None and self.drones[name].role is Role.LOST:
+            if name is not None and self.drones[name].role is DroneRole.LOST:
                 why = self.drones[name].lost_reason
                 self.event(now, f"{name} failed on {m.id} ({why}); replacing it")
                 self.drones[name].mission = ""
@@ -831,7 +835,7 @@ class CentralTaskManager:
         took_over = ms.relief_on_route_t
         old = ms.active
         ms.active, ms.relief = ms.relief, None
-        rr.role = Role.PATROLLING
+        rr.role = DroneRole.PATROLLING
         if ms.started_t is None:
             ms.started_t = now
         if ms.state is MissionState.WAITING:
@@ -863,12 +867,12 @@ class CentralTaskManager:
         if not self.drones:
             return  # no drone has joined yet: still waiting
         if any(
-            r.status is not None and not r.status.battery_known and r.role is not Role.LOST
+            r.status is not None and not r.status.battery_known and r.role is not DroneRole.LOST
             for r in self.drones.values()
         ):
             return  # a drone's first battery reading is still to come: still waiting
         soonest = self._soonest_ready(ms, now)
-        lost = [r.name for r in self.drones.values() if r.role is Role.LOST]
+        lost = [r.name for r in self.drones.values() if r.role is DroneRole.LOST]
         if soonest is None and len(lost) == len(self.drones):
             # nobody low on charge: every drone is lost (silent, in emergency, no link)
             detail = f"stalled: no drone able to fly ({', '.join(sorted(lost))} lost)"
@@ -890,7 +894,7 @@ class CentralTaskManager:
             now, "warn", f"Patrol {ms.mission.id} has stalled: {why}{when}. It resumes by itself."
         )
 
-    def _join(self, rec: DroneRecord, ms: MissionRecord) -> Join:
+    def _join(self, rec: DroneRecord, ms: MissionRecord) -> JoinPoint:
         """Where ``rec`` would join ``ms``'s route if dispatched now (continuity.py)."""
         assert rec.status is not None
         m = ms.mission
@@ -911,7 +915,7 @@ class CentralTaskManager:
             q = entry_on_leg(m.route, m.loop, join.index, here)
             if here.dist_xy(q) < here.dist_xy(m.route[join.index]) - ENTRY_GAIN_M:
                 t = up + transit_s(here, q, self.model)
-                join = Join(join.index, t, None, q)
+                join = JoinPoint(join.index, t, None, q)
         return join
 
     def _owed(self, ms: MissionRecord, now: float) -> bool:
@@ -939,12 +943,12 @@ class CentralTaskManager:
         ms: MissionRecord,
         now: float,
         out: list[Dispatch],
-        join: Join | None = None,
+        join: JoinPoint | None = None,
     ) -> None:
         assert rec.status is not None
         m = ms.mission
         start = join.index if join is not None else self.entry_index(rec.status.station, m.route)
-        ms.join = join if join is not None else Join(start, 0.0, None)
+        ms.join = join if join is not None else JoinPoint(start, 0.0, None)
         ms.join_sent_t, ms.relief_on_route_t = now, None
         plan = FlightPlan(
             next(self._plan_ids),
@@ -959,7 +963,7 @@ class CentralTaskManager:
             # GPS-guided: the arrival radius comes from the GPS noise (server/fleet/accuracy.py)
             tolerance_m=GPS_ARRIVAL_RADIUS_M if self.origin is not None else 1.0,
         )
-        rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, Role.RELIEVING, m.id
+        rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, DroneRole.RELIEVING, m.id
         ms.relief = rec.name
         who = f"to relieve {ms.active}" if ms.active else "to patrol"
         self.event(
@@ -972,7 +976,7 @@ class CentralTaskManager:
     def _hold(self, rec: DroneRecord, now: float) -> None:
         """Hover where it is (a paused mission's drone); sent by the next step."""
         plan = FlightPlan(next(self._plan_ids), PlanKind.HOLD)
-        rec.plan, rec.plan_sent_t, rec.role = plan, -math.inf, Role.PAUSED
+        rec.plan, rec.plan_sent_t, rec.role = plan, -math.inf, DroneRole.PAUSED
 
     def _send_home(
         self,
@@ -988,7 +992,7 @@ class CentralTaskManager:
 
             z = min(z, limits_of(self.world).ceiling_m)  # a mission's layer was checked
         plan = FlightPlan(next(self._plan_ids), PlanKind.RETURN, cruise_z=max(z, 1.0))
-        rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, Role.RETURNING, ""
+        rec.plan, rec.plan_sent_t, rec.role, rec.mission = plan, now, DroneRole.RETURNING, ""
         if out is not None:
             out.append(Dispatch(rec.name, plan))
         else:
@@ -1012,7 +1016,7 @@ class CentralTaskManager:
                     "battery": st.battery_pct if st else 0.0,
                     "state": st.state if st else "UNKNOWN",
                     "mission": rec.mission,
-                    "link": rec.role is not Role.LOST,
+                    "link": rec.role is not DroneRole.LOST,
                 }
             )
         header = {"stamp": stamp or {"sec": int(now), "nanosec": 0}, "frame_id": "map"}

@@ -42,7 +42,7 @@ PATROL_SERVICE_TYPE = "uav_console/Patrol"
 MAX_WORD = 64  # a status's free-text words (``operator``)
 
 
-class Role(enum.Enum):
+class DroneRole(enum.Enum):
     """What the CTM has a drone doing (``/fleet/status`` roles)."""
 
     PATROLLING = "patrolling"
@@ -335,8 +335,8 @@ class FlightPlan:
         )
 
 
-# Bounds of a mission request (issue 14: a mission named "a/b" or 100 KB long could not be
-# stopped; routes and mission counts were unbounded). A name is a URL path segment.
+# Bounds of a mission request. A name is a URL path segment (a mission named "a/b" or 100 KB
+# long could not be stopped by name); routes and mission counts are bounded too.
 MISSION_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 MAX_ROUTE_POINTS = 200
 

@@ -1,6 +1,6 @@
 """Handoff timing and the persistent-coverage bound, as plain functions of a flight model.
 
-The replacement must reach the handoff point before the patrolling drone has to leave (issue 8).
+The replacement must reach the handoff point before the patrolling drone has to leave.
 With battery ``b`` (%), drain ``r`` (%/s) and threshold ``θ`` (%), the active drone must leave
 in ``t_leave = (b − θ) / r``. The replacement needs ``t_lead = t_takeoff + d_h / v + Δz / v_z +
 margin`` to get there, so the CTM dispatches it as soon as ``t_leave ≤ t_lead``.

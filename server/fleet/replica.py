@@ -28,13 +28,13 @@ from server.fleet.continuity import (
     MAX_VISITS,
     CoverageTracker,
     HandoffRecord,
-    Join,
+    JoinPoint,
     RouteCoverage,
 )
 from server.fleet.ctm import CentralTaskManager, DroneRecord, MissionRecord
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
-from server.fleet.messages import FlightPlan, Handoff, LtmStatus, Mission, Role
+from server.fleet.messages import DroneRole, FlightPlan, Handoff, LtmStatus, Mission
 from server.fleet.states import MissionState
 
 VERSION = 1
@@ -130,12 +130,12 @@ def _drone_of(x: Any, now: float) -> DroneRecord:
         name=_str(d, "name"),
         status=None if d.get("status") is None else LtmStatus.from_dict(d["status"]),
         last_heard=_at_f(d.get("last_heard"), now),
-        role=Role(d["role"]),
+        role=DroneRole(d["role"]),
         mission=_str(d, "mission"),
         plan=None if d.get("plan") is None else FlightPlan.from_dict(d["plan"]),
         plan_sent_t=_at_f(d.get("plan_sent_t"), now),
         lost_reason=_str(d, "lost_reason"),
-        lost_from=Role(d["lost_from"]),
+        lost_from=DroneRole(d["lost_from"]),
         charging_since=_at_f(d.get("charging_since"), now),
         samples=samples,
     )
@@ -262,7 +262,7 @@ def _coverage_of(x: Any, now: float) -> CoverageTracker:
     )
 
 
-def _join(j: Join | None) -> dict[str, Any] | None:
+def _join(j: JoinPoint | None) -> dict[str, Any] | None:
     if j is None:
         return None
     return {
@@ -274,13 +274,13 @@ def _join(j: Join | None) -> dict[str, Any] | None:
     }
 
 
-def _join_of(x: Any) -> Join | None:
+def _join_of(x: Any) -> JoinPoint | None:
     if x is None:
         return None
     d = _obj(x, "join")
     eta = d.get("active_eta_s")
     after = d.get("after")
-    return Join(
+    return JoinPoint(
         _int(d, "index"),
         _float(d["relief_eta_s"]),
         None if eta is None else _float(eta),

@@ -1,4 +1,4 @@
-"""The HTTP door's guard, in front of every route (pure ASGI middleware; issue 14).
+"""The HTTP door's guard, in front of every route (pure ASGI middleware).
 
 Before any route, token check or body parsing runs:
 
@@ -7,7 +7,7 @@ Before any route, token check or body parsing runs:
   at 127.0.0.1 (DNS rebinding), so it gets 421 (a WebSocket is closed before it opens).
 - Request bodies are limited per route *before* they are read: a ``Content-Length`` over the
   limit gets 413 at once, and a chunked body is counted as it streams and cut off at the limit
-  (a 400 MB POST without a token used to be parsed before the 401).
+  (a 400 MB POST without a token gets its 401 unread).
 - Every response carries security headers: a Content-Security-Policy (scripts, styles and
   connections from this origin only; no framing), ``X-Frame-Options``, ``Referrer-Policy:
   no-referrer`` (the first-load ``?token=`` never leaks in a Referer) and ``nosniff``. A

@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from drone.mavlink.gcs.events import Telemetry
+from drone.mavlink.gcs.events import MavlinkTelemetry
 from drone.mavlink.geo import yaw_ned_to_enu
 from server.msgs import header
 from server.nodes.vehicle_node import EMPTY, POSE, TASK, TWIST, VehicleNode
@@ -131,7 +131,7 @@ class MavrosNode(VehicleNode):
                     },
                 )
 
-    def publish_telemetry(self, t: Telemetry, now: float) -> None:
+    def publish_telemetry(self, t: MavlinkTelemetry, now: float) -> None:
         """Publish what is due (state 1 Hz and on change, positions 10 Hz)."""
         g, stamp = self.graph, self.stamp()
         connected = self.vehicle.protocol.connected

@@ -5,14 +5,14 @@ text plus the ROS 1 wire serialisation. The recorder writes MCAP channels in tha
 rosbridge endpoint sends it for ``compression: "cbor-raw"``.
 """
 
-from server.ros1.codec import Codec, codec_for
+from server.ros1.codec import MessageCodec, codec_for
 from server.ros1.definitions import definition, has_definition, ros1_fields
 from server.ros1.errors import DecodeError, EncodeError, Ros1Error, UnknownType
 
 __all__ = [
-    "Codec",
     "DecodeError",
     "EncodeError",
+    "MessageCodec",
     "Ros1Error",
     "UnknownType",
     "codec_for",

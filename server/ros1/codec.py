@@ -6,10 +6,11 @@ primitives; ``bool`` one byte; ``string`` a ``uint32`` byte length then UTF-8; `
 elements; ``uint8[]``/``char[]``/``byte[]`` the raw bytes. Nested messages are inlined.
 
 Graph messages are ROS 2-shaped dicts (``{sec, nanosec}`` stamps, headers without ``seq``):
-:meth:`Codec.encode` takes them (ROS 1's ``{secs, nsecs}`` too, a missing field as its default)
-and :meth:`Codec.decode` gives them back in the same shape, so encode-then-decode is the
-identity on what the graph carries. ``uint8[]`` may be ``bytes``, base64 text (as the vehicle
-node publishes camera JPEGs) or a list of ints; it decodes to ``bytes``.
+:meth:`MessageCodec.encode` takes them (ROS 1's ``{secs, nsecs}`` too, a missing field as its
+default) and :meth:`MessageCodec.decode` gives them back in the same shape, so
+encode-then-decode is the identity on what the graph carries. ``uint8[]`` may be ``bytes``,
+base64 text (as the vehicle node publishes camera JPEGs) or a list of ints; it decodes to
+``bytes``.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ _NUMBERS: dict[str, tuple[struct.Struct, int, int] | tuple[struct.Struct, None, 
 _BYTE_ARRAYS = {"uint8", "char", "byte"}
 
 
-class Codec:
+class MessageCodec:
     """Encoder and decoder of one message type (get one with :func:`codec_for`)."""
 
     def __init__(self, type_name: str) -> None:
@@ -85,13 +86,13 @@ class Codec:
 
 
 @functools.cache
-def codec_for(type_name: str) -> Codec:
+def codec_for(type_name: str) -> MessageCodec:
     """The (cached) codec of ``type_name``.
 
     Raises:
         UnknownType: it, or a type it uses, has no ROS 1 definition.
     """
-    return Codec(type_name)
+    return MessageCodec(type_name)
 
 
 # -- compilation --------------------------------------------------------------------------

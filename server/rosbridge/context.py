@@ -64,8 +64,8 @@ class BridgeContext:
             with code 1008.
         auth_timeout_s: a connection without a token must send ``auth`` within this time.
         preauth_max_bytes: the largest frame a connection may send before it authenticates
-            (an ``auth`` frame is ~100 bytes; issue 14: 16 MB frames before auth starved the
-            auth deadline, one PNG frame froze the loop). Under ``serve`` the transport refuses
+            (an ``auth`` frame is ~100 bytes; 16 MB frames before auth would starve the auth
+            deadline, one PNG frame would freeze the loop). Under ``serve`` the transport refuses
             a larger one at its frame header (``server.http.ws_guard``); the endpoint's own check
             covers servers without that.
         offload_decode_bytes / offload_binary_bytes: text / binary frames (and reassembled

@@ -151,7 +151,7 @@ class _Connection:
             now = ctx.clock()
             size = len(text) if text is not None else len(data or b"")
             if self.session.role is None and size > ctx.preauth_max_bytes:
-                # Nothing but a small auth frame before authenticating (issue 14): refused
+                # Nothing but a small auth frame before authenticating: refused
                 # unread, and the connection closed. (Under ``serve`` the transport already
                 # refused it at its header, 1009: ``server.http.ws_guard``.)
                 self.protocol.send_status(

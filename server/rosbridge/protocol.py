@@ -60,7 +60,7 @@ COMPRESSIONS = ("none", "png", "cbor", "cbor-raw")
 LEVELS = {"none": 0, "error": 1, "warning": 2, "info": 3}
 DEFAULT_FRAGMENT_TIMEOUT_S = 600.0  # rosbridge_suite's defragmentation fragment_timeout
 MAX_FRAGMENT_BUFFERS = 16
-# Bounds of subscription parameters (issue 14). rosbridge_suite leaves them open; these are far
+# Bounds of subscription parameters. rosbridge_suite leaves them open; these are far
 # beyond what a console or roslibjs asks (defaults 0 / none) and keep one client from making the
 # server do per-message work out of proportion: four observers with fragment_size 1 on the
 # camera cost 8 link losses; a queue_length of 2**63 was accepted.

@@ -101,10 +101,10 @@ def full_text(type_name: str) -> str:
     """
     if has_definition(type_name):
         return ros1_definition(type_name)
-    return _legacy_full_text(type_name)
+    return _typedefs_full_text(type_name)
 
 
-def _legacy_full_text(type_name: str) -> str:
+def _typedefs_full_text(type_name: str) -> str:
     parts: list[str] = []
     for td in typedefs(type_name):
         lines = [

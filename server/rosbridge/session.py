@@ -44,7 +44,7 @@ from server.rosbridge.values import check_message, is_known_type, to_json_text
 from server.vehicles import deadlines
 
 Schedule = Callable[[float, Callable[[], None]], object]
-# Drone commands over rosbridge that the audit trail records (issue 14).
+# Drone commands over rosbridge that the audit trail records.
 _DRONE_COMMAND = re.compile(r"^(/uav\d+)?/ardrone/(takeoff|land|reset|emergency)$")
 MAX_AUDIT_PENDING = 16
 _JOG_TOPIC = re.compile(r"^(/uav\d+)?/cmd_vel$")
@@ -659,7 +659,7 @@ class BridgeSession:
         state = lease.state
         mine = state.holder == self.owner
         # The holder is told its holding's secret (what REST callers name in X-Pilot-Lease);
-        # everyone else only that someone holds it (issue 14: holder ids were readable).
+        # everyone else only that someone holds it (a holder id is a credential).
         key = lease.key_of(self.owner) or ""
         values = {
             "holder": key if mine else (lease.PUBLIC_NAME if state.holder else ""),

@@ -1,6 +1,6 @@
 """WAV bytes -> 16 kHz mono float32 samples, the only input the recogniser takes (sans-I/O).
 
-Any sample rate, mono or stereo, 16-bit PCM (the issue's contract). Stereo is averaged to mono;
+Any sample rate, mono or stereo, 16-bit PCM. Stereo is averaged to mono;
 other rates are resampled with libswresample through PyAV (already a dependency for video), which
 low-pass filters before decimating, so 44.1/48 kHz microphone audio does not alias.
 """

@@ -95,7 +95,7 @@ class Snapped:
         A snap that had to choose between two readings almost equally far from what was heard
         ("climb" vs "land" for a garbled verb) is a guess; the margin factor pushes such a guess
         under the dialog manager's threshold so the operator is asked to repeat instead of a
-        wrong command being flown (issue 15: wrong commands executed must not rise).
+        wrong command being flown (bench/speech.py counts wrong commands executed).
         """
         gate = 1.0 if math.isinf(self.margin) else 1.0 - math.exp(-self.margin / MARGIN_SCALE)
         return math.exp(-self.distance) * gate

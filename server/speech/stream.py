@@ -151,7 +151,7 @@ class StreamSession:
         # first quiet frame, and a soft last consonant may lie after it. 0.3 s is the pad the
         # recogniser's own trim gives a whole clip (recognizer.VAD_PAD_S), the speech the
         # doubt rules were chosen on: with 0.2 s, 3 of bench/speech.py's 324 espeak-ng clips
-        # were flown wrong (a beam's doubt no longer showed).
+        # are flown wrong (a beam's doubt does not show).
         self.settle = int(settle_s * SAMPLE_RATE)
         self.listen = int(listen_s * SAMPLE_RATE)
         self.commit = int(commit_s * SAMPLE_RATE)

@@ -26,7 +26,7 @@ they run in spoken order ("go to marker 3 and land"). ``cancel`` in a sentence c
 ``query`` is accepted and left to the dialog (it is answered from ``vehicle.snapshot()``).
 A manual jog (``vehicle.jog``) cancels the running task.
 
-Tag search (issue 4): while a task needs localisation (goto and patrol of markers, return home,
+Tag search: while a task needs localisation (goto and patrol of markers, return home,
 indoor waypoints) and no marker has been seen for ``search_after_s``, and the estimate is no
 longer confident (planar σ > 0.3 m or yaw σ > 10°) — or at once when the drone has never been
 localised, also for a task that only needs a known position (a move, a GPS waypoint) — the
@@ -35,7 +35,7 @@ event "searching": "I lost sight of the markers, searching"), the drone holds it
 height and turns in yaw until a marker fix arrives ("marker_found"), then the task resumes.
 After two full turns without a marker the task fails.
 
-Idle search (issue 13 item 7, ``idle_search=True``): flying indoors with nothing to do, no
+Idle search (``idle_search=True``): flying indoors with nothing to do, no
 marker for ``search_after_s`` and the estimate no longer confident, the manager starts a
 ``search`` task itself (event "searching": "My position is uncertain; searching for markers"),
 which reports what it found or gives up after two turns. Not within ``IDLE_JOG_GRACE_S`` of a

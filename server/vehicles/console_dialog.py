@@ -35,7 +35,7 @@ from drone.deadline import Expired, not_flown
 from drone.supervisor.alarms import Alarm, BadAlarm
 from server.dialog.adapters import task_events
 from server.dialog.manager import DialogManager, DialogResult
-from server.dialog.ports import DescribePort, DroneView, FleetPort, TaskDecision, TaskEvent
+from server.dialog.ports import DescribePort, DroneView, FleetPort, TaskDecision, TaskReport
 from server.graph import Graph, GraphError
 from server.language.nlu import NLU
 from server.vehicles import names, remote
@@ -55,7 +55,7 @@ class RemoteTaskPort:
 
     def __init__(self, stack: RemoteDroneStack, graph: Graph) -> None:
         self.stack = stack
-        self._listeners: list[Callable[[TaskEvent], None]] = []
+        self._listeners: list[Callable[[TaskReport], None]] = []
         self._tail: asyncio.Future[Any] | None = None  # the last op sent, for the order
         self._pending: set[asyncio.Future[Any]] = set()
         self.on_failure: Callable[[str], None] = lambda text: None  # set by the dialog
@@ -146,7 +146,7 @@ class RemoteTaskPort:
         fut.add_done_callback(done)
 
     # ------------------------------------------------------------------ notices
-    def on_event(self, callback: Callable[[TaskEvent], None]) -> None:
+    def on_event(self, callback: Callable[[TaskReport], None]) -> None:
         self._listeners.append(callback)
 
     def _on_notice(self, msg: dict[str, Any]) -> None:
@@ -165,7 +165,7 @@ class RemoteTaskPort:
                 cb(event)
             if event.kind in ("done", "failed", "took_off") and idle:
                 for cb in self._listeners:
-                    cb(TaskEvent("idle"))
+                    cb(TaskReport("idle"))
 
     def close(self) -> None:
         self._sub.close()

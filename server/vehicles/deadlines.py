@@ -65,7 +65,7 @@ def reply_message(text: str, drone: str, prefix: str, *, utterance: str = "") ->
     }
 
 
-class CommandExpired(Exception):
+class RestCommandExpired(Exception):
     """A REST command past its deadline at the door (REST: 409, ``accepted: false``)."""
 
     def __init__(self, text: str, verdict: Expired) -> None:
@@ -147,7 +147,7 @@ def report_expired(
 
 __all__ = [
     "BadIssued",
-    "CommandExpired",
+    "RestCommandExpired",
     "audit_row",
     "issued_at_door",
     "judge",

@@ -51,11 +51,11 @@ from server.vehicles.door_protocol import (
     Auth,
     ClientMessage,
     DoorMessage,
+    DoorPhase,
     DoorSession,
     Error,
     Heartbeat,
     Hello,
-    Phase,
     Stop,
     Supersede,
     Superseded,
@@ -277,8 +277,8 @@ class _Connection:
                 await self.writer.start_tls(
                     self.door.tls, ssl_handshake_timeout=max(self._left(), 0.01)
                 )
-            while self.session.phase is not Phase.CLOSED:
-                if self.session.phase is Phase.AWAITING_AUTH:
+            while self.session.phase is not DoorPhase.CLOSED:
+                if self.session.phase is DoorPhase.AWAITING_AUTH:
                     # The deadline is judged by a read that waited for the client in vain, not
                     # by the clock alone: what came while the door was not running is read.
                     if self._hard_left() <= 0:
@@ -298,7 +298,7 @@ class _Connection:
                 if self.ws.close_expected():
                     break
         except TimeoutError:
-            if self.session.phase is Phase.AWAITING_AUTH:
+            if self.session.phase is DoorPhase.AWAITING_AUTH:
                 self.door.counts.auth_timeouts += 1
                 with contextlib.suppress(Exception):
                     self._close(CLOSE_TRY_LATER, self._late_auth())
@@ -322,7 +322,7 @@ class _Connection:
                 msg = self._frame(event)
                 if msg is None:
                     continue
-                if self.session.phase is Phase.OPEN and not isinstance(msg, Auth):
+                if self.session.phase is DoorPhase.OPEN and not isinstance(msg, Auth):
                     batch.append(msg)
                 else:
                     self._message(msg)  # auth: what follows is judged by its outcome
@@ -341,7 +341,7 @@ class _Connection:
 
     def _frame(self, frame: Frame) -> ClientMessage | None:
         """The message a frame completes (None: a control frame, a fragment, a refusal)."""
-        if self.session.phase is Phase.CLOSED:
+        if self.session.phase is DoorPhase.CLOSED:
             return None
         if frame.opcode is Opcode.TEXT:
             self._parts = [bytes(frame.data)]
@@ -377,7 +377,7 @@ class _Connection:
 
     def _message(self, msg: ClientMessage) -> None:
         door = self.door
-        if self.session.phase is Phase.CLOSED:
+        if self.session.phase is DoorPhase.CLOSED:
             return
         if isinstance(msg, Auth):
             try:
@@ -405,7 +405,7 @@ class _Connection:
 
     async def _heartbeats(self) -> None:
         door = self.door
-        while self.session.phase is Phase.OPEN:
+        while self.session.phase is DoorPhase.OPEN:
             now = door.monotonic()
             if self.session.heartbeat_due(now):
                 state, link_ok = door.status()

@@ -275,17 +275,17 @@ def encode(msg: ClientMessage | DoorMessage) -> str:
     return json.dumps(obj, separators=(",", ":"), allow_nan=False)
 
 
-class Phase(enum.Enum):
+class DoorPhase(enum.Enum):
     AWAITING_AUTH = "awaiting_auth"
     OPEN = "open"
     CLOSED = "closed"
 
 
 # What each phase takes, and the phase it leads to (anything else closes the connection).
-ACCEPTS: dict[Phase, dict[type, Phase]] = {
-    Phase.AWAITING_AUTH: {Auth: Phase.OPEN},
-    Phase.OPEN: {Stop: Phase.OPEN, Supersede: Phase.OPEN},
-    Phase.CLOSED: {},
+ACCEPTS: dict[DoorPhase, dict[type, DoorPhase]] = {
+    DoorPhase.AWAITING_AUTH: {Auth: DoorPhase.OPEN},
+    DoorPhase.OPEN: {Stop: DoorPhase.OPEN, Supersede: DoorPhase.OPEN},
+    DoorPhase.CLOSED: {},
 }
 
 
@@ -298,7 +298,7 @@ class DoorSession:
     """
 
     def __init__(self, accepted_at: float, auth_deadline_s: float = AUTH_DEADLINE_S) -> None:
-        self.phase = Phase.AWAITING_AUTH
+        self.phase = DoorPhase.AWAITING_AUTH
         self.auth_deadline = accepted_at + auth_deadline_s
         self.next_heartbeat: float | None = None
         self.role: str | None = None
@@ -311,17 +311,17 @@ class DoorSession:
                 phase does not take (then the phase is CLOSED: before ``auth`` nothing else is
                 read, and a second ``auth`` is refused).
         """
-        if self.phase is Phase.CLOSED:
+        if self.phase is DoorPhase.CLOSED:
             raise DoorProtocolError("the connection is closed")
         try:
             msg = parse_client(text)
         except DoorProtocolError:
-            if self.phase is Phase.AWAITING_AUTH:
-                self.phase = Phase.CLOSED
+            if self.phase is DoorPhase.AWAITING_AUTH:
+                self.phase = DoorPhase.CLOSED
             raise
         if type(msg) not in ACCEPTS[self.phase]:
-            closing = self.phase is Phase.AWAITING_AUTH
-            self.phase = Phase.CLOSED
+            closing = self.phase is DoorPhase.AWAITING_AUTH
+            self.phase = DoorPhase.CLOSED
             if closing:
                 raise DoorProtocolError("authenticate first: {'op': 'auth', 'token': …}")
             raise DoorProtocolError("already authenticated")
@@ -329,24 +329,24 @@ class DoorSession:
 
     def authenticated(self, role: str, now: float) -> None:
         """The token of the ``auth`` just received was good for ``role``; heartbeats start."""
-        self.phase = ACCEPTS[Phase.AWAITING_AUTH][Auth]
+        self.phase = ACCEPTS[DoorPhase.AWAITING_AUTH][Auth]
         self.role = role
         self.next_heartbeat = now + HEARTBEAT_S
 
     def refuse(self) -> None:
-        self.phase = Phase.CLOSED
+        self.phase = DoorPhase.CLOSED
 
     @property
     def closed(self) -> bool:
-        return self.phase is Phase.CLOSED
+        return self.phase is DoorPhase.CLOSED
 
     def overdue(self, now: float) -> bool:
         """Whether the connection is still unauthenticated past its deadline."""
-        return self.phase is Phase.AWAITING_AUTH and now >= self.auth_deadline
+        return self.phase is DoorPhase.AWAITING_AUTH and now >= self.auth_deadline
 
     def heartbeat_due(self, now: float) -> bool:
         """Whether a heartbeat is due now (and the next one is scheduled if so)."""
-        if self.phase is not Phase.OPEN or self.next_heartbeat is None:
+        if self.phase is not DoorPhase.OPEN or self.next_heartbeat is None:
             return False
         if now < self.next_heartbeat:
             return False

@@ -20,7 +20,7 @@ from drone.sim.camera import Renderer
 from drone.sim.world import COLOURS, OBJECT_KINDS, World, load_world
 from server.captioner import Captioner, CaptionerUnavailable, describe_frame_sync
 from server.captioner.eval import Said, TruthItem, said, score_descriptions
-from server.captioner.evalset import SEED_BASE, TUNING_SEED_BASE, Truth, sample
+from server.captioner.evalset import SEED_BASE, TUNING_SEED_BASE, TruthLabel, sample
 from server.captioner.grounding import SeenMarker, Thing, ground_marker_ids, ground_objects
 from server.captioner.markers import MarkerDetector
 from server.captioner.scene import KINDS as SCENE_KINDS
@@ -41,7 +41,7 @@ def _named(text: str) -> list[Said]:
     return list(said(text, KINDS, list(COLOURS)))
 
 
-def _untrue(text: str, truth: tuple[Truth, ...]) -> list[Said]:
+def _untrue(text: str, truth: tuple[TruthLabel, ...]) -> list[Said]:
     """What ``text`` names that is not in view, in another colour, or a marker without id."""
     objects = {(t.kind, t.colour) for t in truth if t.kind != "marker"}
     ids = {t.marker_id for t in truth if t.kind == "marker"}

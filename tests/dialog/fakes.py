@@ -10,7 +10,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from server.dialog.ports import DroneView, TaskDecision, TaskEvent
+from server.dialog.ports import DroneView, TaskDecision, TaskReport
 
 
 @dataclass
@@ -25,7 +25,7 @@ class FakeFlight:
     started: float = 0.0
     now: float = 0.0
     log: list[tuple[str, Any]] = field(default_factory=list)
-    _callbacks: list[Callable[[TaskEvent], None]] = field(default_factory=list)
+    _callbacks: list[Callable[[TaskReport], None]] = field(default_factory=list)
 
     # TaskPort
     def submit(self, commands: Sequence[Mapping[str, Any]]) -> list[TaskDecision]:
@@ -53,12 +53,12 @@ class FakeFlight:
         else:
             self.queue.append(dict(command))
 
-    def on_event(self, callback: Callable[[TaskEvent], None]) -> None:
+    def on_event(self, callback: Callable[[TaskReport], None]) -> None:
         self._callbacks.append(callback)
 
     def _emit(self, kind: str, cmd: Mapping[str, Any] | None = None) -> None:
         for cb in self._callbacks:
-            cb(TaskEvent(kind, dict(cmd or {})))
+            cb(TaskReport(kind, dict(cmd or {})))
 
     # VehiclePort
     def snapshot(self) -> DroneView:

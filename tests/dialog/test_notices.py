@@ -6,14 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from server.dialog.ports import TaskEvent
+from server.dialog.ports import TaskReport
 from server.dialog.states import State
 from tests.dialog.test_manager import Rig
 
 
 def _emit(rig: Rig, kind: str, action: str, text: str) -> None:
     for cb in rig.flight._callbacks:
-        cb(TaskEvent(kind, {"action": action}, text))
+        cb(TaskReport(kind, {"action": action}, text))
 
 
 async def test_search_started_found_and_gave_up_are_spoken() -> None:

@@ -11,7 +11,7 @@ import pytest
 from drone.sim.world import load_world
 from experiments.patrol import PatrolConfig, PatrolExperiment, patrol_main
 from server.fleet.ctm import CentralTaskManager
-from server.fleet.messages import Role
+from server.fleet.messages import DroneRole
 from server.fleet.node import REPLY_TOPIC, CtmNode
 from server.fleet.planner import StationModel
 from server.fleet.service import station_model
@@ -171,7 +171,7 @@ def test_a_charging_drone_is_a_candidate_once_above_the_missions_reserve() -> No
         )  # fmt: skip
 
     ctm.on_status(status(35.0), 0.0)
-    ctm.drones["uav1"].role, ctm.drones["uav1"].charging_since = Role.CHARGING, 0.0
+    ctm.drones["uav1"].role, ctm.drones["uav1"].charging_since = DroneRole.CHARGING, 0.0
     assert ctm.step(1.0) == []
     info = ctm.mission_info(mid)
     assert info["state"] == "stalled"

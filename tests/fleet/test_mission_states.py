@@ -24,7 +24,7 @@ from server.dialog.manager import DialogManager
 from server.fleet.central import CentralPatrol
 from server.fleet.errors import IllegalTransition, MessageError
 from server.fleet.ltm import interruption, operator_action
-from server.fleet.messages import LtmStatus, Role
+from server.fleet.messages import DroneRole, LtmStatus
 from server.fleet.states import MissionEvent, MissionState, transition
 from server.graph import Graph
 from server.settings import Settings
@@ -207,7 +207,7 @@ def test_stop_by_voice_pauses_and_resume_flies_the_hovering_drone_again() -> Non
     # the hovering drone was nearest the route: it carries on at once, the other stays down
     assert ms.active == pilot.victim
     assert pilot.roles[_other(pilot.victim)] == {"idle"}
-    assert exp.ctm.drones[pilot.victim].role is Role.PATROLLING
+    assert exp.ctm.drones[pilot.victim].role is DroneRole.PATROLLING
 
 
 def test_emergency_pauses_and_end_brings_the_others_home() -> None:

@@ -12,7 +12,7 @@ import pytest
 
 from experiments.patrol import PatrolConfig, PatrolExperiment, patrol_main
 from server import cli
-from server.fleet.messages import Role
+from server.fleet.messages import DroneRole
 
 FAST = {"flight_time_s": 150.0, "swap_s": 20.0}
 # Stated bound on any coverage gap at a handoff: none may exceed one tick of the rig, since the
@@ -75,7 +75,7 @@ def test_failed_drone_is_replaced() -> None:
     exp = PatrolExperiment(PatrolConfig(drones=3, duration_s=120.0, fail_at_s=50.0, **FAST))
     report = exp.run()
     assert report.replacements == 1
-    lost = [r for r in exp.ctm.drones.values() if r.role is Role.LOST]
+    lost = [r for r in exp.ctm.drones.values() if r.role is DroneRole.LOST]
     assert len(lost) == 1 and lost[0].lost_reason == "emergency"
     # the gap is bounded by detection + take-off + transit of the replacement
     lead = exp.model.takeoff_s + 30.0 / exp.model.speed_m_s + 15.0
@@ -109,11 +109,11 @@ def test_ltm_disconnect_and_reconnect() -> None:
     exp.hooks.append(cut)
     report = exp.run()
     victim = str(state["victim"])
-    assert Role.LOST in state["roles"]  # type: ignore[operator]
+    assert DroneRole.LOST in state["roles"]  # type: ignore[operator]
     assert state.get("autonomous") == "ctm_silent"
     assert report.replacements == 1
     rec = exp.ctm.drones[victim]
-    assert rec.role is not Role.LOST  # heard again
+    assert rec.role is not DroneRole.LOST  # heard again
     assert any(f"{victim} back" in text for _, text in exp.ctm.events)
     assert report.max_gap_s < 25.0
 

@@ -32,7 +32,7 @@ from server.fleet.client import VehicleClient
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.geo import Enu, origin_of
 from server.fleet.ltm import LocalTaskManager
-from server.fleet.messages import PlanKind, Role
+from server.fleet.messages import DroneRole, PlanKind
 from server.fleet.node import CtmNode
 from server.fleet.router import make_fleet_router
 from server.graph import Graph
@@ -143,7 +143,7 @@ async def test_remote_ltm_joins_gets_plan_and_reconnects(tmp_path: Path) -> None
         task = asyncio.create_task(client.run(stop))
         try:
             await until(lambda: "uav1" in c.ctm.drones)
-            assert c.ctm.drones["uav1"].role is Role.IDLE
+            assert c.ctm.drones["uav1"].role is DroneRole.IDLE
             assert c.graph.service_type("/uav1/fleet/flight_plan") == "uav_console/FlightPlan"
             # a mission through the REST door
             async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{c.port}") as http:
@@ -162,13 +162,13 @@ async def test_remote_ltm_joins_gets_plan_and_reconnects(tmp_path: Path) -> None
             assert ltm.plan is not None and ltm.plan.kind is PlanKind.PATROL
             assert ltm.plan.route[0].x == pytest.approx(-15.0, abs=0.05)
             await until(lambda: tm.current is not None and tm.current.name == "waypoints")
-            assert c.ctm.drones["uav1"].role in (Role.RELIEVING, Role.PATROLLING)
+            assert c.ctm.drones["uav1"].role in (DroneRole.RELIEVING, DroneRole.PATROLLING)
             assert client.core.heartbeats > 0
             # the link drops: the CTM loses it, the client reconnects, the CTM hears it again
             await client.drop(hold_s=2.5)
-            await until(lambda: c.ctm.drones["uav1"].role is Role.LOST)
+            await until(lambda: c.ctm.drones["uav1"].role is DroneRole.LOST)
             await until(lambda: client.connects >= 2)
-            await until(lambda: c.ctm.drones["uav1"].role is not Role.LOST)
+            await until(lambda: c.ctm.drones["uav1"].role is not DroneRole.LOST)
             async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{c.port}") as http:
                 fleet = (await http.get("/api/v1/fleet")).json()
                 info = (await http.get(f"/api/v1/missions/{mid}")).json()

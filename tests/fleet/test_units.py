@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from server.fleet.ctm import CentralTaskManager, route_distance
 from server.fleet.errors import GeoError, MessageError, MissionError, NotFoundError, PlanError
 from server.fleet.geo import Enu, Geo, to_enu, to_geo
-from server.fleet.messages import FlightPlan, LtmStatus, MissionRequest, PlanKind, Role
+from server.fleet.messages import DroneRole, FlightPlan, LtmStatus, MissionRequest, PlanKind
 from server.fleet.planner import (
     FlightModel,
     StationModel,
@@ -210,7 +210,7 @@ def test_ctm_dispatches_relief_at_lead_time_and_hands_over() -> None:
     fly(ctm, a, 1.0, x=-15, y=-15, z=5, flying=True, state="FLYING", battery_pct=95)
     ctm.on_status(replace(ctm.drones[b].status, t=1.0), 1.0)  # type: ignore[arg-type]
     ctm.step(1.0)
-    assert ctm.drones[a].role is Role.PATROLLING
+    assert ctm.drones[a].role is DroneRole.PATROLLING
     lead = lead_time_s(Enu(0, 0, 0), SQUARE[0], ctm.model)
     drain = ctm.model.drain_pct_s
     t, out = 1.0, []
@@ -221,23 +221,23 @@ def test_ctm_dispatches_relief_at_lead_time_and_hands_over() -> None:
         fly(ctm, a, t, x=-15, y=0, z=5, flying=True, state="FLYING", battery_pct=battery)
         ctm.on_status(replace(ctm.drones[b].status, t=t), t)  # type: ignore[arg-type]
         out = ctm.step(t)
-    assert out[0].drone == b and ctm.drones[b].role is Role.RELIEVING
+    assert out[0].drone == b and ctm.drones[b].role is DroneRole.RELIEVING
     assert battery == pytest.approx(30.0 + lead * drain, abs=2 * drain)
     # the relief reaches the route: handoff, the tired drone goes home
     fly(ctm, b, t + 1, x=-14, y=-15, z=5, flying=True, state="FLYING", battery_pct=99)
     fly(ctm, a, t + 1, x=-15, y=0, z=5, flying=True, state="FLYING", battery_pct=battery)
     out = ctm.step(t + 1)
     assert [(d.drone, d.plan.kind) for d in out] == [(a, PlanKind.RETURN)]
-    assert ctm.drones[a].role is Role.RETURNING and ctm.drones[b].role is Role.PATROLLING
+    assert ctm.drones[a].role is DroneRole.RETURNING and ctm.drones[b].role is DroneRole.PATROLLING
     assert ctm.missions["m1"].handoffs == 1
     fly(ctm, a, t + 30, flying=False, state="LANDED", battery_pct=28)
     fly(ctm, b, t + 30, x=0, y=-15, z=5, flying=True, state="FLYING", battery_pct=90)
     ctm.step(t + 30)
-    assert ctm.drones[a].role is Role.CHARGING
+    assert ctm.drones[a].role is DroneRole.CHARGING
     fly(ctm, a, t + 150, flying=False, state="LANDED", battery_pct=100)
     fly(ctm, b, t + 150, x=0, y=-15, z=5, flying=True, state="FLYING", battery_pct=80)
     ctm.step(t + 150)
-    assert ctm.drones[a].role is Role.IDLE
+    assert ctm.drones[a].role is DroneRole.IDLE
 
 
 @pytest.mark.parametrize(
@@ -260,7 +260,7 @@ def test_ctm_replaces_failed_drone(failure: dict[str, Any] | None, reason: str) 
     for r in others:
         ctm.on_status(replace(r.status, t=t), t)  # type: ignore[arg-type]
     out = ctm.step(t)
-    assert ctm.drones[a].role is Role.LOST and ctm.drones[a].lost_reason == reason
+    assert ctm.drones[a].role is DroneRole.LOST and ctm.drones[a].lost_reason == reason
     assert len(out) == 1 and out[0].drone != a and out[0].plan.kind is PlanKind.PATROL
     assert ctm.missions["m1"].replacements == 1
     # back and still flying: its post went to another, so it is sent home
@@ -268,7 +268,7 @@ def test_ctm_replaces_failed_drone(failure: dict[str, Any] | None, reason: str) 
     fly(ctm, a, t + 1, x=-15, y=-15, z=5, flying=True, state="FLYING", **healthy)
     back = ctm.step(t + 1)
     assert [(d.drone, d.plan.kind) for d in back if d.drone == a] == [(a, PlanKind.RETURN)]
-    assert ctm.drones[a].role is Role.RETURNING
+    assert ctm.drones[a].role is DroneRole.RETURNING
 
 
 def test_ctm_more_drones_than_routes_and_two_missions() -> None:
@@ -278,7 +278,7 @@ def test_ctm_more_drones_than_routes_and_two_missions() -> None:
     out = ctm.step(0.0)
     assert len(out) == 2 and len({d.drone for d in out}) == 2
     assert {d.plan.mission for d in out} == {"m1", "m2"}
-    idle = [r for r in ctm.drones.values() if r.role is Role.IDLE]
+    idle = [r for r in ctm.drones.values() if r.role is DroneRole.IDLE]
     assert len(idle) == 2
     info = ctm.mission_info("m2")
     assert info["handoff_threshold"] == 0.5 and len(info["route_geo"]) == 2
@@ -310,10 +310,10 @@ def test_ctm_leaves_a_manually_flown_drone_alone() -> None:
         assert ctm.step(float(t)) == []
     # nor after a link blip or a silence while it flies (the drone was never the CTM's)
     fly(ctm, "uav1", 30.0, flying=True, z=1.2, link_ok=False)
-    assert ctm.step(30.0) == [] and ctm.drones["uav1"].role is Role.LOST
+    assert ctm.step(30.0) == [] and ctm.drones["uav1"].role is DroneRole.LOST
     fly(ctm, "uav1", 31.0, flying=True, z=1.2, link_ok=True)
-    assert ctm.step(40.0) == [] and ctm.drones["uav1"].role is Role.LOST  # silent
+    assert ctm.step(40.0) == [] and ctm.drones["uav1"].role is DroneRole.LOST  # silent
     for t in range(41, 50):
         fly(ctm, "uav1", float(t), flying=True, z=1.2)
         assert ctm.step(float(t)) == []
-    assert ctm.drones["uav1"].role is Role.IDLE and ctm.drones["uav1"].plan is None
+    assert ctm.drones["uav1"].role is DroneRole.IDLE and ctm.drones["uav1"].plan is None

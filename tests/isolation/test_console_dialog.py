@@ -14,7 +14,7 @@ import pytest
 
 from drone.bus.commands import decode_command
 from drone.bus.errors import PayloadError
-from drone.supervisor.alarms import Action, ActionKind, Alarm, BadAlarm, Severity
+from drone.supervisor.alarms import ActionKind, Alarm, AlarmAction, BadAlarm, Severity
 from server.dialog.states import State
 from server.graph import Graph
 from server.language.nlu import default_nlu
@@ -166,7 +166,9 @@ async def test_the_vehicles_task_notices_and_alarms_are_followed_and_said() -> N
     graph.publish(notices, {"data": json.dumps(note)})
     assert replies[-1]["text"] == "Landed." and dialog.state is State.LANDED
     graph.publish(notices, {"data": "not json"})  # logged, not raised
-    alarm = Alarm("battery", Severity.ALERT, "Battery critical: landing.", Action(ActionKind.LAND))
+    alarm = Alarm(
+        "battery", Severity.ALERT, "Battery critical: landing.", AlarmAction(ActionKind.LAND)
+    )
     graph.advertise(names.alarm_topic("uav1"), names.STRING)
     _flying(stack, dialog)
     graph.publish(names.alarm_topic("uav1"), {"data": json.dumps(alarm.as_message("uav1"))})
@@ -179,13 +181,13 @@ async def test_the_vehicles_task_notices_and_alarms_are_followed_and_said() -> N
     "action",
     [
         None,
-        Action(ActionKind.HOVER),
-        Action(ActionKind.RETURN_HOME),
-        Action(ActionKind.DESCEND, distance_m=0.4),
-        Action(ActionKind.BACK_OFF, to=(1.0, 2.0, 1.5)),
+        AlarmAction(ActionKind.HOVER),
+        AlarmAction(ActionKind.RETURN_HOME),
+        AlarmAction(ActionKind.DESCEND, distance_m=0.4),
+        AlarmAction(ActionKind.BACK_OFF, to=(1.0, 2.0, 1.5)),
     ],
 )
-def test_an_alarm_reads_back_as_the_vehicle_wrote_it(action: Action | None) -> None:
+def test_an_alarm_reads_back_as_the_vehicle_wrote_it(action: AlarmAction | None) -> None:
     alarm = Alarm("altitude", Severity.WARN, "Too high.", action)
     assert Alarm.from_message(json.loads(json.dumps(alarm.as_message("uav1")))) == alarm
 

@@ -30,11 +30,11 @@ from server.vehicles.door_protocol import (
     MAX_FRAME_BYTES,
     Ack,
     Auth,
+    DoorPhase,
     DoorSession,
     Error,
     Heartbeat,
     Hello,
-    Phase,
     Stop,
     Supersede,
     Superseded,
@@ -135,7 +135,7 @@ def test_session_takes_auth_first_then_stops_and_keeps_the_beat() -> None:
     assert not s.overdue(100.9) and s.overdue(101.0)
     assert isinstance(s.receive('{"op":"auth","token":"t"}'), Auth)
     s.authenticated("pilot", now=100.5)
-    assert s.phase is Phase.OPEN and not s.overdue(200.0)
+    assert s.phase is DoorPhase.OPEN and not s.overdue(200.0)
     assert [s.heartbeat_due(t) for t in (100.6, 100.75, 100.8, 101.0)] == [
         False,
         True,
@@ -146,21 +146,21 @@ def test_session_takes_auth_first_then_stops_and_keeps_the_beat() -> None:
     assert isinstance(s.receive('{"op":"stop","action":"land","id":"x"}'), Stop)
     with pytest.raises(DoorProtocolError):  # a bad frame is refused, the connection stays
         s.receive("nope")
-    assert s.phase is Phase.OPEN
+    assert s.phase is DoorPhase.OPEN
     with pytest.raises(DoorProtocolError, match="already"):
         s.receive('{"op":"auth","token":"t"}')
-    assert s.phase is Phase.CLOSED
+    assert s.phase is DoorPhase.CLOSED
 
 
 def test_session_closes_on_anything_but_auth_first() -> None:
     s = DoorSession(0.0)
     with pytest.raises(DoorProtocolError, match="authenticate first"):
         s.receive('{"op":"stop","action":"emergency","id":"x"}')
-    assert s.phase is Phase.CLOSED
+    assert s.phase is DoorPhase.CLOSED
     garbage = DoorSession(0.0)
     with pytest.raises(DoorProtocolError):
         garbage.receive("GET / HTTP/1.1")
-    assert garbage.phase is Phase.CLOSED
+    assert garbage.phase is DoorPhase.CLOSED
 
 
 # ------------------------------------------------------------------------------ tickets

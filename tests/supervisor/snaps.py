@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from drone.supervisor import Action, Alarm, Phase, Supervisor, SupervisorParams, default_monitors
+from drone.supervisor import (
+    Alarm,
+    AlarmAction,
+    Phase,
+    Supervisor,
+    SupervisorParams,
+    default_monitors,
+)
 from drone.supervisor.phase import phase_of
 from drone.vehicle import MarkerSeen, VehicleSnapshot
 
@@ -72,7 +79,7 @@ def fake_flight_supervisor(flight: Any, world: Any = None) -> Supervisor:
         running = flight.running or {}
         return phase_of(s, str(running.get("action", "")), "running" if running else "idle")
 
-    def act(action: Action, by: str) -> None:
+    def act(action: AlarmAction, by: str) -> None:
         flight.preempt(action.command(), by)
 
     return Supervisor(default_monitors(SupervisorParams(), world), snapshot, phase, act)

@@ -10,14 +10,16 @@ from typing import Any
 
 import httpx
 
-from drone.supervisor import Action, ActionKind, Alarm, Severity
+from drone.supervisor import ActionKind, Alarm, AlarmAction, Severity
 from server.vehicles import names
 from server.vehicles.host import shared_topics
 from tests.app_client import app_fixture
 
 
 def test_an_alarm_says_its_monitor_severity_text_and_the_command_it_ran() -> None:
-    a = Alarm("altitude", Severity.WARN, "Descending.", Action(ActionKind.DESCEND, distance_m=0.4))
+    a = Alarm(
+        "altitude", Severity.WARN, "Descending.", AlarmAction(ActionKind.DESCEND, distance_m=0.4)
+    )
     assert json.loads(json.dumps(a.as_message("uav2"))) == {
         "drone": "uav2",
         "monitor": "altitude",
@@ -25,9 +27,9 @@ def test_an_alarm_says_its_monitor_severity_text_and_the_command_it_ran() -> Non
         "text": "Descending.",
         "action": {"action": "move", "direction": "down", "distance": 0.4},
     }
-    away = Action(ActionKind.BACK_OFF, to=(1.0, 2.0, 1.5))
+    away = AlarmAction(ActionKind.BACK_OFF, to=(1.0, 2.0, 1.5))
     assert away.command() == {"action": "waypoints", "waypoints": [{"x": 1.0, "y": 2.0, "z": 1.5}]}
-    assert (away.event, Action(ActionKind.LAND).event) == ("move", "land")
+    assert (away.event, AlarmAction(ActionKind.LAND).event) == ("move", "land")
     assert Alarm("link", Severity.ALERT, "Lost.").as_message()["action"] is None
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drone.mavlink.codec import Codec, Message, mav, signing_timestamp
-from drone.mavlink.gcs.events import StatusText, Telemetry
+from drone.mavlink.gcs.events import MavlinkTelemetry, StatusText
 
 GCS_SYSTEM_ID = 255  # QGroundControl's and MAVProxy's default
 GCS_COMPONENT_ID = mav.MAV_COMP_ID_MISSIONPLANNER  # 190
@@ -77,7 +77,7 @@ class GcsCore:
         self.retries = retries
         self.setpoint_period_s = 1.0 / setpoint_hz
         self.request_streams = request_streams
-        self.telemetry = Telemetry()
+        self.telemetry = MavlinkTelemetry()
         self.link_ok = False
         self.params: dict[str, float] = {}
         self.commands_sent = 0  # COMMAND_LONG/INT frames written, retries included

@@ -73,7 +73,7 @@ class MissionItemReached:
 
 
 @dataclass(frozen=True)
-class Telemetry:
+class MavlinkTelemetry:
     """What the vehicle last told (immutable). NaN where never heard."""
 
     system_id: int = 0

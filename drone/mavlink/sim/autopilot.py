@@ -57,7 +57,7 @@ from collections.abc import Callable
 
 from drone.ardrone.navdata import CtrlState
 from drone.mavlink.codec import Message, mav, signing_timestamp
-from drone.mavlink.sim.commands import CommandService
+from drone.mavlink.sim.commands import AutopilotCommandService
 from drone.mavlink.sim.params import ParamsService
 from drone.sim.drone import Truth
 from drone.sim.errors import SimConfigError
@@ -65,7 +65,7 @@ from drone.sim.errors import SimConfigError
 REFUSED_UNSIGNED = b"Refused: MAVLink 2 signing required"  # STATUSTEXT, <= 50 bytes
 
 
-class SimAutopilot(CommandService, ParamsService):
+class SimAutopilot(AutopilotCommandService, ParamsService):
     """See the module docstring. One service per module, each a layer over
     :class:`~drone.mavlink.sim.core.AutopilotCore` (the shared state): ``streams``, ``params``,
     ``mission``, ``flight`` (over ``mission``), ``commands`` (over ``flight`` and ``streams``);

@@ -1,6 +1,6 @@
 """The command protocol of the simulated autopilot: COMMAND_LONG/COMMAND_INT answered with
 COMMAND_ACK, retransmissions answered without acting twice, one handler per command in a
-table (:meth:`CommandService._command_table`)."""
+table (:meth:`AutopilotCommandService._command_table`)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from drone.mavlink.sim.streams import MSG_NAMES, StreamsService
 FORCE_MAGIC = 21196  # MAV_CMD_COMPONENT_ARM_DISARM param2: force (PX4 commander)
 
 
-class CommandService(FlightService, StreamsService):
+class AutopilotCommandService(FlightService, StreamsService):
     """COMMAND_LONG/COMMAND_INT: dedupe, dispatch through the command table, acknowledge."""
 
     def _ack(self, cid: object, msg: Message, result: int) -> None:

@@ -10,10 +10,10 @@ from drone.ardrone.navdata import CtrlState
 from drone.mavlink.codec import Message, mav
 from drone.mavlink.geo import yaw_ned_to_enu
 from drone.mavlink.sim.core import RESULT_ACCEPTED, RESULT_DENIED
-from drone.mavlink.sim.mission import MissionService
+from drone.mavlink.sim.mission import AutopilotMissionService
 
 
-class FlightService(MissionService):
+class FlightService(AutopilotMissionService):
     """Arming, take-off, modes, offboard, failsafes and the position controller."""
 
     def _arm(self) -> int:

@@ -12,7 +12,7 @@ from drone.mavlink.sim.core import AutopilotCore, MissionItem
 _FLOWN_TO = (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_LOITER_UNLIM)
 
 
-class MissionService(AutopilotCore):
+class AutopilotMissionService(AutopilotCore):
     """Mission upload/download and the AUTO.MISSION item sequencer."""
 
     def _on_mission_count(self, cid: object, msg: Message) -> None:

@@ -133,7 +133,7 @@ class Console {
       // "Did you say …?" answered by a button: to the drone that asked (dialog.js addAnswers).
       onAnswer: (answer, drone) => this.sendUtterance(answer, "button", 1, drone || this.drone),
     });
-    // Speech (issue 15): server (offline) or browser recogniser, push-to-talk, hands-free.
+    // Speech: server (offline) or browser recogniser, push-to-talk, hands-free.
     this.speech = new VoiceInput(
       {
         button: $("mic"),

@@ -61,7 +61,7 @@ export class CentralPanel {
     this.busy = true;
     this.say(pending);
     try {
-      // Starting a patrol needs the pilot lease (issue 14): the page's rosbridge session holds
+      // Starting a patrol needs the pilot lease: the page's rosbridge session holds
       // it, and REST names the holding's key in X-Pilot-Lease, as app.js's own requests do.
       const key = this.lease();
       const headers = key ? { "X-Pilot-Lease": key } : {};

@@ -36,8 +36,8 @@ export const KEYMAP = Object.freeze({
   e: "yaw_right",
 });
 
-// Keys that move the drone: they work only while keyboard flying is armed (issue 18: a letter
-// typed outside the command box must never launch the drone). Stops (Shift+Esc, Space = hover,
+// Keys that move the drone: they work only while keyboard flying is armed (a letter typed
+// outside the command box must never launch the drone). Stops (Shift+Esc, Space = hover,
 // L = land) always work.
 export const MOVING_KEYS = Object.freeze(new Set(["t", ...Object.keys(KEYMAP)]));
 
