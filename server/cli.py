@@ -31,6 +31,15 @@ from server.settings import (
     shape_of,
 )
 
+# A vehicle joins its console's bus only: a ``vehicle --central URL`` (a rosbridge central) is
+# refused in one line that says what to give instead, before argparse, which would read
+# ``--central`` as an ambiguous prefix of ``--central-grace-s`` and ``--central-loss-land-s``.
+CENTRAL_FLAG = "--central"
+CENTRAL_REFUSAL = (
+    "uav-console vehicle: a vehicle joins its console over the bus: --bus-connect ENDPOINT "
+    "(serve prints it: 'bus: tcp/…'), not --central"
+)
+
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="uav-console", description=__doc__)
@@ -66,15 +75,8 @@ def _parser() -> argparse.ArgumentParser:
     v = sub.add_parser(
         "vehicle",
         help="one drone's stack joining a console's bus",
-        description="One drone's flight stack, joining a console's bus (--bus-connect), or only "
-        "its local task manager joining a rosbridge central (--central). Settings come from "
-        "UAVC_* variables and the flags below.",
-    )
-    v.add_argument(
-        "--central",
-        default=None,
-        help="ws://HOST:8000/rosbridge: only the fleet's local task manager, on a rosbridge "
-        "central; without it the whole vehicle joins the bus (--bus-connect)",
+        description="One drone's whole flight stack, joining a console's bus "
+        "(--bus-connect ENDPOINT). Settings come from UAVC_* variables and the flags below.",
     )
     v.add_argument("--name", required=True)
     v.add_argument(
@@ -84,8 +86,6 @@ def _parser() -> argparse.ArgumentParser:
         help="this vehicle's own key, its bus password (uav-console vehicle-key NAME on the "
         "console; else UAVC_VEHICLE_KEY)",
     )
-    v.add_argument("--ca", type=Path, default=None, help="--central: CA file for a wss:// one")
-    v.add_argument("--fingerprint", default=None, help="--central: its cert's pinned SHA-256")
     v.add_argument("--prefix", default=None, help="topic prefix (default /NAME; '' for one drone)")
     v.add_argument("--index", type=int, default=None, help="simulator address / station index")
     v.add_argument("--safety-host", default="127.0.0.1", help="the safety door's address")
@@ -131,6 +131,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     # `patrol` owns its flags (and --help); hand them over untouched.
     if args_list[:1] == ["patrol"]:
         return _patrol(args_list[1:])
+    if args_list[:1] == ["vehicle"] and any(
+        a == CENTRAL_FLAG or a.startswith(CENTRAL_FLAG + "=") for a in args_list
+    ):
+        print(CENTRAL_REFUSAL, file=sys.stderr)
+        return 2
     args = _parser().parse_args(args_list)
     try:
         if args.command == "serve":
@@ -146,21 +151,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             asyncio.run(run_sim(addr, args.world, args.speed))
             return 0
         if args.command == "vehicle":
-            settings = settings_from(args)
-            if args.central is not None and args.central.rstrip("/").endswith("/vehicle-link"):
-                print(
-                    "uav-console vehicle: a vehicle joins its console over the bus: "
-                    "--bus-connect ENDPOINT (serve prints it: 'bus: tcp/…'), not --central",
-                    file=sys.stderr,
-                )
-                return 2
-            if args.central is None:
-                from server.vehicles.main import whole_vehicle_main
+            from server.vehicles.main import whole_vehicle_main
 
-                return whole_vehicle_main(args, settings)
-            from server.fleet.client import vehicle_main
-
-            return vehicle_main(args, settings)
+            return whole_vehicle_main(args, settings_from(args))
         if args.command == "vehicle-key":
             from server.vehicles.key_cli import vehicle_key_main
 

@@ -139,7 +139,7 @@ class Settings(BaseSettings):
     token: str | None = Field(
         None,
         description="Pilot token; generated and stored in data_dir on first start. A vehicle "
-        "process: the token its safety door takes (and a rosbridge central's).",
+        "process: the token its safety door takes.",
         json_schema_extra=_topic(CONSOLE),
     )
     observer_token: str | None = Field(

@@ -4,8 +4,8 @@ Names (a drone's are prefixed ``/NAME``): status topic ``/NAME/fleet/ltm_status`
 (``std_msgs/String``, ``data`` = ``LtmStatus`` JSON), flight-plan service
 ``/NAME/fleet/flight_plan`` (args = ``FlightPlan`` JSON object; answer ``{accepted, reason,
 plan_id}``), and ``/fleet/status`` (``uav_console/FleetStatus``, latched) which doubles as the
-CTM's heartbeat to every LTM. A remote LTM (``server.fleet.client``) advertises the same names
-over rosbridge, so the CTM cannot tell the two apart.
+CTM's heartbeat to every LTM. A vehicle process's LTM (``server.fleet.bus_ltm``) has the same
+names on its own graph; its plans and its status travel on the bus (``server.fleet.failover``).
 """
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ Usage (``server/runtime.py``)::
     ...
     await fleet.stop()
 
-Remote vehicles (``uav-console vehicle``) need nothing here: they advertise their status topic
-and plan service over rosbridge and ``CtmNode`` discovers them.
+Vehicles on the bus (``uav-console vehicle --bus-connect``) need nothing here: their LTM status
+and plans travel on the bus, through the central role (:meth:`FleetService.join_bus`).
 """
 
 from __future__ import annotations

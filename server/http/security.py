@@ -45,13 +45,14 @@ TOKEN_FILE = "tokens.json"
 # Control topics (DESIGN §4): pilot only, and only for the lease holder. Fleet form: /uavN/...
 CONTROL_TOPIC_RE = re.compile(r"^(/uav\d+)?(/cmd_vel|/ardrone/.+|/console/utterance)$")
 # Server-only topics: the console's replies/state and the fleet's status (DESIGN §4).
-# (A remote vehicle publishes its own ``/NAME/fleet/ltm_status``: that one stays open to pilots.)
 SERVER_TOPIC_RE = re.compile(r"^(/fleet(/.*)?|(/[^/]+)?/console(/.*)?)$")
 PILOT_CONSOLE_TOPIC_RE = re.compile(r"^(/[^/]+)?/console/utterance$")
-# A vehicle process's own names (server.vehicles.names: info, telemetry, reply, state, control,
-# interpret): only that vehicle publishes them, over the bus, never a client here (a pilot's
-# "reply" there would be re-published on /console/reply as the drone's).
-VEHICLE_NAME_RE = re.compile(r"^/[^/]+/vehicle(/.*)?$")
+# A drone's own names: its vehicle process's (server.vehicles.names: info, telemetry, reply,
+# state, control, interpret) and its LTM's (``/NAME/fleet/ltm_status``, the flight-plan service
+# ``/NAME/fleet/flight_plan``): only that vehicle, over the bus, or the console's own LTM of an
+# in-process drone has them, never a client here (a pilot's "reply" there would be re-published
+# on /console/reply as the drone's; a pilot's LTM status would put a drone in the CTM's plans).
+VEHICLE_NAME_RE = re.compile(r"^/[^/]+/(vehicle|fleet)(/.*)?$")
 # Safety commands any pilot may publish without the lease (DESIGN §5: any pilot may land).
 ANY_PILOT_TOPIC_RE = re.compile(r"^(/uav\d+)?/ardrone/land$")
 CMD_VEL_RE = re.compile(r"^(/uav\d+)?/cmd_vel$")
@@ -288,7 +289,7 @@ class Security:
 
     def can_publish(self, role: Role | None, topic: str, who: str | None = None) -> bool:
         """Pilots publish, but not on the server's own ``/console/*`` and ``/fleet/*``, nor
-        on a vehicle's own ``/NAME/vehicle/*``."""
+        on a drone's own ``/NAME/vehicle/*`` and ``/NAME/fleet/*``."""
         name = _canonical(topic)
         if SERVER_TOPIC_RE.match(name) and not PILOT_CONSOLE_TOPIC_RE.match(name):
             return False
@@ -303,7 +304,8 @@ class Security:
 
     def can_provide(self, role: Role | None, service: str, who: str | None = None) -> bool:
         """Whether a client may provide ``service`` (``advertise_service``): pilots only, and
-        not a vehicle's own ``/NAME/vehicle/*`` (the console's commands to the drone go there)."""
+        not a drone's own ``/NAME/vehicle/*`` (the console's commands to the drone go there) nor
+        ``/NAME/fleet/*`` (the CTM's plans to its LTM)."""
         return role is Role.PILOT and not VEHICLE_NAME_RE.match(_canonical(service))
 
     def needs_lease(self, service_or_topic: str, *, service: bool) -> bool:

@@ -10,8 +10,8 @@ host therefore serves HTTPS/WSS by default with:
   and every local address (remade when the set of addresses changes or it nears expiry).
 
 Keys are written 0600. Loopback stays HTTP (it is already a secure context). ``--cert/--key``
-take a real certificate instead; ``--no-tls`` opts out. The client side (``uav-console vehicle
---central wss://…``) verifies the server with a CA file or a pinned SHA-256 fingerprint.
+take a real certificate instead; ``--no-tls`` opts out. The same CA signs the bus router's
+certificate off loopback (``drone.bus``, docs/bus.md#tls).
 """
 
 from __future__ import annotations
@@ -272,62 +272,6 @@ def user_files(cert: Path, key: Path) -> TLSFiles:
     except (OSError, ssl.SSLError, ValueError) as exc:
         raise TLSError(f"cannot use --cert {cert} --key {key}: {exc}") from exc
     return TLSFiles(cert, key, None, fp)
-
-
-# ------------------------------------------------------------------ client side (vehicle)
-def normalise_fingerprint(text: str) -> str:
-    """'ab:cd…' or 'abcd…' (64 hex digits) -> 'AB:CD:…'.
-
-    Raises:
-        TLSError: not a SHA-256 fingerprint.
-    """
-    hexits = text.replace(":", "").replace(" ", "").strip().upper()
-    if len(hexits) != 64 or any(c not in "0123456789ABCDEF" for c in hexits):
-        raise TLSError(f"{text!r} is not a SHA-256 fingerprint (64 hex digits)")
-    return ":".join(hexits[i : i + 2] for i in range(0, 64, 2))
-
-
-def client_context(ca_file: Path | None = None, pinned: str | None = None) -> ssl.SSLContext:
-    """An SSL context for ``wss://``: verify against ``ca_file`` (else the system's CAs), or,
-    with ``pinned``, accept exactly the certificate with that fingerprint (checked by
-    :func:`check_pinned` after the handshake; chain and name checks are off in that mode,
-    the pin replaces them as in SSH's known_hosts).
-
-    Raises:
-        TLSError: the CA file cannot be read.
-    """
-    if pinned is not None:
-        ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
-        ctx.check_hostname = False
-        ctx.verify_mode = ssl.CERT_NONE
-        return ctx
-    try:
-        return ssl.create_default_context(cafile=str(ca_file) if ca_file else None)
-    except (OSError, ssl.SSLError) as exc:
-        raise TLSError(f"cannot read the CA file {ca_file}: {exc}") from exc
-
-
-def untrusted(exc: ssl.SSLCertVerificationError) -> str:
-    """What a client joining a central server tells its operator when the server's certificate
-    does not verify, and how to trust it."""
-    return (
-        f"the central server's certificate is not trusted ({exc.verify_message}); "
-        "give --ca FILE (its ca.pem) or --fingerprint SHA256 (printed by serve)"
-    )
-
-
-def check_pinned(ssl_object: ssl.SSLObject | ssl.SSLSocket | None, pinned: str) -> None:
-    """Raises TLSError unless the peer's certificate has the pinned fingerprint."""
-    der = ssl_object.getpeercert(binary_form=True) if ssl_object is not None else None
-    if not der:
-        raise TLSError("the server presented no certificate")
-    got = ":".join(f"{b:02X}" for b in hashlib.sha256(der).digest())
-    want = normalise_fingerprint(pinned)
-    if got != want:
-        raise TLSError(
-            f"the server's certificate has fingerprint {got}, not the pinned {want}: refusing "
-            "to connect (a different server, or its certificate was remade)"
-        )
 
 
 def tls_for(settings: Settings) -> TLSFiles | None:

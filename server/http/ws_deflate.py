@@ -10,8 +10,7 @@ touched (§6.2). So messages over ``PLAIN_BYTES`` go out as they are; telemetry,
 service calls, small and repetitive, stay compressed.
 
 :class:`PlainLargeServerFactory` replaces websockets' server factory (uvicorn's, via
-``server.http.ws_guard``); :class:`PlainLargeClientFactory` its client factory (the fleet client's,
-``server.vehicles.central_connection``).
+``server.http.ws_guard``).
 """
 
 from __future__ import annotations
@@ -21,7 +20,6 @@ from typing import Any
 
 from websockets.extensions.base import Extension, ServerExtensionFactory
 from websockets.extensions.permessage_deflate import (
-    ClientPerMessageDeflateFactory,
     PerMessageDeflate,
     ServerPerMessageDeflateFactory,
 )
@@ -82,18 +80,6 @@ class PlainLargeServerFactory(ServerPerMessageDeflateFactory):
     ) -> tuple[list[ExtensionParameter], PerMessageDeflate]:
         response, ext = super().process_request_params(params, accepted_extensions)
         return response, PlainLargeDeflate.like(ext)
-
-
-class PlainLargeClientFactory(ClientPerMessageDeflateFactory):
-    """websockets' client factory (its defaults), negotiating :class:`PlainLargeDeflate`."""
-
-    def __init__(self) -> None:
-        super().__init__(compress_settings={"memLevel": 5})  # websockets' client default
-
-    def process_response_params(
-        self, params: Sequence[ExtensionParameter], accepted_extensions: Sequence[Extension]
-    ) -> PerMessageDeflate:
-        return PlainLargeDeflate.like(super().process_response_params(params, accepted_extensions))
 
 
 def plain_large(factories: Sequence[ServerExtensionFactory]) -> list[ServerExtensionFactory]:

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 
 from drone.bus.config import vehicle_user
 from drone.bus.errors import BusError
+from drone.bus.probe import untrusted
 from drone.bus.vehicle import VehicleBus
 from drone.deadline import BadIssued, ClockOffset, Deadline, parse_issued
 from drone.sim.errors import AddressInUse
@@ -642,6 +643,22 @@ def bus_for(settings: Settings, name: str, key: str) -> VehicleBus | None:
     )
 
 
+def untrusted_router(settings: Settings) -> str | None:
+    """Why a ``tls/`` router this vehicle is to join is not trusted by its CA (``bus_ca``): the
+    reason, what to change; None when every router that answers is trusted (one not up yet is
+    joined when it is)."""
+    ca = bus_ca(settings)
+    if ca is None or not ca.is_file():
+        return None  # bus_for says what is missing
+    for endpoint in settings.bus_connect:
+        why = untrusted(endpoint, str(ca))
+        if why is not None:
+            return (
+                f"the bus router at {endpoint} {why}; --bus-ca FILE: the console's DATA/tls/ca.pem"
+            )
+    return None
+
+
 def bus_ca(settings: Settings) -> Path | None:
     """The CA file this vehicle verifies a ``tls/`` bus router with (None: no ``tls/`` router
     to join): ``bus_ca``, else the data directory's ``tls/ca.pem`` (the console's own)."""
@@ -664,6 +681,9 @@ async def run_vehicle(
     for sig in (signal.SIGTERM, signal.SIGINT):
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
+    refusal = untrusted_router(settings)
+    if refusal is not None:  # it would dial that router forever and never join
+        raise CannotStart(f"{options.name}: {refusal}")
     try:
         await host.start()
     except OSError as exc:  # another console's simulator holds the address

@@ -80,5 +80,6 @@ def drone_order(name: str) -> tuple[str, int, str]:
 def pid_dir(data_dir: Path, port: int) -> Path:
     """Where a console's vehicle processes leave their pid (``NAME.pid``): one directory per
     console port, so two consoles sharing a data directory never take each other's vehicles
-    for their own (a vehicle rejoins only the console at its ``--central`` URL's port)."""
+    for their own (a vehicle writes its pid under its console's port, one of the settings
+    ``serve`` passes the vehicles it spawns)."""
     return data_dir / "vehicles" / str(port)

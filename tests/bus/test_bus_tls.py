@@ -22,6 +22,7 @@ from drone.bus.config import OBSERVER_USER, BusTLS, as_tls, client_config, on_lo
 from drone.bus.console import ConsoleBus
 from drone.bus.errors import BusConfigError
 from drone.bus.payloads import Telemetry, decode_telemetry, encode
+from drone.bus.probe import untrusted
 from drone.bus.session import open_session
 from drone.bus.vehicle import VehicleBus
 from server.cli import main as cli_main
@@ -29,10 +30,13 @@ from server.http.tls import ensure_ca
 from server.settings import Settings
 from server.vehicles.central import bus_tls
 from server.vehicles.host import join_bus
+from server.vehicles.keys import new_key
+from server.vehicles.names import EXIT_CANNOT_START
 from tests.isolation.conftest import ROOT, serve
 from tests.isolation.conftest import wait_for as poll
 from tests.support.loopback import free_port, fresh_address
 from tests.support.polling import wait_for
+from tests.support.processes import running
 
 SCRIPT = textwrap.dedent(
     """
@@ -283,3 +287,58 @@ def test_a_console_off_tls_joins_a_tls_router_with_its_ca(
         )
     finally:
         second.close()
+
+
+def test_a_vehicle_refuses_a_router_its_ca_does_not_trust_and_joins_one_it_does(
+    tmp_path: Path,
+) -> None:
+    """``uav-console vehicle --bus-connect tls/… --bus-ca FILE`` from another data directory:
+    with another CA it stops at once, in one line naming the router, why, and ``--bus-ca``
+    (Zenoh alone would say "Unable to connect", as for a router not up, and dial it forever);
+    with the console's CA it joins."""
+    key = new_key()
+    settings = forced_on(tmp_path / "console")
+    bus = ConsoleBus(
+        tmp_path / "console" / "bus",
+        "default",
+        [],
+        name="first",
+        listen=settings.bus_listen,
+        tls=bus_tls(settings),
+        vehicle_passwords={"uav1": key},
+    )
+    bus.start()
+    try:
+        assert bus.tls is not None
+        [endpoint] = bus.listen
+        other_ca, _ = ensure_ca(tmp_path / "other")
+        assert untrusted(endpoint, bus.tls.ca) is None
+        assert "does not trust" in (untrusted(endpoint, str(other_ca)) or "")
+        assert untrusted(f"tls/127.0.0.1:{free_port()}", str(other_ca)) is None  # not up
+        env = {**os.environ, "UAVC_SIM_BASE_ADDR": fresh_address(), "UAVC_VEHICLE_KEY": key}
+        env["UAVC_DATA_DIR"] = str(tmp_path / "vehicle")
+        env.pop("UAVC_TOKEN", None)
+        argv = [sys.executable, "-m", "server", "vehicle", "--name", "uav1", "--drone", "sim"]
+        argv += ["--bus-connect", endpoint]
+        refused = subprocess.run(
+            [*argv, "--bus-ca", str(other_ca)],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert refused.returncode == EXIT_CANNOT_START, refused.stderr
+        [line] = [ln for ln in refused.stderr.splitlines() if ln.startswith("uav-console")]
+        assert f"the bus router at {endpoint} presents a certificate" in line
+        assert "does not trust" in line and "--bus-ca" in line
+        assert bus.alive() == []
+        with running([*argv, "--bus-ca", bus.tls.ca], tmp_path / "uav1.log", env) as proc:
+            wait_for(
+                lambda: proc.poll() is None and bus.alive(),
+                lambda alive: alive == ["uav1"],
+                90,
+                "uav1 on the TLS bus with the console's CA",
+            )
+    finally:
+        bus.close()

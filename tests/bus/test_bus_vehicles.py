@@ -388,11 +388,20 @@ def test_a_vehicle_needs_a_bus(
     monkeypatch.delenv("UAVC_BUS_CONNECT", raising=False)
     assert cli_main(["vehicle", "--name", NAME]) == 2
     assert "--bus-connect ENDPOINT is needed" in capsys.readouterr().err
-    # the rosbridge vehicle link is gone: one line saying what joins a console instead
-    link = ["vehicle", "--name", NAME, "--central", "ws://console.invalid/vehicle-link"]
-    assert cli_main(link) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--bus-connect ENDPOINT" in err and "not --central" in err
+    # no rosbridge central is a way in: one line saying what joins a console instead
+    for central in (
+        ["--central", "ws://console.invalid/rosbridge"],
+        ["--central=wss://console.invalid:8000/rosbridge"],
+        ["--central", "ws://console.invalid/vehicle-link"],
+    ):
+        assert cli_main(["vehicle", "--name", NAME, *central]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--bus-connect ENDPOINT" in err and "not --central" in err
+    # the installed command says the same (python -m server: the same entry point)
+    argv = [sys.executable, "-m", "server", "vehicle", "--central", "ws://h/rosbridge"]
+    out = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1, out.stderr
+    assert "--bus-connect ENDPOINT" in out.stderr and not out.stdout
 
 
 def test_a_bus_vehicle_hovers_then_lands_when_its_console_stalls(rig: Rig) -> None:

@@ -183,4 +183,4 @@ def test_help_lists_the_settings_by_topic(command: str) -> None:
         assert f"settings: {group_of(name)}:" in out.stdout
         assert all(flag in out.stdout for flag in flags_of(name)), name
     if command == "vehicle":
-        assert "--key-file" in out.stdout and "--central" in out.stdout
+        assert "--key-file" in out.stdout and "--bus-connect" in out.stdout

@@ -2,7 +2,7 @@
 
 websockets' sans-I/O client and server protocols shake hands in memory: the server with the
 console's extension factories, the client with websockets' stock deflate (as a browser offers
-it) or the vehicle link's. Large messages must leave with RSV1 clear and the payload as it was;
+it). Large messages must leave with RSV1 clear and the payload as it was;
 small ones compressed; and the peer must read every message, in any order (the compression
 context survives plain messages in between).
 """
@@ -23,7 +23,6 @@ from websockets.uri import parse_uri
 
 from server.http.ws_deflate import (
     PLAIN_BYTES,
-    PlainLargeClientFactory,
     PlainLargeDeflate,
     plain_large,
 )
@@ -86,15 +85,6 @@ def test_the_server_sends_large_messages_plain_and_small_ones_deflated() -> None
     client.receive_data(wire)
     got = [e.data.decode() for e in client.events_received()]
     assert got == texts
-
-
-def test_the_vehicle_link_client_does_the_same_towards_the_server() -> None:
-    server, client = pair([ServerPerMessageDeflateFactory()], [PlainLargeClientFactory()])
-    texts = [image_text(20_000), "small " * 50, image_text(20_000), "small " * 50]
-    for t in texts:
-        client.send_text(t.encode())
-    server.receive_data(b"".join(client.data_to_send()))
-    assert [e.data.decode() for e in server.events_received()] == texts
 
 
 def test_a_fragmented_large_message_stays_plain_to_its_last_frame() -> None:

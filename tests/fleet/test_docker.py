@@ -41,7 +41,8 @@ def test_compose_shape() -> None:
         sim_ip = services[f"sim{k}"]["networks"]["fleet"]["ipv4_address"]
         cmd = services[f"vehicle{k}"]["command"]
         assert cmd[cmd.index("--drone") + 1] == sim_ip
-        assert "--central" not in cmd  # the whole vehicle joins over the bus alone
+        # the whole vehicle, joining over the bus (a stray flag would not parse)
+        assert _parser().parse_args(cmd).bus_connect == ["tls/central:7447"]
         assert services[f"sim{k}"]["command"][2] == sim_ip
         # its own key, made by the one-shot `keys` service in the central's data volume
         assert cmd[cmd.index("--key-file") + 1] == f"/central/vehicle-keys/uav{k}.key"

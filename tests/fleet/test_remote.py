@@ -1,219 +1,192 @@
-"""A remote LTM joins the central server over a real rosbridge WebSocket on loopback.
+"""A remote vehicle's LTM takes part in the fleet over the bus (docs/bus.md, docs/failover.md):
+its status reaches the central, the central's plans reach it as queries, and a network outage
+between them is a lost drone whose post the mission frees, and a drone heard again after it.
 
-The server is a minimal FastAPI app with the rosbridge endpoint (server/rosbridge) and the
-fleet router, run by uvicorn in a thread; the CTM runs on its loop through ``CtmNode``. The
-vehicle side is ``VehicleClient`` around an LTM whose drone is the lockstep simulator (advanced
-in virtual time as the client steps), and, in the last test, a real ``uav-console vehicle``
-process with its own simulator on a loopback address.
+The central is the fleet service with its central role on a Zenoh router and its REST doors
+(``tests/support/bus_central.py``, ``serve``'s composition) in this process. The vehicle is, in
+the first test, an LTM on the lockstep simulator joined to the router through a relay the test
+cuts (a real outage: the vehicle's Zenoh session rejoins by itself), and in the second a real
+``uav-console vehicle --bus-connect`` process with its own simulator on a loopback address.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import os
-import subprocess
 import sys
-import threading
-import time
-from collections.abc import AsyncIterator, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
-import uvicorn
-from fastapi import FastAPI
 
+from drone.bus.vehicle import VehicleBus
 from drone.lockstep import LockstepRig
 from drone.sim.world import load_world
-from server.fleet.client import VehicleClient
-from server.fleet.ctm import CentralTaskManager
+from server.fleet.bus_ltm import BusLtmNode
 from server.fleet.geo import Enu, origin_of
 from server.fleet.ltm import LocalTaskManager
 from server.fleet.messages import DroneRole, PlanKind
-from server.fleet.node import CtmNode
-from server.fleet.router import make_fleet_router
 from server.graph import Graph
-from server.http.security import Security, TokenStore
-from server.rosbridge.context import BridgeContext
-from server.rosbridge.endpoint import make_router
-from server.settings import ROOT, Settings
-from tests.support.loopback import free_port, fresh_address
+from server.settings import ROOT
+from tests.support.bus_central import FLEET, BusCentral, bus_central
+from tests.support.loopback import fresh_address
+from tests.support.polling import until_async
+from tests.support.processes import running, vehicle_key
+from tests.support.relay import relay
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = pytest.mark.timeout(120)
 WORLD = load_world("outdoor")
-
-
-@dataclass
-class Central:
-    port: int
-    graph: Graph
-    ctm: CentralTaskManager
-    node: CtmNode
-    token: str
-    loop: asyncio.AbstractEventLoop
-
-    @property
-    def ws(self) -> str:
-        return f"ws://127.0.0.1:{self.port}/rosbridge"
-
-    def call(self, fn: Any, *args: Any) -> Any:
-        async def run() -> Any:
-            return fn(*args)
-
-        return asyncio.run_coroutine_threadsafe(run(), self.loop).result(10)
-
-
-@contextlib.contextmanager
-def central_server(tmp: Path) -> Iterator[Central]:
-    port = free_port()
-    settings = Settings(port=port, data_dir=tmp, world="outdoor")
-    graph = Graph()
-    tokens = TokenStore(tmp)
-    ctx = BridgeContext(graph=graph, security=Security(settings, tokens), settings=settings)
-    ctm = CentralTaskManager(origin=origin_of(WORLD), world=WORLD, lost_after_s=1.5)
-    box: dict[str, Any] = {}
-
-    @contextlib.asynccontextmanager
-    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        graph.bind_loop(asyncio.get_running_loop())
-        node = CtmNode(graph, ctm, period_s=0.1, publish_period_s=0.2)
-        await node.start()
-        box["node"], box["loop"] = node, asyncio.get_running_loop()
-        yield
-        await node.stop()
-
-    app = FastAPI(lifespan=lifespan)
-    app.include_router(make_router(ctx))
-    app.include_router(
-        make_fleet_router(ctm, on_change=lambda: box["node"].poke()), prefix="/api/v1"
-    )
-    server = uvicorn.Server(
-        uvicorn.Config(app, host="127.0.0.1", port=port, log_level="error", ws_ping_interval=None)
-    )
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started:
-        assert time.monotonic() < deadline and thread.is_alive(), "server did not start"
-        time.sleep(0.01)
-    try:
-        yield Central(port, graph, ctm, box["node"], tokens.pilot_token, box["loop"])
-    finally:
-        server.should_exit = True
-        thread.join(10)
-
-
-async def until(pred: Any, timeout_s: float = 15.0) -> None:
-    """Wait for something another thread or process does (polling real I/O, not timing)."""
-    end = time.monotonic() + timeout_s
-    while not pred():
-        assert time.monotonic() < end, "condition not reached in time"
-        await asyncio.sleep(0.02)
+WAYPOINTS = [
+    {"lat": 36.367029, "lon": 127.363305, "alt": 65.0},
+    {"lat": 36.367029, "lon": 127.363639, "alt": 65.0},
+]
 
 
 def lockstep_ltm(name: str = "uav1") -> tuple[LockstepRig, Any, LocalTaskManager]:
+    """An LTM whose drone is the lockstep simulator; the central's silence never sends it
+    home here (its grace is longer than any test)."""
     from server.tasks.manager import TaskManager
 
     rig = LockstepRig(WORLD, n_drones=1, seed=3, camera=False, dt=0.05)
     tm = TaskManager(rig.vehicle, WORLD, rig.clock)
-    rig.add_stepper(lambda now, dt: tm.step(now))
+
+    def step(now: float, dt: float) -> None:
+        tm.step(now)
+
+    rig.add_stepper(step)
     ltm = LocalTaskManager(
-        name, rig.vehicle, tm, Enu(0, 0, 0), origin=origin_of(WORLD), period_s=0.2
+        name,
+        rig.vehicle,
+        tm,
+        Enu(0, 0, 0),
+        origin=origin_of(WORLD),
+        period_s=0.2,
+        ctm_timeout_s=600.0,
     )
     rig.wait_link()
     return rig, tm, ltm
 
 
-async def test_remote_ltm_joins_gets_plan_and_reconnects(tmp_path: Path) -> None:
-    with central_server(tmp_path) as c:
-        rig, tm, ltm = lockstep_ltm()
-        client = VehicleClient(
-            c.ws,
-            ltm,
-            token=c.token,
-            clock=rig.clock.now,
-            period_s=0.02,
-            step_tasks=lambda now: rig.run(0.1),  # virtual time runs 5× faster than the wall
-            backoff_s=(0.05, 0.2),
-        )
-        stop = asyncio.Event()
-        task = asyncio.create_task(client.run(stop))
-        try:
-            await until(lambda: "uav1" in c.ctm.drones)
-            assert c.ctm.drones["uav1"].role is DroneRole.IDLE
-            assert c.graph.service_type("/uav1/fleet/flight_plan") == "uav_console/FlightPlan"
-            # a mission through the REST door
-            async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{c.port}") as http:
-                wps = [
-                    {"lat": 36.367029, "lon": 127.363305, "alt": 65.0},
-                    {"lat": 36.367029, "lon": 127.363639, "alt": 65.0},
-                ]
-                r = await http.post("/api/v1/missions", json={"waypoints": wps})
-                assert r.status_code == 201, r.text
-                mid = r.json()["id"]
-                bad = await http.post("/api/v1/missions", json={"markers": [1], "waypoints": wps})
-                assert bad.status_code == 422
-                assert (await http.get("/api/v1/missions/nope")).status_code == 404
-            # the plan crossed the WebSocket and the LTM flies it
-            await until(lambda: ltm.plan is not None)
-            assert ltm.plan is not None and ltm.plan.kind is PlanKind.PATROL
-            assert ltm.plan.route[0].x == pytest.approx(-15.0, abs=0.05)
-            await until(lambda: tm.current is not None and tm.current.name == "waypoints")
-            assert c.ctm.drones["uav1"].role in (DroneRole.RELIEVING, DroneRole.PATROLLING)
-            assert client.core.heartbeats > 0
-            # the link drops: the CTM loses it, the client reconnects, the CTM hears it again
-            await client.drop(hold_s=2.5)
-            await until(lambda: c.ctm.drones["uav1"].role is DroneRole.LOST)
-            await until(lambda: client.connects >= 2)
-            await until(lambda: c.ctm.drones["uav1"].role is not DroneRole.LOST)
-            async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{c.port}") as http:
-                fleet = (await http.get("/api/v1/fleet")).json()
-                info = (await http.get(f"/api/v1/missions/{mid}")).json()
-            assert fleet["drones"][0]["name"] == "uav1"
-            assert info["replacements"] == 1  # the lost drone's post was freed
-        finally:
-            stop.set()
-            await task
+async def stepping(rig: LockstepRig, node: BusLtmNode, stop: asyncio.Event) -> None:
+    """The vehicle's loop: virtual time 5× the wall's, the LTM stepped after the drone."""
+    while not stop.is_set():
+        rig.run(0.1)
+        node.step(rig.clock.now())
+        await asyncio.sleep(0.02)
 
 
-async def test_vehicle_process_joins(tmp_path: Path) -> None:
-    """``python -m server vehicle`` with its own simulator joins over the WebSocket."""
-    with central_server(tmp_path) as c:
-        env = dict(os.environ, UAVC_SIM_BASE_ADDR=fresh_address(), PYTHONPATH=str(ROOT))
-        cmd = [
-            sys.executable,
-            "-m",
-            "server",
-            "vehicle",
-            "--central",
-            c.ws,
-            "--name",
-            "uav2",
-            "--drone",
-            "sim",
-            "--world",
-            "outdoor",
-            f"--token={c.token}",
-        ]
-        proc = subprocess.Popen(
-            cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
-        )
-        try:
-            await until(lambda: "uav2" in c.ctm.drones or proc.poll() is not None, 40.0)
-            assert proc.poll() is None, proc.stdout.read().decode()[-2000:]  # type: ignore[union-attr]
-            await until(lambda: (st := c.ctm.drones["uav2"].status) is not None and st.link_ok)
+def role_of(c: BusCentral, name: str) -> Callable[[], DroneRole | None]:
+    return lambda: c.ctm.drones[name].role if name in c.ctm.drones else None
+
+
+async def test_a_remote_ltm_on_the_bus_gets_plans_is_lost_in_an_outage_and_heard_again(
+    tmp_path: Path,
+) -> None:
+    with bus_central(tmp_path, WORLD, ["uav1"]) as c:
+        await until_async(lambda: c.role.central, 10.0, "the console holds the central role")
+        cred = c.credential("uav1")
+        host, port = cred.connect[0].removeprefix("tcp/").rsplit(":", 1)
+        with relay(host, int(port)) as link:
+            rig, tm, ltm = lockstep_ltm()
+            graph = Graph()
+            graph.bind_loop(asyncio.get_running_loop())
+            node = BusLtmNode(graph, ltm, clock=rig.clock.now)
+            bus = VehicleBus([link.endpoint], cred.user, cred.password, FLEET, "uav1")
+            bus.start()
+            node.join_bus(bus.session, FLEET)
+            stop = asyncio.Event()
+            loop_task = asyncio.create_task(stepping(rig, node, stop))
+            try:
+                await until_async(lambda: role_of(c, "uav1")() is DroneRole.IDLE, 20.0, "uav1 idle")
+                assert c.role.info()["on_bus"] == ["uav1"]  # its status came over the bus
+                plans = node.plans
+                assert plans is not None
+                await until_async(lambda: plans.central_alive, 10.0, "the vehicle sees a central")
+                assert plans.central_name == "central"
+                # a mission through the REST door
+                async with httpx.AsyncClient(base_url=c.url) as http:
+                    r = await http.post("/api/v1/missions", json={"waypoints": WAYPOINTS})
+                    assert r.status_code == 201, r.text
+                    mid = r.json()["id"]
+                    bad = await http.post(
+                        "/api/v1/missions", json={"markers": [1], "waypoints": WAYPOINTS}
+                    )
+                    assert bad.status_code == 422
+                    assert (await http.get("/api/v1/missions/nope")).status_code == 404
+                # the plan crossed the bus as a query, and the LTM flies it
+                await until_async(lambda: ltm.plan is not None, 20.0, "the plan at the LTM")
+                assert ltm.plan is not None and ltm.plan.kind is PlanKind.PATROL
+                assert ltm.plan.route[0].x == pytest.approx(-15.0, abs=0.05)
+                assert plans.plans >= 1
+                await until_async(
+                    lambda: tm.current is not None and tm.current.name == "waypoints",
+                    20.0,
+                    "the LTM flying the route",
+                )
+                assert role_of(c, "uav1")() in (DroneRole.RELIEVING, DroneRole.PATROLLING)
+                # the network goes: the central loses the drone, the vehicle the central
+                link.cut()
+                await until_async(lambda: role_of(c, "uav1")() is DroneRole.LOST, 20.0, "uav1 lost")
+                await until_async(lambda: not plans.central_alive, 10.0, "central gone")
+                # the network comes back: the vehicle's session rejoins, the central hears it
+                link.heal()
+                await until_async(
+                    lambda: role_of(c, "uav1")() not in (None, DroneRole.LOST), 30.0, "uav1 again"
+                )
+                assert link.accepted >= 2
+                async with httpx.AsyncClient(base_url=c.url) as http:
+                    fleet = (await http.get("/api/v1/fleet")).json()
+                    info = (await http.get(f"/api/v1/missions/{mid}")).json()
+                assert fleet["drones"][0]["name"] == "uav1"
+                assert info["replacements"] == 1  # the lost drone's post was freed
+            finally:
+                stop.set()
+                await loop_task
+                node.close()
+                bus.close()
+
+
+async def test_a_vehicle_process_joins_the_central_over_the_bus_and_flies_its_plan(
+    tmp_path: Path,
+) -> None:
+    """``uav-console vehicle --bus-connect … --drone sim`` with its own simulator and its own
+    key: the central hears its LTM (its own station) and sends it a plan it takes."""
+    key = vehicle_key(tmp_path / "console", "uav2")
+    with bus_central(tmp_path, WORLD, keys={"uav2": key}) as c:
+        env = {
+            **os.environ,
+            "UAVC_SIM_BASE_ADDR": fresh_address(),
+            "UAVC_VEHICLE_KEY": key,
+            "UAVC_DATA_DIR": str(tmp_path / "vehicle"),
+            "PYTHONPATH": str(ROOT),
+        }
+        env.pop("UAVC_TOKEN", None)
+        argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", c.endpoint]
+        argv += ["--name", "uav2", "--drone", "sim", "--world", "outdoor"]
+        log = tmp_path / "uav2.log"
+        with running(argv, log, env) as proc:
+
+            def linked() -> bool:
+                assert proc.poll() is None, log.read_text()[-3000:]
+                st = c.ctm.drones["uav2"].status if "uav2" in c.ctm.drones else None
+                return st is not None and st.link_ok
+
+            await until_async(linked, 90.0, "uav2's LTM status, its drone link up")
             st = c.ctm.drones["uav2"].status
             assert st is not None and st.station == Enu(1.5, 0.0, 0.0)  # its own station
             assert st.lat == pytest.approx(36.367164, abs=1e-3)
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-            if proc.stdout is not None:
-                proc.stdout.close()
+            assert c.role.info()["on_bus"] == ["uav2"]
+            await until_async(lambda: c.role.central, 10.0, "the console holds the central role")
+            async with httpx.AsyncClient(base_url=c.url) as http:
+                r = await http.post("/api/v1/missions", json={"waypoints": WAYPOINTS})
+                assert r.status_code == 201, r.text
+
+            def applied() -> bool:
+                st = c.ctm.drones["uav2"].status
+                return st is not None and st.plan_id > 0
+
+            await until_async(applied, 60.0, "uav2's LTM applying the central's plan")
+            assert role_of(c, "uav2")() in (DroneRole.RELIEVING, DroneRole.PATROLLING)
+            assert "refused" not in log.read_text()

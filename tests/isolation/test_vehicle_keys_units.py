@@ -185,8 +185,10 @@ def test_pilots_may_not_speak_or_answer_as_a_vehicle(tmp_path: Path) -> None:
     assert not sec.can_publish(Role.PILOT, "/uav1/vehicle/reply")  # laundered to /console/reply
     assert not sec.can_publish(Role.PILOT, "/uav1/vehicle/info")
     assert not sec.can_provide(Role.PILOT, "/uav1/vehicle/control")
-    assert sec.can_publish(Role.PILOT, "/uav1/fleet/ltm_status")  # the rosbridge fleet client's
-    assert sec.can_provide(Role.PILOT, "/uav1/fleet/flight_plan")
+    # nor as its LTM: a status would put a drone in the CTM's plans, a service take its plans
+    assert not sec.can_publish(Role.PILOT, "/uav1/fleet/ltm_status")
+    assert not sec.can_provide(Role.PILOT, "/uav1/fleet/flight_plan")
+    assert sec.can_publish(Role.PILOT, "/uav1/ardrone/takeoff")  # a pilot's own commands stay
 
 
 # ------------------------------------------------------------------------------ replies

@@ -194,19 +194,21 @@ async def test_only_the_server_publishes_console_and_fleet(srv14: RunningServer)
             assert (await c.status(topic))["msg"] == f"pilot may not advertise {topic}"
             await c.send({"op": "publish", "id": "p" + topic, "topic": topic, "msg": {}})
             assert (await c.status("p" + topic))["msg"] == f"pilot may not publish to {topic}"
-        # a remote vehicle's own status and the pilot's utterances stay open
+        # nor a drone's LTM's: its status would put a drone in the CTM's plans, its plan
+        # service would take the drone's plans
+        ltm = "/uav2/fleet/ltm_status"
+        await c.send({"op": "advertise", "id": "ltm", "topic": ltm, "type": "std_msgs/String"})
+        assert (await c.status("ltm"))["msg"] == f"pilot may not advertise {ltm}"
+        await c.send({"op": "publish", "id": "pltm", "topic": ltm, "msg": {"data": "{}"}})
+        assert (await c.status("pltm"))["msg"] == f"pilot may not publish to {ltm}"
+        plan = "/uav2/fleet/flight_plan"
         await c.send(
-            {
-                "op": "advertise",
-                "id": "ltm",
-                "topic": "/uav2/fleet/ltm_status",
-                "type": "std_msgs/String",
-            }
+            {"op": "advertise_service", "id": "plan", "service": plan, "type": "x/FlightPlan"}
         )
+        assert "may not" in (await c.status("plan"))["msg"]
         await c.send({"op": "call_service", "id": "t", "service": "/rosapi/topics"})
         topics = (await c.expect_op("service_response", id="t"))["values"]["topics"]
-        assert "/uav2/fleet/ltm_status" in topics
-        assert not [m for m in c.seen if m.get("id") == "ltm"]
+        assert ltm not in topics
 
 
 async def test_lease_holder_is_secret(srv14: RunningServer) -> None:
