@@ -234,11 +234,12 @@ class VehicleCentral:
             scan = self.keys.scan()
             if scan.problems:
                 for problem in scan.problems:
-                    log.error(
-                        "vehicle keys: %s; the bus keeps the vehicle keys it has until "
-                        "that is fixed (`uav-console vehicle-key NAME --rotate` remakes one)",
-                        problem,
+                    line = (
+                        f"vehicle keys: {problem}; the bus keeps the vehicle keys it has until "
+                        "that is fixed (`uav-console vehicle-key NAME --rotate` remakes one)"
                     )
+                    log.error("%s", line)
+                    print(f"uav-console: {line}", file=sys.stderr, flush=True)
                 continue
             try:
                 await self.rekey(scan.keys)
