@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
 import multiprocessing as mp
+import os
 import statistics
 import sys
 import tempfile
@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 FLEET = "bench"
+POSE = {"x": 1.0, "y": 2.0, "z": 1.0, "yaw_deg": 0.0, "battery_pct": 80.0, "state": "HOVERING"}
 
 
 def vehicle_worker(
@@ -46,6 +47,7 @@ def vehicle_worker(
 
     from drone.bus import keys
     from drone.bus.config import client_config
+    from drone.bus.payloads import Telemetry, encode
     from drone.bus.session import open_session
 
     session = open_session(client_config(connect=connect, user=f"vehicle-{name}", password=key))
@@ -59,7 +61,7 @@ def vehicle_worker(
     )
     period = 1.0 / rate_hz
     while not stop.is_set():
-        pub.put(json.dumps({"t": time.time()}))
+        pub.put(encode(Telemetry(drone=name, stamp=time.time(), **POSE)))
         time.sleep(period)
     gaps = [b - a for a, b in itertools.pairwise(beats)]
     out.put((name, max(gaps) if gaps else None))
@@ -193,8 +195,10 @@ def main() -> None:
     ap.add_argument("--rate-hz", type=float, default=50.0)
     args = ap.parse_args()
     res = run(args.vehicles, args.restarts, args.rate_hz)
+    load = os.getloadavg()[0]
     print(
-        f"\n{res['vehicles']} vehicles, {res['restarts']} router restarts (median / worst):\n"
+        f"\nload {load:.1f} on {os.cpu_count()} cores; "
+        f"{res['vehicles']} vehicles, {res['restarts']} router restarts (median / worst):\n"
         f"  rekey call     {res['rekey_ms'][0]:6.0f} / {res['rekey_ms'][1]:.0f} ms\n"
         f"  cut off        {res['cut_off_ms'][0]:6.0f} / {res['cut_off_ms'][1]:.0f} ms\n"
         f"  telemetry gap  {res['telemetry_gap_ms'][0]:6.0f} / {res['telemetry_gap_ms'][1]:.0f} ms"
