@@ -55,7 +55,7 @@ from server.msgs import header
 from server.settings import Settings, SettingsError
 from server.vehicles import names
 from server.vehicles.errors import NoBus
-from server.vehicles.keys import WATCH_PERIOD_S, KeyWatch, VehicleKeys, vehicle_env
+from server.vehicles.keys import KEY_ENV, WATCH_PERIOD_S, KeyWatch, VehicleKeys, vehicle_env
 from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.vehicles.relay import ReplyRelay
 from server.vehicles.tickets import TICKET_TTL_S, DoorSecrets, mint
@@ -241,8 +241,10 @@ class VehicleCentral:
                     log.error("%s", line)
                     print(f"uav-console: {line}", file=sys.stderr, flush=True)
                 continue
+            # a vehicle serve spawned keeps the key it was started with (its process has it)
+            spawned = {n: vp.env[KEY_ENV] for n, vp in self.processes.items() if KEY_ENV in vp.env}
             try:
-                await self.rekey(scan.keys)
+                await self.rekey({**scan.keys, **spawned})
             except BusError as exc:
                 self.alert(f"the bus is down: its router did not restart: {exc}; retrying")
                 watch.again(time.monotonic())
@@ -268,12 +270,8 @@ class VehicleCentral:
         if passwords == bus.vehicle_passwords and bus.router is not None:
             return False
         had = bus.vehicle_passwords
-        # on the bus now and let in again (a vehicle serve spawned keeps its credential)
-        before = {
-            n
-            for n in bus.alive()
-            if n not in had or passwords.get(n) == had[n] or n in self.processes
-        }
+        # on the bus now and let in again: not a vehicle whose key is revoked or replaced
+        before = {n for n in bus.alive() if n not in had or passwords.get(n) == had[n]}
         commander.hold()
         try:
             await commander.drained(REKEY_DRAIN_S)
