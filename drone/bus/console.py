@@ -242,7 +242,7 @@ class ConsoleBus:
         """Let exactly these keyed vehicles (name → key) on the bus, besides those this console
         was started for: when that changes who may join (or the router is down after a
         failed restart), restart the router with the new dictionary and access control, on the
-        same endpoints. Blocks until the console's session is back on it (tenths of a second;
+        same endpoints. Blocks until the console's session is back on it (tens of milliseconds;
         call it off the event loop). None: nothing changed, the router left as it is.
 
         A vehicle whose key was revoked or replaced is cut off (its link was authenticated by
@@ -265,6 +265,8 @@ class ConsoleBus:
                 self.shared_credentials,
                 revoked=set(self.vehicle_passwords) - set(passwords),
             )
+            self.vehicle_passwords = passwords
+            self.vehicle_names = sorted(self._own_vehicles | set(passwords))
             if creds.users == old and self.router is not None:
                 return None
             started = clock()
@@ -272,8 +274,6 @@ class ConsoleBus:
                 self.router.close()  # type: ignore[no-untyped-call]
                 self.router = None
             self.credentials = creds
-            self.vehicle_passwords = passwords
-            self.vehicle_names = sorted(self._own_vehicles | set(passwords))
             for attempt in range(REOPEN_TRIES):
                 try:
                     self.router = self._open_router(creds)
@@ -284,8 +284,11 @@ class ConsoleBus:
                     time.sleep(REOPEN_PAUSE_S)
             session = self.session
         deadline = clock() + RELINK_WAIT_S
-        while not any(str(z) == self.zid for z in session.info.routers_zid()):
-            if clock() >= deadline:
+        while clock() < deadline:
+            try:
+                if any(str(z) == self.zid for z in session.info.routers_zid()):
+                    break
+            except zenoh.ZError:  # closed meanwhile: the console stops
                 break
             time.sleep(RELINK_POLL_S)
         done = Rekeyed(
