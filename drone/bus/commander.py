@@ -51,7 +51,7 @@ CameraCallback = Callable[[int, bytes, float | None], None]  # counter, JPEG, st
 
 class BusCommander:
     """See the module docstring. ``console``: this console's name, one key segment (the lease
-    holder's half; its presence on the bus is its router's token, ``drone.bus.console``)."""
+    holder's half; its presence on the bus is its session's token, ``drone.bus.console``)."""
 
     def __init__(self, session: zenoh.Session, fleet: str, console: str) -> None:
         self.session = session
