@@ -48,6 +48,9 @@ log = logging.getLogger(__name__)
 CLIENT_FILE = "client.json5"  # observer: watch only
 LISTEN_DIR = "listen"  # <bus dir>/listen/<console name>: where its router listened last
 PILOT_FILE = "pilot.json5"
+# <bus dir>/keyed.txt: the vehicles whose bus password was a vehicle key of this console's, a
+# name a line: one that has no key at the next start was revoked meanwhile, and is dropped
+KEYED_FILE = "keyed.txt"
 JOIN_WATCH_S = 0.5  # how often the joiners' links are looked at (the log, /health)
 JOIN_GRACE_S = 2.0  # a router not joined this long after the start is said to be not up
 # A restarted router's port may still be held a moment by the one closed (its listener's task
@@ -195,8 +198,13 @@ class ConsoleBus:
             BusConfigError: an endpoint cannot be listened on or the credentials are unusable.
         """
         creds = Credentials.load_or_create(
-            self.directory, self.vehicle_names, self.vehicle_passwords, self.shared_credentials
+            self.directory,
+            self.vehicle_names,
+            self.vehicle_passwords,
+            self.shared_credentials,
+            revoked=self._keyed_before() - set(self.vehicle_passwords),
         )
+        self._write_keyed()
         self.credentials = creds
         self.router = self._open_router(creds)
         self.session = open_session(
@@ -222,6 +230,17 @@ class ConsoleBus:
             self.session.declare_subscriber(keys.all_telemetry(self.fleet), self._on_telemetry)
         )
         self._join(creds.password(CONSOLE_USER))
+
+    def _keyed_before(self) -> set[str]:
+        """The vehicles that had a key when this bus's dictionary was last written."""
+        try:
+            return set((self.directory / KEYED_FILE).read_text().split())
+        except OSError:
+            return set()
+
+    def _write_keyed(self) -> None:
+        names = "".join(f"{n}\n" for n in sorted(self.vehicle_passwords))
+        write_private(self.directory / KEYED_FILE, names)
 
     def _open_router(self, creds: Credentials) -> zenoh.Session:
         return open_session(
@@ -266,6 +285,7 @@ class ConsoleBus:
                 revoked=set(self.vehicle_passwords) - set(passwords),
             )
             self.vehicle_passwords = passwords
+            self._write_keyed()
             self.vehicle_names = sorted(self._own_vehicles | set(passwords))
             if creds.users == old and self.router is not None:
                 return None

@@ -103,6 +103,22 @@ def test_a_replaced_key_is_refused_and_the_new_one_taken(bus: ConsoleBus) -> Non
     join(bus, "uav7", KEY8).close()  # type: ignore[no-untyped-call]
 
 
+def test_a_key_revoked_while_the_console_was_down_is_refused_at_its_start(
+    bus: ConsoleBus,
+) -> None:
+    bus.close()
+    again = ConsoleBus(
+        bus.directory, "default", [], name="west", listen=list(bus.listen), vehicle_passwords={}
+    )
+    again.start()
+    try:
+        assert "vehicle-uav7" not in read_dictionary(bus.directory / "credentials.txt")
+        with pytest.raises(BusConfigError):
+            join(again, "uav7", KEY7).close()
+    finally:
+        again.close()
+
+
 class Vehicle:
     """A vehicle's ``cmd`` queryable: records each command's op and action as it arrives."""
 
