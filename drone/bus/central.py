@@ -2,7 +2,7 @@
 state for the standbys, the LTMs' status and the plans sent to them.
 
 - ``uavc/<fleet>/console/<console>/alive``: liveliness of every console of the fleet, the
-  one presence token a console has (its router declares it: ``drone.bus.console``); the
+  one presence token a console has (its session declares it: ``drone.bus.console``); the
   consoles it names take part in the election;
 - ``uavc/<fleet>/central/alive`` and ``…/alive/<console>``: liveliness of the central;
 - ``uavc/<fleet>/central/missions``: the JSON of ``GET /api/v1/patrol``, from the central;
@@ -11,7 +11,10 @@ state for the standbys, the LTMs' status and the plans sent to them.
 - ``uavc/<fleet>/<drone>/plan``: plans, as queries the vehicle answers.
 
 Who holds the role is decided by ``server.fleet.election`` from :meth:`CentralBus.view`; this
-class only declares the role's tokens and watches. Payloads are bytes: the console decodes
+class only declares the role's tokens and watches. While the console's session is off its
+router (the router restarting for new vehicle keys: ``drone.bus.console``), and for
+:data:`RELINK_SETTLE_S` after, the view is the last one seen on the bus: a console that
+briefly sees nobody must not claim the role. Payloads are bytes: the console decodes
 them. Zenoh calls back in its own threads; replicas and statuses are handed to ``loop``.
 """
 
@@ -21,6 +24,7 @@ import asyncio
 import contextlib
 import logging
 import threading
+import time
 from collections.abc import Callable
 
 import zenoh
@@ -32,6 +36,9 @@ from drone.bus.plans import all_ltm, central_holder, plan_key
 log = logging.getLogger(__name__)
 
 REPLICA = "replica"
+# The liveliness a session lost with its router comes back within milliseconds of it linking
+# again (the history of every token on the bus); the election's own settling time.
+RELINK_SETTLE_S = 0.5
 
 
 def replica_key(fleet: str) -> str:
@@ -42,7 +49,7 @@ class CentralBus:
     """One console's central role on the bus, and the consoles it sees there.
 
     Args:
-        session: the console's Zenoh session (its embedded router's).
+        session: the console's Zenoh session (a client of its embedded router).
         fleet: the fleet's name.
         console: this console's name (one key segment, unique in the fleet).
         loop: the event loop the callbacks run on.
@@ -73,6 +80,9 @@ class CentralBus:
         self._role: list[zenoh.LivelinessToken] = []
         self._missions: zenoh.Publisher | None = None
         self._replica: zenoh.Publisher | None = None
+        self.clock = time.monotonic
+        self._last_view: tuple[set[str], set[str]] | None = None  # seen while linked, settled
+        self._linked_since: float | None = None
 
     def start(self) -> None:
         lv = self.session.liveliness()
@@ -94,9 +104,26 @@ class CentralBus:
         self._replica = self.session.declare_publisher(replica_key(self.fleet))
 
     def view(self) -> tuple[set[str], set[str]]:
-        """(consoles alive, consoles holding the central role), as this console sees them."""
+        """(consoles alive, consoles holding the central role), as this console sees them;
+        while its session is off its router and :data:`RELINK_SETTLE_S` after, the last view
+        seen on it (see the module docstring)."""
         with self._lock:
-            return set(self._consoles) | {self.console}, set(self._holders)
+            seen = set(self._consoles) | {self.console}, set(self._holders)
+        now = self.clock()
+        if not self.session.info.routers_zid():  # off its router (a router's own: never set)
+            self._linked_since = None
+            return self._frozen(seen)
+        if self._linked_since is None:
+            self._linked_since = now
+        if self._last_view is not None and now - self._linked_since < RELINK_SETTLE_S:
+            return self._frozen(seen)
+        self._last_view = (set(seen[0]), set(seen[1]))
+        return seen
+
+    def _frozen(self, seen: tuple[set[str], set[str]]) -> tuple[set[str], set[str]]:
+        if self._last_view is None:
+            return seen
+        return set(self._last_view[0]), set(self._last_view[1])
 
     @property
     def holding(self) -> bool:

@@ -1,8 +1,15 @@
 """A console's commanding side of the bus: commands as queries on ``…/cmd`` (one reply each),
 and what the vehicles publish for it to show (status, camera).
 
-I/O over a Zenoh session the console already has (its router's). Zenoh answers on its own
-threads; :meth:`BusCommander.command` hands each reply to the caller's event loop.
+I/O over a Zenoh session the console already has (a client of its router). Zenoh answers on
+its own threads; :meth:`BusCommander.command` hands each reply to the caller's event loop.
+
+While the console restarts its router (new vehicle keys, ``drone.bus.console``) it holds the
+commands (:meth:`BusCommander.hold`): those in flight are answered first
+(:meth:`BusCommander.drained`), new ones wait, and on :meth:`BusCommander.release` the stops
+among them go first, then the rest in the order they came. One held longer than
+:data:`HOLD_MAX_S` fails with :class:`~drone.bus.errors.NoReply` ("not sent"): a command is
+never lost without its sender hearing of it.
 """
 
 from __future__ import annotations
@@ -13,6 +20,7 @@ import json
 import logging
 import secrets
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -33,6 +41,8 @@ from drone.bus.payloads import (
 log = logging.getLogger(__name__)
 
 COMMAND_TIMEOUT_S = 10.0
+HOLD_MAX_S = 10.0  # a command held through a router restart longer than this is not sent
+DRAIN_POLL_S = 0.01
 
 StatusCallback = Callable[[Status], None]
 TelemetryCallback = Callable[[Telemetry], None]
@@ -41,7 +51,7 @@ CameraCallback = Callable[[int, bytes, float | None], None]  # counter, JPEG, st
 
 class BusCommander:
     """See the module docstring. ``console``: this console's name, one key segment (the lease
-    holder's half; its presence on the bus is its router's token, ``drone.bus.console``)."""
+    holder's half; its presence on the bus is its session's token, ``drone.bus.console``)."""
 
     def __init__(self, session: zenoh.Session, fleet: str, console: str) -> None:
         self.session = session
@@ -53,6 +63,9 @@ class BusCommander:
         self._status: dict[str, Status] = {}
         self._camera: dict[str, tuple[int, bytes]] = {}
         self.refused = 0  # status payloads that did not decode
+        self._holding = False
+        self._held: list[tuple[bool, asyncio.Future[None]]] = []  # (a stop, its go)
+        self._in_flight = 0
         self._beat = session.declare_publisher(
             keys.console_heartbeat(self.fleet, console),
             congestion_control=zenoh.CongestionControl.DROP,
@@ -94,12 +107,55 @@ class BusCommander:
         """Send ``command`` to ``drone`` and await its reply (accepted or refused).
 
         Stops go at real-time priority, express (never batched behind other messages).
+        While held (:meth:`hold`), it waits for :meth:`release` (stops first).
 
         Raises:
             NoReply: no vehicle answered (none by that name, the router refused the query,
-                or no answer within ``timeout_s``).
+                or no answer within ``timeout_s``), or held over :data:`HOLD_MAX_S`.
         """
         loop = asyncio.get_running_loop()
+        if self._holding:
+            go: asyncio.Future[None] = loop.create_future()
+            self._held.append((command.is_stop, go))
+            try:
+                await asyncio.wait_for(go, HOLD_MAX_S)
+            except TimeoutError as exc:
+                raise NoReply(
+                    f"{command.op} to {drone} not sent: the bus was restarting for over "
+                    f"{HOLD_MAX_S:g} s"
+                ) from exc
+        self._in_flight += 1
+        try:
+            return await self._command(loop, drone, command, timeout_s)
+        finally:
+            self._in_flight -= 1
+
+    def hold(self) -> None:
+        """Hold new commands until :meth:`release` (call on the commands' event loop)."""
+        self._holding = True
+
+    async def drained(self, timeout_s: float) -> bool:
+        """Wait until no command is in flight (at most ``timeout_s``); whether none is."""
+        end = time.monotonic() + timeout_s
+        while self._in_flight and time.monotonic() < end:
+            await asyncio.sleep(DRAIN_POLL_S)
+        return not self._in_flight
+
+    def release(self) -> None:
+        """Let the held commands go: the stops first (each wakes, and sends, in this order)."""
+        self._holding = False
+        held, self._held = self._held, []
+        for _stop, go in sorted(held, key=lambda h: not h[0]):  # stable: in order otherwise
+            if not go.done():
+                go.set_result(None)
+
+    async def _command(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        drone: str,
+        command: Command,
+        timeout_s: float,
+    ) -> CommandReply:
         done: asyncio.Future[CommandReply] = loop.create_future()
 
         def settle(result: CommandReply | Exception) -> None:

@@ -44,6 +44,22 @@ _EVERYTHING = [
 NO_SHARED_MEMORY: dict[str, Any] = {"shared_memory": {"enabled": False}}
 
 JOIN_RETRY_MS = 1000  # a joiner dials a router that is not up (yet, or again) this often
+# A client or joiner that lost its router dials it again after this, then backs off (×2) to
+# JOIN_RETRY_MS: a console restarts its router to change its access control (a vehicle key
+# made or revoked while it runs) and its clients are back within tens of milliseconds of the
+# router listening again, well inside a vehicle's 1 s heartbeat timeout. Zenoh's default
+# (1 s) would leave them off the bus about a second (measured: docs/bus.md).
+REJOIN_RETRY_MS = 20
+
+
+def _retry(init_ms: int) -> dict[str, Any]:
+    """Zenoh 1.x ``connect/retry``: dial after ``init_ms``, doubling up to JOIN_RETRY_MS."""
+    return {
+        "period_init_ms": init_ms,
+        "period_max_ms": JOIN_RETRY_MS,
+        "period_increase_factor": 2,
+    }
+
 
 _WATCH = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
 _OWN = ["put", "delete", "liveliness_token", "declare_queryable", "reply"]
@@ -104,7 +120,9 @@ def vehicle_user(name: str) -> str:
 
 
 def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
-    """The router's ACL for ``fleet`` and these vehicle names (ACLs are fixed at start).
+    """The router's ACL for ``fleet`` and these vehicle names. Zenoh reads it when the router
+    opens, so a console restarts its router when the vehicles change
+    (:meth:`drone.bus.console.ConsoleBus.rekey`).
 
     The routers of other consoles reach it only through its joiners
     (:func:`joiner_config`), which authenticate as ``console``."""
@@ -168,7 +186,10 @@ def router_config(
         "mode": "router",
         "listen": {"endpoints": listen},
         "connect": {"endpoints": connect},
-        "scouting": {"multicast": {"enabled": False}},
+        # delay: what `zenoh.open` waits to scout others before it returns (500 ms by
+        # default); this router scouts nobody, and a restart (ConsoleBus.rekey) keeps its
+        # clients off the bus no longer than it takes to open (2 ms measured, against 500)
+        "scouting": {"multicast": {"enabled": False}, "delay": 0},
         "transport": {
             "auth": {
                 "usrpwd": {
@@ -203,7 +224,7 @@ def joiner_config(
         "listen": {"endpoints": []},
         "connect": {
             "endpoints": [router, peer],
-            "retry": {"period_init_ms": JOIN_RETRY_MS, "period_max_ms": JOIN_RETRY_MS},
+            "retry": _retry(REJOIN_RETRY_MS),
         },
         "scouting": {"multicast": {"enabled": False}},
         "transport": {
@@ -218,10 +239,12 @@ def client_config(
     *, connect: list[str], user: str, password: str, ca: str | None = None
 ) -> dict[str, Any]:
     """A client of the router: what ``client.json5`` holds for a third-party script.
-    ``ca``: the CA file that a ``tls/`` router's certificate must be signed by."""
+    ``ca``: the CA file that a ``tls/`` router's certificate must be signed by. A client that
+    loses its router dials it again within :data:`REJOIN_RETRY_MS` (a router restarted on
+    its endpoint takes it back at once)."""
     return {
         "mode": "client",
-        "connect": {"endpoints": connect},
+        "connect": {"endpoints": connect, "retry": _retry(REJOIN_RETRY_MS)},
         "scouting": {"multicast": {"enabled": False}},
         "transport": {
             "auth": {"usrpwd": {"user": user, "password": password}},

@@ -1,5 +1,14 @@
 """A console's side of the bus: the embedded router, the client files it hands out, and what it
-hears (which vehicles are alive, their latest telemetry)."""
+hears (which vehicles are alive, their latest telemetry).
+
+The router and the console's own session are two Zenoh sessions in the console's process: the
+router (mode ``router``: authentication, access control, the listeners) and a client of it as
+``console`` (:attr:`ConsoleBus.session`), on which the console declares everything it does on
+the bus. Zenoh reads a router's access control and password dictionary when it opens, so a
+change of the vehicles' keys restarts the router alone (:meth:`ConsoleBus.rekey`) on the same
+endpoints and Zenoh id; every client, the console's session among them, dials it again and
+declares again what it had declared (Zenoh keeps a session's declarations across a reconnect).
+"""
 
 from __future__ import annotations
 
@@ -19,6 +28,7 @@ from drone.bus.config import (
     CONSOLE_USER,
     OBSERVER_USER,
     PILOT_USER,
+    VEHICLE_PREFIX,
     BusTLS,
     access_control,
     as_tls,
@@ -29,7 +39,7 @@ from drone.bus.config import (
     vehicle_user,
 )
 from drone.bus.credentials import Credentials, write_private
-from drone.bus.errors import PayloadError
+from drone.bus.errors import BusConfigError, PayloadError
 from drone.bus.payloads import Telemetry, decode_telemetry
 from drone.bus.session import DEFAULT_LISTEN, free_listen_endpoint, open_session
 
@@ -38,8 +48,43 @@ log = logging.getLogger(__name__)
 CLIENT_FILE = "client.json5"  # observer: watch only
 LISTEN_DIR = "listen"  # <bus dir>/listen/<console name>: where its router listened last
 PILOT_FILE = "pilot.json5"
+# <bus dir>/keyed.txt: the vehicles whose bus password was a vehicle key of this console's, a
+# name a line: one that has no key at the next start was revoked meanwhile, and is dropped
+KEYED_FILE = "keyed.txt"
 JOIN_WATCH_S = 0.5  # how often the joiners' links are looked at (the log, /health)
 JOIN_GRACE_S = 2.0  # a router not joined this long after the start is said to be not up
+# A restarted router's port may still be held a moment by the one closed (its listener's task
+# ends on Zenoh's runtime): tried again this often, this many times.
+REOPEN_TRIES = 20
+REOPEN_PAUSE_S = 0.1
+RELINK_WAIT_S = 5.0  # how long a rekey waits for the console's session to be back on the router
+RELINK_POLL_S = 0.005
+
+
+@dataclass(frozen=True)
+class Rekeyed:
+    """A restart of the router for a new set of vehicle keys (:meth:`ConsoleBus.rekey`)."""
+
+    added: tuple[str, ...]  # vehicles that may join now
+    removed: tuple[str, ...]  # vehicles whose key was revoked: refused from now on
+    changed: tuple[str, ...]  # vehicles whose key was replaced (rotated)
+    down_s: float  # from the old router's close to the console's session back on the new one
+
+    def said(self) -> str:
+        """The restart, in a line for the log."""
+        parts = [
+            f"{what} {', '.join(names)}"
+            for what, names in (
+                ("may join:", self.added),
+                ("refused from now on:", self.removed),
+                ("new key:", self.changed),
+            )
+            if names
+        ]
+        return (
+            f"bus: vehicle keys changed ({'; '.join(parts) or 'nothing'}); router restarted "
+            f"with them, the console back on it in {self.down_s * 1000:.0f} ms"
+        )
 
 
 @dataclass(frozen=True)
@@ -77,7 +122,8 @@ class ConsoleBus:
     Args:
         directory: ``<data dir>/bus`` (credentials and the client files, 0600).
         fleet: the fleet's name, the second key segment.
-        vehicles: the vehicle names that get a credential (the ACL is fixed at start).
+        vehicles: the vehicle names that get a credential (:meth:`rekey` changes the
+            others, those of ``vehicle_passwords``).
         name: the console's name (one key segment, unique in the fleet): its router's Zenoh id
             derives from it (:func:`drone.bus.config.router_id`).
         vehicle_passwords: name → password for vehicles whose password is given (the
@@ -119,9 +165,8 @@ class ConsoleBus:
         self.on_join = on_join
         self.fleet = keys.segment(fleet)
         self.vehicle_passwords = dict(vehicle_passwords or {})
-        self.vehicle_names = sorted(
-            {keys.segment(v) for v in vehicles} | set(self.vehicle_passwords)
-        )
+        self._own_vehicles = {keys.segment(v) for v in vehicles}
+        self.vehicle_names = sorted(self._own_vehicles | set(self.vehicle_passwords))
         wrap = as_tls if tls is not None and tls.cert is not None else str
         self.name = keys.segment(name)
         self.listen = [wrap(e) for e in listen] or [
@@ -130,7 +175,10 @@ class ConsoleBus:
         self.connect = list(connect)
         self.zid = router_id(self.fleet, self.name)  # its router's Zenoh id, from its name
         self.credentials: Credentials | None = None
-        self.session: zenoh.Session | None = None
+        self.router: zenoh.Session | None = None  # the router: listeners, auth, ACL
+        self.session: zenoh.Session | None = None  # the console's own: a client of the router
+        self._router_lock = threading.Lock()  # a rekey's restart against close()
+        self.rekeys: list[Rekeyed] = []
         self._presence: zenoh.LivelinessToken | None = None
         self._lock = threading.Lock()
         self._alive: set[str] = set()
@@ -143,25 +191,28 @@ class ConsoleBus:
         self._watch: threading.Thread | None = None
 
     def start(self) -> None:
-        """Open the router and write ``client.json5`` / ``pilot.json5``.
+        """Open the router and the console's session, and write ``client.json5`` /
+        ``pilot.json5``.
 
         Raises:
             BusConfigError: an endpoint cannot be listened on or the credentials are unusable.
         """
         creds = Credentials.load_or_create(
-            self.directory, self.vehicle_names, self.vehicle_passwords, self.shared_credentials
+            self.directory,
+            self.vehicle_names,
+            self.vehicle_passwords,
+            self.shared_credentials,
+            revoked=self._keyed_before() - set(self.vehicle_passwords),
         )
+        self._write_keyed()
         self.credentials = creds
-        acl = access_control(self.fleet, creds.vehicles())
+        self.router = self._open_router(creds)
         self.session = open_session(
-            router_config(
-                listen=self.listen,
-                connect=[],  # others' routers are joined through the joiners below
+            client_config(
+                connect=self.client_endpoints,
+                user=CONSOLE_USER,
                 password=creds.password(CONSOLE_USER),
-                dictionary_file=str(creds.path),
-                acl=acl,
-                zid=self.zid,  # the same across restarts (router_id)
-                tls=self.tls,
+                ca=self.tls.ca if self.tls is not None else None,
             )
         )
         self._write_client(CLIENT_FILE, OBSERVER_USER)
@@ -169,7 +220,7 @@ class ConsoleBus:
         (self.directory / LISTEN_DIR).mkdir(mode=0o700, exist_ok=True)
         write_private(self._listen_file, "\n".join(self.listen) + "\n")
         liveliness = self.session.liveliness()
-        # this console on the bus (any role), as long as its router: the vehicles' watch of
+        # this console on the bus (any role), as long as its process: the vehicles' watch of
         # their consoles and the central's election both go by this one token
         self._presence = liveliness.declare_token(keys.console_alive(self.fleet, self.name))
         self._subs.append(
@@ -179,6 +230,97 @@ class ConsoleBus:
             self.session.declare_subscriber(keys.all_telemetry(self.fleet), self._on_telemetry)
         )
         self._join(creds.password(CONSOLE_USER))
+
+    def _keyed_before(self) -> set[str]:
+        """The vehicles that had a key when this bus's dictionary was last written."""
+        try:
+            return set((self.directory / KEYED_FILE).read_text().split())
+        except OSError:
+            return set()
+
+    def _write_keyed(self) -> None:
+        names = "".join(f"{n}\n" for n in sorted(self.vehicle_passwords))
+        write_private(self.directory / KEYED_FILE, names)
+
+    def _open_router(self, creds: Credentials) -> zenoh.Session:
+        return open_session(
+            router_config(
+                listen=self.listen,
+                connect=[],  # others' routers are joined through the joiners
+                password=creds.password(CONSOLE_USER),
+                dictionary_file=str(creds.path),
+                acl=access_control(self.fleet, creds.vehicles()),
+                zid=self.zid,  # the same across restarts (router_id)
+                tls=self.tls,
+            )
+        )
+
+    def rekey(
+        self, vehicle_passwords: Mapping[str, str], clock: Callable[[], float] = time.monotonic
+    ) -> Rekeyed | None:
+        """Let exactly these keyed vehicles (name → key) on the bus, besides those this console
+        was started for: when that changes who may join (or the router is down after a
+        failed restart), restart the router with the new dictionary and access control, on the
+        same endpoints. Blocks until the console's session is back on it (tens of milliseconds;
+        call it off the event loop). None: nothing changed, the router left as it is.
+
+        A vehicle whose key was revoked or replaced is cut off (its link was authenticated by
+        the old router) and refused when it dials again; every other client is back within
+        :data:`~drone.bus.config.REJOIN_RETRY_MS` of the new router listening.
+
+        Raises:
+            BusConfigError: the new dictionary cannot be written, or the router could not open
+                again (the bus is then down: call again to retry).
+        """
+        passwords = {keys.segment(n): p for n, p in vehicle_passwords.items()}
+        with self._router_lock:
+            if self.session is None or self.credentials is None:
+                raise BusConfigError("the bus is closed")
+            old = self.credentials.users
+            creds = Credentials.load_or_create(
+                self.directory,
+                sorted(self._own_vehicles | set(passwords)),
+                passwords,
+                self.shared_credentials,
+                revoked=set(self.vehicle_passwords) - set(passwords),
+            )
+            self.vehicle_passwords = passwords
+            self._write_keyed()
+            self.vehicle_names = sorted(self._own_vehicles | set(passwords))
+            if creds.users == old and self.router is not None:
+                return None
+            started = clock()
+            if self.router is not None:
+                self.router.close()  # type: ignore[no-untyped-call]
+                self.router = None
+            self.credentials = creds
+            for attempt in range(REOPEN_TRIES):
+                try:
+                    self.router = self._open_router(creds)
+                    break
+                except BusConfigError:
+                    if attempt == REOPEN_TRIES - 1:
+                        raise
+                    time.sleep(REOPEN_PAUSE_S)
+            session = self.session
+        deadline = clock() + RELINK_WAIT_S
+        while clock() < deadline:
+            try:
+                if any(str(z) == self.zid for z in session.info.routers_zid()):
+                    break
+            except zenoh.ZError:  # closed meanwhile: the console stops
+                break
+            time.sleep(RELINK_POLL_S)
+        done = Rekeyed(
+            added=_names(set(creds.users) - set(old)),
+            removed=_names(set(old) - set(creds.users)),
+            changed=_names({u for u in set(old) & set(creds.users) if old[u] != creds.users[u]}),
+            down_s=clock() - started,
+        )
+        self.rekeys.append(done)
+        del self.rekeys[:-100]
+        log.warning("%s", done.said())
+        return done
 
     def _join(self, password: str) -> None:
         """A joiner for each router in ``connect``; a thread that says when each link comes
@@ -284,9 +426,13 @@ class ConsoleBus:
         if self._presence is not None:
             self._presence.undeclare()  # type: ignore[no-untyped-call]
             self._presence = None
-        if self.session is not None:
-            self.session.close()  # type: ignore[no-untyped-call]
-            self.session = None
+        with self._router_lock:
+            if self.session is not None:
+                self.session.close()  # type: ignore[no-untyped-call]
+                self.session = None
+            if self.router is not None:
+                self.router.close()  # type: ignore[no-untyped-call]
+                self.router = None
 
     def _write_client(self, name: str, user: str) -> None:
         assert self.credentials is not None
@@ -324,6 +470,13 @@ class ConsoleBus:
             return
         with self._lock:
             self._latest[drone] = telemetry
+
+
+def _names(users: set[str]) -> tuple[str, ...]:
+    """The vehicle names among bus users, sorted."""
+    return tuple(
+        sorted(u.removeprefix(VEHICLE_PREFIX) for u in users if u.startswith(VEHICLE_PREFIX))
+    )
 
 
 def _reachable(endpoint: str) -> str:

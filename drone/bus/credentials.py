@@ -9,7 +9,13 @@ import secrets
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from drone.bus.config import CONSOLE_USER, OBSERVER_USER, PILOT_USER, vehicle_user
+from drone.bus.config import (
+    CONSOLE_USER,
+    OBSERVER_USER,
+    PILOT_USER,
+    VEHICLE_PREFIX,
+    vehicle_user,
+)
 from drone.bus.errors import BusConfigError
 
 FILE_NAME = "credentials.txt"
@@ -30,7 +36,8 @@ class Credentials:
 
     def vehicles(self) -> list[str]:
         """Names of the vehicles that have a credential."""
-        return sorted(u.removeprefix("vehicle-") for u in self.users if u.startswith("vehicle-"))
+        users = self.users
+        return sorted(u.removeprefix(VEHICLE_PREFIX) for u in users if u.startswith(VEHICLE_PREFIX))
 
     @classmethod
     def load_or_create(
@@ -39,13 +46,15 @@ class Credentials:
         vehicles: Iterable[str],
         vehicle_passwords: Mapping[str, str] | None = None,
         shared: Path | None = None,
+        revoked: Iterable[str] = (),
     ) -> Credentials:
         """Read the dictionary, adding the roles and any of ``vehicles`` it lacks.
 
         ``shared``: another console's dictionary (the consoles of a fleet share one): its
         users and passwords replace this one's. ``vehicle_passwords`` (name → password: the
         console's vehicle keys) are authoritative over both: a vehicle joins the bus with the
-        same key it joins the console with.
+        same key it joins the console with. ``revoked``: vehicles whose key was removed, dropped
+        unless ``vehicles``, ``vehicle_passwords`` or ``shared`` name them.
 
         Raises:
             BusConfigError: a line of a file is not ``user:password``, or ``shared`` cannot
@@ -56,15 +65,20 @@ class Credentials:
         path = directory / FILE_NAME
         users = read_dictionary(path) if path.exists() else {}
         before = dict(users)
+        shared_users: dict[str, str] = {}
         if shared is not None:
             try:
-                users.update(read_dictionary(shared))
+                shared_users = read_dictionary(shared)
             except OSError as exc:
                 raise BusConfigError(f"the shared bus credentials: {exc}") from None
+            users.update(shared_users)
         given = {vehicle_user(n): p for n, p in (vehicle_passwords or {}).items()}
         changed = {u for u, p in given.items() if users.get(u) != p}
         users.update(given)
         wanted = [CONSOLE_USER, OBSERVER_USER, PILOT_USER, *(vehicle_user(v) for v in vehicles)]
+        keep = set(wanted) | set(given) | set(shared_users)
+        gone = {vehicle_user(n) for n in revoked} - keep
+        users = {u: p for u, p in users.items() if u not in gone}
         missing = [u for u in wanted if u not in users]
         for user in missing:
             users[user] = secrets.token_urlsafe(24)

@@ -2,7 +2,7 @@
 
 Each console runs a :class:`CentralRole` beside its fleet service. Through the bus
 (:class:`drone.bus.central.CentralBus`) it sees the consoles there (each one's presence token,
-which its router declares) and the holders of the role, and the election
+which its console session declares) and the holders of the role, and the election
 (:mod:`server.fleet.election`) decides which console holds it:
 
 - **central**: its central task manager decides and sends plans to the vehicles' LTMs as queries

@@ -8,7 +8,10 @@
   and is re-published after a check (:mod:`server.vehicles.relay`), so this process is the
   only publisher of ``/console/reply``.
 - Keys: ``serve`` makes one per vehicle it spawns (``<data dir>/vehicle-keys``) and hands it over
-  in the child's environment (``UAVC_VEHICLE_KEY``), not on its command line.
+  in the child's environment (``UAVC_VEHICLE_KEY``), not on its command line. The bus follows
+  the key directory while the console runs (:meth:`VehicleCentral._watch_keys`): a key made,
+  replaced or revoked restarts the bus's router with the new access control, the vehicles on
+  it rejoin by themselves, and the commands sent meanwhile wait for it (stops first).
 - Discovery: every vehicle alive on the bus becomes a drone of the runtime
   (:class:`~server.vehicles.bus_remote.BusDroneStack` and its dialog), whether ``serve``
   spawned it or it joined from another host (``uav-console vehicle --bus-connect``).
@@ -38,6 +41,7 @@ import re
 import signal
 import sys
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -51,7 +55,7 @@ from server.msgs import header
 from server.settings import Settings, SettingsError
 from server.vehicles import names
 from server.vehicles.errors import NoBus
-from server.vehicles.keys import VehicleKeys, vehicle_env
+from server.vehicles.keys import KEY_ENV, WATCH_PERIOD_S, KeyWatch, VehicleKeys, vehicle_env
 from server.vehicles.mavlink_stack import SIM_MAVLINK, drone_kind
 from server.vehicles.relay import ReplyRelay
 from server.vehicles.tickets import TICKET_TTL_S, DoorSecrets, mint
@@ -65,6 +69,10 @@ log = logging.getLogger("uav_console")
 RESTART_BACKOFF_S = (0.5, 5.0)
 STABLE_AFTER_S = 30.0
 DISCOVER_EVERY = 5  # heartbeat periods
+# A router restart for new keys: the commands in flight get this long to be answered first,
+# then the drones that were on the bus this long to be back (commands to them wait as long).
+REKEY_DRAIN_S = 2.0
+REKEY_REJOIN_S = 5.0
 
 
 def pid_dir_of(settings: Settings) -> Path:
@@ -211,6 +219,80 @@ class VehicleCentral:
             "/console/utterance", lambda _msg: self.touch_recording(), type="uav_console/Utterance"
         )
         self._tasks.append(asyncio.create_task(self._beat(), name="vehicles-heartbeat"))
+        self._tasks.append(asyncio.create_task(self._watch_keys(), name="vehicle-keys-watch"))
+
+    async def _watch_keys(self) -> None:
+        """Follow the vehicle key directory: once it has changed and kept still
+        (:class:`~server.vehicles.keys.KeyWatch`), restart the bus's router with its keys
+        (:meth:`rekey`). A file in it that holds no key is said in the log and changes
+        nothing: the router keeps the keys it has until the directory is right."""
+        watch = KeyWatch()
+        while True:
+            await asyncio.sleep(WATCH_PERIOD_S)
+            if self.bus is None or not watch.observe(self.keys.signature(), time.monotonic()):
+                continue
+            scan = self.keys.scan()
+            if scan.problems:
+                for problem in scan.problems:
+                    line = (
+                        f"vehicle keys: {problem}; the bus keeps the vehicle keys it has until "
+                        "that is fixed (`uav-console vehicle-key NAME --rotate` remakes one)"
+                    )
+                    log.error("%s", line)
+                    print(f"uav-console: {line}", file=sys.stderr, flush=True)
+                continue
+            # a vehicle serve spawned keeps the key it was started with (its process has it)
+            spawned = {n: vp.env[KEY_ENV] for n, vp in self.processes.items() if KEY_ENV in vp.env}
+            try:
+                await self.rekey({**scan.keys, **spawned})
+            except BusError as exc:
+                self.alert(f"the bus is down: its router did not restart: {exc}; retrying")
+                watch.again(time.monotonic())
+            except Exception:  # one failed look must not end the watch
+                log.exception("vehicle keys: the bus was not rekeyed")
+                watch.again(time.monotonic())
+
+    async def rekey(self, passwords: Mapping[str, str]) -> bool:
+        """Restart the bus's router for these vehicle keys (name → key) when they are not the
+        ones it has; whether it restarted. Commands are held meanwhile
+        (:meth:`~drone.bus.commander.BusCommander.hold`: those in flight answered first, new
+        ones sent once the drones that were on the bus are back, stops first) and calls to
+        those drones wait for them (:meth:`~server.vehicles.remote.RemoteDroneStack.expect`).
+
+        Raises:
+            BusError: the router did not open again (the bus is down).
+        """
+        from server.vehicles.remote import RemoteDroneStack
+
+        bus, commander = self.bus, self.commander
+        if bus is None or commander is None:
+            return False
+        if passwords == bus.vehicle_passwords and bus.router is not None:
+            return False
+        had = bus.vehicle_passwords
+        # on the bus now and let in again: not a vehicle whose key is revoked or replaced
+        before = {n for n in bus.alive() if n not in had or passwords.get(n) == had[n]}
+        commander.hold()
+        try:
+            await commander.drained(REKEY_DRAIN_S)
+            for name in before:
+                stack = self.runtime.drones.get(name)
+                if isinstance(stack, RemoteDroneStack):
+                    stack.expect(REKEY_REJOIN_S)
+            done = await asyncio.to_thread(bus.rekey, passwords)
+            if done is None:
+                return False
+            back = before - set(done.changed)
+            end = time.monotonic() + REKEY_REJOIN_S
+            while not back <= set(bus.alive()) and time.monotonic() < end:
+                await asyncio.sleep(0.02)
+            missing = sorted(back - set(bus.alive()))
+            if missing:
+                log.error("bus: %s not back on the bus after its router restarted", missing)
+            print(f"uav-console: {done.said()}", file=sys.stderr, flush=True)
+            return True
+        finally:
+            commander.release()
 
     def flight_stacks(self) -> str:
         """Where each drone's flight stack runs, for ``serve``'s start-up lines."""

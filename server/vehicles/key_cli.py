@@ -56,7 +56,11 @@ def vehicle_key_main(
 def _one(keys: VehicleKeys, name: str, args: argparse.Namespace, out: TextIO) -> None:
     if args.revoke:
         if keys.revoke(name):
-            print(f"{name}'s vehicle key removed: it opens nothing any more", file=out)
+            print(
+                f"{name}'s vehicle key removed: it opens nothing any more (a serve running "
+                "on this data directory cuts that vehicle off its bus within a second)",
+                file=out,
+            )
         else:
             print(f"{name} had no vehicle key", file=out)
         return
@@ -75,6 +79,7 @@ def _one(keys: VehicleKeys, name: str, args: argparse.Namespace, out: TextIO) ->
     )
     print(
         "  (the endpoint serve prints as 'bus: …'; tls/ off loopback, with --bus-ca and the "
-        "console's tls/ca.pem; restart serve: its bus takes the keys it finds at its start)",
+        "console's tls/ca.pem; a serve running on this data directory lets it on its bus "
+        "within a second)",
         file=out,
     )

@@ -42,6 +42,14 @@ KEY_RE = re.compile(r"^uavk_[A-Za-z0-9_-]{32,128}$")
 # A key made or removed while the console runs counts within this long (a lookup rescans the
 # directory at most this often, so refused guesses cannot make it read the disk any faster).
 RESCAN_S = 1.0
+# The console's bus looks at the key directory this often (a stat of it and of its files; the
+# keys themselves are read only when that changes) ...
+WATCH_PERIOD_S = 0.25
+# ... and takes a change once the directory has kept still this long, so that one
+# `vehicle-key a b c` (three files written in a row) restarts the bus's router once.
+WATCH_QUIET_S = 0.5
+
+Signature = tuple[tuple[str, int, int, int], ...]
 
 
 def check_name(name: str) -> str:
@@ -121,6 +129,47 @@ class VehicleKey:
     path: Path
 
 
+@dataclass(frozen=True)
+class KeyScan:
+    """The key directory as read once: every vehicle's key, and each file in it that holds
+    no usable key (one line each: the file and why)."""
+
+    keys: Mapping[str, str] = field(repr=False)  # name -> key
+    problems: tuple[str, ...] = ()
+
+
+class KeyWatch:
+    """When the console's bus should read the vehicle keys again (sans-I/O: fed the
+    directory's :meth:`VehicleKeys.signature` and the time).
+
+    A change is taken once the directory has kept still for ``quiet_s`` (a burst of writes is
+    one change); :meth:`observe` says True once per change. The first observation counts as a
+    change: the keys the bus started with may have been read before it.
+    """
+
+    def __init__(self, quiet_s: float = WATCH_QUIET_S) -> None:
+        self.quiet_s = quiet_s
+        self._seen: Signature | None = None
+        self._changed_at: float | None = None
+        self._started = False
+
+    def observe(self, signature: Signature, now: float) -> bool:
+        """Whether to read the keys now."""
+        if not self._started or signature != self._seen:
+            self._started = True
+            self._seen = signature
+            self._changed_at = now
+            return False
+        if self._changed_at is not None and now - self._changed_at >= self.quiet_s:
+            self._changed_at = None
+            return True
+        return False
+
+    def again(self, now: float) -> None:
+        """Read the keys again after the quiet time (what was read could not be applied)."""
+        self._changed_at = now
+
+
 class VehicleKeys:
     """The console's key store, one file per vehicle under ``<data_dir>/vehicle-keys``.
 
@@ -188,6 +237,50 @@ class VehicleKeys:
                     out.append(VehicleKey(name, read_key_file(path), path))
         return out
 
+    def signature(self) -> Signature:
+        """What the directory looks like (each file's name, size, inode and change time, and
+        the directory's own): cheap to take often; it changes when a key is made, replaced
+        or removed, by this module or by hand."""
+        try:
+            st = os.stat(self.directory)
+            entries = list(os.scandir(self.directory))
+        except OSError:
+            return ()
+        found = [("", st.st_mtime_ns, st.st_ino, 0)]
+        for entry in entries:
+            if entry.name.endswith(KEY_SUFFIX):
+                try:
+                    est = entry.stat(follow_symlinks=True)
+                except OSError:
+                    found.append((entry.name, -1, -1, -1))
+                    continue
+                found.append((entry.name, est.st_mtime_ns, est.st_ino, est.st_size))
+        return tuple(sorted(found))
+
+    def scan(self) -> KeyScan:
+        """Every key in the directory, and each ``*.key`` file that holds none (a bad name, not
+        a key, unreadable), said in a line."""
+        found: dict[str, str] = {}
+        problems: list[str] = []
+        try:
+            paths = sorted(self.directory.glob(f"*{KEY_SUFFIX}"))
+        except OSError as exc:
+            return KeyScan({}, (f"cannot read the vehicle key directory {self.directory}: {exc}",))
+        for path in paths:
+            name = path.name[: -len(KEY_SUFFIX)]
+            if not NAME_RE.match(name):
+                problems.append(
+                    f"{path}: {name!r} cannot name a vehicle (letters, digits and _ only, a "
+                    "letter first)"
+                )
+                continue
+            try:
+                found[name] = read_key_file(path)
+            except VehicleKeyError as exc:
+                if path.exists():  # else removed since the listing: not a problem
+                    problems.append(str(exc))
+        return KeyScan(found, tuple(problems))
+
     def vehicle_for(self, key: str | None) -> str | None:
         """The vehicle ``key`` belongs to, or None. Every stored key is compared, in constant
         time each, so the answer's timing tells nothing of which one came close."""
@@ -245,6 +338,8 @@ def vehicle_env(env: Mapping[str, str], keys: VehicleKeys, name: str) -> dict[st
 
 __all__ = [
     "KEY_ENV",
+    "KeyScan",
+    "KeyWatch",
     "VehicleKey",
     "VehicleKeys",
     "check_name",

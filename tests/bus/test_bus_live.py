@@ -73,8 +73,8 @@ def test_a_console_whose_router_id_hashes_to_a_leading_zero_is_on_the_bus(
     )
     bus.start()
     try:
-        assert bus.session is not None
-        assert str(bus.session.info.zid()) == "bb2d10a528463effa1e64c5e5e26a71"
+        assert bus.router is not None
+        assert str(bus.router.info.zid()) == "bb2d10a528463effa1e64c5e5e26a71"
         v = vehicle(bus, "uav7")
         try:
             wait_for(bus.alive, lambda a: a == ["uav7"], 10, "uav7 alive on the bus")

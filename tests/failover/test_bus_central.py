@@ -132,8 +132,8 @@ async def test_a_console_has_one_presence_token_for_the_vehicles_and_the_electio
 
 
 async def test_the_routers_ids_derive_from_the_consoles_names(fleet: Fleet) -> None:
-    assert fleet.a.router.session is not None
-    assert str(fleet.a.router.session.info.zid()) == router_id("default", "console-a")
+    assert fleet.a.router.router is not None
+    assert str(fleet.a.router.router.info.zid()) == router_id("default", "console-a")
     assert router_id("default", "console-a") != router_id("default", "console-b")
 
 
