@@ -107,7 +107,11 @@ def test_a_key_made_while_serve_runs_lets_its_vehicle_join(tmp_path: Path) -> No
             wait_for(lambda: joined(srv, "uav8"), "uav8, keyed while serve ran, joined", JOIN_S)
             # the vehicle already there rejoined the restarted router by itself
             wait_for(lambda: joined(srv, "uav7"), "uav7 back on the bus", 30)
-            said = srv.log_path.read_text()
+            said = wait_for(
+                lambda: (t := srv.log_path.read_text()) and "vehicle keys changed" in t and t,
+                "the restart said",
+                30,
+            )
             assert "vehicle keys changed (may join: uav8)" in said
             assert said.count("vehicle keys changed") == 1  # one key made: one restart
             assert probe(endpoint, "uav8", new_key()).startswith("refused")  # a wrong key
@@ -140,6 +144,8 @@ def test_a_malformed_key_file_leaves_the_bus_as_it_is(tmp_path: Path) -> None:
         assert "vehicle keys changed" not in srv.log_path.read_text()
         bad.unlink()
         wait_for(lambda: probe(endpoint, "uav6", key6) == "joined", "uav6 let in once fixed", 30)
+        # said once the console's own session is back, which may be after a vehicle's
+        wait_for(lambda: "vehicle keys changed" in srv.log_path.read_text(), "the restart said", 30)
         assert srv.log_path.read_text().count("vehicle keys changed") == 1
 
 
