@@ -192,6 +192,7 @@ class CentralRole:
                 if self.lost_holder_at is None
                 else f" ({now - self.lost_holder_at:.2f} s after the last central left)",
             )
+            self.ctm.claim(now)
             self._next_replica = 0.0
             self.node.poke()
         elif action is Action.RELEASE:
