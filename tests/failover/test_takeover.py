@@ -70,6 +70,11 @@ def status(name: str, seq: int, p: Enu, *, flying: bool, plan_id: int = 0) -> Lt
     )
 
 
+def hear(role: CentralRole, st: LtmStatus) -> None:
+    """``st`` on the bus, as the standby's CentralBus hands it over."""
+    role._on_ltm(st.name, json.dumps(st.to_dict()).encode())
+
+
 def central_patrolling() -> tuple[CentralTaskManager, str, bytes]:
     """Console-a's CTM with one drone patrolling the route (its relief not due for long);
     the drone's name and console-a's last replica, taken at 10.0 on its clock."""
@@ -128,8 +133,7 @@ def test_a_drone_unheard_while_the_old_central_froze_is_not_lost_to_the_new_one(
     assert plan is not None
     p = ROUTE[(plan.start_index + 1) % len(ROUTE)]
     now[0] += 0.4
-    role._on_ltm(active, json.dumps(status(active, 9, p, flying=True, plan_id=plan.plan_id)
-                                    .to_dict()).encode())  # fmt: skip
+    hear(role, status(active, 9, p, flying=True, plan_id=plan.plan_id))
     assert ctm.step(now[0]) == []
     assert ctm.drones[active].role is Role.PATROLLING and ms.active == active
 
@@ -141,8 +145,7 @@ def test_a_drone_still_silent_after_the_claim_is_lost_after_the_usual_silence() 
     other = next(n for n in STATIONS if n != active)
     for seq, t in enumerate((0.5, 1.5, 2.5), start=9):  # the other one is heard again
         now[0] = claimed + t
-        role._on_ltm(other, json.dumps(status(other, seq, STATIONS[other], flying=False)
-                                       .to_dict()).encode())  # fmt: skip
+        hear(role, status(other, seq, STATIONS[other], flying=False))
     assert ctm.step(claimed + ctm.lost_after_s - 0.1) == []
     assert ctm.drones[active].role is Role.PATROLLING
     out = ctm.step(claimed + ctm.lost_after_s + 0.1)
