@@ -249,7 +249,10 @@ class CentralRole:
             log.warning("central role: LTM status on %s names %r", drone, status.name)
             return
         self.on_bus[drone] = now
-        self.heard.setdefault(drone, deque(maxlen=HEARD_KEPT)).append((status, now))
+        kept = self.heard.setdefault(drone, deque(maxlen=HEARD_KEPT))
+        if kept and kept[-1][0].seq >= status.seq:
+            kept.clear()  # its LTM started again (its statuses count from 1): the old ones go
+        kept.append((status, now))
         self.ctm.on_status(status, now)
 
     # ------------------------------------------------------------------ plans

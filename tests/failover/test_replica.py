@@ -244,3 +244,26 @@ def test_plans_are_numbered_past_a_replayed_status_too() -> None:
     standby = CentralTaskManager()
     restore(standby, data, 11.5, [(flying(2, 3.0, plan_id=40), 11.6)])  # a plan after it
     assert next(standby._plan_ids) == 40 + 1 + PLAN_ID_MARGIN
+
+
+def test_a_vehicle_started_again_is_not_taken_back_to_its_old_statuses() -> None:
+    """Its LTM numbers its statuses from 1 again: the standby forgets the ones it kept from
+    before (their numbers are higher), so a replica with the new ones stands."""
+    from drone.sim.world import load_world
+    from server.fleet.failover import CentralRole
+    from server.fleet.service import FleetService
+    from server.graph import Graph
+
+    now = [0.0]
+    service = FleetService(Graph(), load_world("indoor"), clock=lambda: now[0])
+    standby = CentralRole(service, None, "f", "console-b", clock=lambda: now[0])
+    for seq, x, t in [(500, 0.0, 10.0), (501, 3.0, 11.0), (1, 6.0, 12.0)]:  # started again
+        now[0] = t
+        standby._on_ltm("uav1", json.dumps(flying(seq, x).to_dict()).encode())
+    central = patrolling([Enu(0.0, 0.0, 1.5), Enu(6.0, 0.0, 1.5)])
+    central.on_status(flying(1, 6.0), 2.0)
+    now[0] = 12.2
+    standby._on_replica(json.dumps({"console": "a", "ctm": snapshot(central, 2.1)}).encode())
+    rec = service.ctm.drones["uav1"]
+    assert rec.status == flying(1, 6.0)
+    assert rec.last_heard == pytest.approx(12.1)
