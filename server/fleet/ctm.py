@@ -185,10 +185,21 @@ class CentralTaskManager:
         self.notices: deque[tuple[float, str, str]] = deque(maxlen=50)
         self._plan_ids = itertools.count(1)
         self._now = 0.0  # the latest step's time (for changes made between steps)
+        # silence is counted from here at the earliest (claim: a standby taking the role over)
+        self.listening_since = -math.inf
         self._mission_ids = itertools.count(1)
         self.decisions = 0
 
     # ------------------------------------------------------------------ inputs
+    def claim(self, now: float) -> None:
+        """This CTM decides from ``now`` on (a standby's, its state restored from the central
+        that was: ``server.fleet.failover``). Until the old central's router is gone the
+        vehicles on it reach no other console, so a drone not heard since is unheard, not
+        silent: its silence (``lost_after_s``) counts from ``now``. A drone already lost stays
+        lost until it is heard."""
+        self.listening_since = max(self.listening_since, now)
+        self.event(now, "central role taken")
+
     def event(self, now: float, text: str) -> None:
         self.events.append((now, text))
 
@@ -569,7 +580,10 @@ class CentralTaskManager:
 
     def _failure(self, rec: DroneRecord, now: float) -> str:
         st = rec.status
-        if st is None or now - rec.last_heard > self.lost_after_s:
+        heard = rec.last_heard
+        if rec.role is not Role.LOST:
+            heard = max(heard, self.listening_since)  # claim
+        if st is None or now - heard > self.lost_after_s:
             return "silent"
         if st.emergency:
             return "emergency"

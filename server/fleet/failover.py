@@ -27,6 +27,7 @@ import json
 import logging
 import socket
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -50,6 +51,10 @@ log = logging.getLogger("uav_console.central")
 
 PERIOD_S = 0.1  # the election's look at the bus: a takeover starts within this of a loss
 REPLICA_PERIOD_S = 1.0
+# LTM statuses a standby keeps per drone to apply again after a replica (replica.restore): an LTM
+# reports once a second (LocalTaskManager.period_s) and a replica comes each REPLICA_PERIOD_S, so
+# a replica lacks one or two of them at most
+HEARD_KEPT = 4
 ON_BUS_S = 5.0  # a drone whose LTM status came over the bus this recently gets plans there
 
 
@@ -94,6 +99,8 @@ class CentralRole:
         self.election = Election(self.console, clock())
         self.bus: CentralBus | None = None
         self.on_bus: dict[str, float] = {}  # drone → when its LTM status last came on the bus
+        # drone → its latest LTM statuses from the bus and when each came, for replica.restore
+        self.heard: dict[str, deque[tuple[LtmStatus, float]]] = {}
         self.replicas_in = 0
         self.refused = 0  # replicas and statuses that did not decode (logged)
         self.claimed_at: float | None = None
@@ -185,6 +192,7 @@ class CentralRole:
                 if self.lost_holder_at is None
                 else f" ({now - self.lost_holder_at:.2f} s after the last central left)",
             )
+            self.ctm.claim(now)
             self._next_replica = 0.0
             self.node.poke()
         elif action is Action.RELEASE:
@@ -220,7 +228,8 @@ class CentralRole:
                 raise MessageError("a replica names its console")
             if body["console"] == self.console:
                 return
-            restore(self.ctm, body.get("ctm"), self.clock())
+            heard = [h for kept in self.heard.values() for h in kept]
+            restore(self.ctm, body.get("ctm"), self.clock(), heard)
         except (ValueError, MessageError) as exc:
             self.refused += 1
             log.warning("central role: a replica refused: %s", exc)
@@ -240,6 +249,10 @@ class CentralRole:
             log.warning("central role: LTM status on %s names %r", drone, status.name)
             return
         self.on_bus[drone] = now
+        kept = self.heard.setdefault(drone, deque(maxlen=HEARD_KEPT))
+        if kept and kept[-1][0].seq >= status.seq:
+            kept.clear()  # its LTM started again (its statuses count from 1): the old ones go
+        kept.append((status, now))
         self.ctm.on_status(status, now)
 
     # ------------------------------------------------------------------ plans

@@ -14,6 +14,13 @@ Plan ids: the central that wrote a snapshot may have sent plans after it (a snap
 a publication old); the restored CTM numbers its plans from ``PLAN_ID_MARGIN`` past the
 snapshot's, and past any plan id its drones report, so that no LTM takes a new plan for one it
 already flies (an LTM ignores a plan whose id it flies: ``LocalTaskManager.apply_plan``).
+
+Statuses the snapshot lacks: a standby hears the LTMs' statuses itself, and one may reach it
+before a snapshot that was taken before the central had it (the central's loop had not yet
+handled it). :func:`restore` applies such statuses again (``heard``: a status whose ``seq`` is
+past the one its drone's record holds), so that a replica never takes the standby back to an
+older position, an older ``last_heard`` or a waypoint visit fewer; were the central to die
+before its next snapshot, the standby would otherwise resume from them.
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from server.fleet.continuity import (
@@ -57,9 +64,16 @@ def snapshot(ctm: CentralTaskManager, now: float) -> dict[str, Any]:
     }
 
 
-def restore(ctm: CentralTaskManager, data: Any, now: float) -> None:
+def restore(
+    ctm: CentralTaskManager,
+    data: Any,
+    now: float,
+    heard: Iterable[tuple[LtmStatus, float]] = (),
+) -> None:
     """Replace ``ctm``'s drones and missions with those of ``data`` (a :func:`snapshot`),
-    its times moved onto ``now``.
+    its times moved onto ``now``; then apply again each status of ``heard`` (a status and when
+    this CTM heard it, on its clock) that the snapshot's drone record does not include yet
+    (see the module docstring).
 
     Raises:
         MessageError: ``data`` is not a snapshot of this version (nothing is changed then).
@@ -76,12 +90,23 @@ def restore(ctm: CentralTaskManager, data: Any, now: float) -> None:
         next_mission = _int(d, "next_mission_id")
     except (KeyError, TypeError, ValueError) as exc:  # MessageError is a ValueError
         raise MessageError(f"replica: {exc}") from exc
-    reported = max((r.status.plan_id for r in drones.values() if r.status), default=0)
     ctm.drones = drones
     ctm.missions = missions
+    _replay(ctm, heard)
+    reported = max((r.status.plan_id for r in ctm.drones.values() if r.status), default=0)
     ctm._plan_ids = itertools.count(max(next_plan, reported + 1) + PLAN_ID_MARGIN)
     ctm._mission_ids = itertools.count(next_mission)
     ctm._now = now
+
+
+def _replay(ctm: CentralTaskManager, heard: Iterable[tuple[LtmStatus, float]]) -> None:
+    """The statuses of ``heard`` newer than their drones' records (a higher ``seq``: an LTM
+    numbers its statuses), in the order they were heard, at the times they were heard."""
+    for status, t in sorted(heard, key=lambda h: h[1]):
+        rec = ctm.drones.get(status.name)
+        if rec is not None and rec.status is not None and status.seq <= rec.status.seq:
+            continue  # the snapshot has it, or a later one of that drone
+        ctm.on_status(status, t)
 
 
 # ---------------------------------------------------------------------- times

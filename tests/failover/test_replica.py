@@ -15,7 +15,7 @@ from experiments.patrol import LockstepLink, PatrolConfig, PatrolExperiment, Pat
 from server.fleet.ctm import CentralTaskManager, DroneRecord
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
-from server.fleet.messages import FlightPlan, PlanKind
+from server.fleet.messages import FlightPlan, LtmStatus, PlanKind, Role
 from server.fleet.replica import PLAN_ID_MARGIN, restore, snapshot
 
 FAST = {"flight_time_s": 150.0, "swap_s": 20.0}
@@ -156,3 +156,114 @@ def test_a_snapshot_with_one_field_wrong_is_refused() -> None:
         node[path[-1]] = value
         with pytest.raises(MessageError):
             restore(CentralTaskManager(), bad, 0.0)
+
+
+def flying(seq: int, x: float, plan_id: int = 1) -> LtmStatus:
+    """Drone ``uav1``'s ``seq``-th status, flying at ``x`` on the line y = 0 at route height."""
+    return LtmStatus(
+        name="uav1",
+        t=float(seq),
+        seq=seq,
+        x=x,
+        y=0.0,
+        z=1.5,
+        yaw_deg=0.0,
+        lat=0.0,
+        lon=0.0,
+        battery_pct=90.0,
+        flying=True,
+        state="FLYING",
+        link_ok=True,
+        emergency=False,
+        station=Enu(0.0, -2.0, 0.0),
+        plan_id=plan_id,
+    )
+
+
+def patrolling(route: list[Enu]) -> CentralTaskManager:
+    """A central CTM with mission ``m`` on ``route``, ``uav1`` patrolling it."""
+    central = CentralTaskManager()
+    central.add_mission(route, now=0.0, mission_id="m")
+    central.drones["uav1"] = DroneRecord("uav1", mission="m", role=Role.PATROLLING)
+    return central
+
+
+def test_a_standby_keeps_the_statuses_a_late_replica_lacks() -> None:
+    """The central's snapshot is taken before its loop has handled an LTM status that the
+    standby has already heard (here: the drone reaching waypoint 2); the replica comes after
+    that status. The standby keeps the status and the visit it makes, so that if the central
+    dies before its next snapshot the standby resumes from where the drone is, not from a
+    second before."""
+    from drone.sim.world import load_world
+    from server.fleet.failover import CentralRole
+    from server.fleet.service import FleetService
+    from server.graph import Graph
+
+    central = patrolling([Enu(0.0, 0.0, 1.5), Enu(6.0, 0.0, 1.5), Enu(6.0, 4.0, 1.5)])
+    central.on_status(flying(1, 0.0), 1.0)  # at waypoint 1
+    central.on_status(flying(2, 3.0), 2.0)  # between waypoints 1 and 2
+    replica = json.dumps({"console": "console-a", "ctm": snapshot(central, 2.9)}).encode()
+
+    now = [0.0]
+    service = FleetService(Graph(), load_world("indoor"), clock=lambda: now[0])
+    standby = CentralRole(service, None, "f", "console-b", clock=lambda: now[0])
+    for seq, x, t in [(1, 0.0, 101.0), (2, 3.0, 102.0), (3, 6.0, 103.0)]:  # its own clock
+        now[0] = t
+        standby._on_ltm("uav1", json.dumps(flying(seq, x).to_dict()).encode())
+    now[0] = 103.1
+    standby._on_replica(replica)  # snapshot at 2.9: before the status at waypoint 2
+
+    rec = service.ctm.drones["uav1"]
+    assert rec.status == flying(3, 6.0)
+    assert rec.last_heard == 103.0
+    cov = service.ctm.missions["m"].coverage
+    assert cov is not None
+    assert [list(v) for v in cov.visits] == [[pytest.approx(101.2)], [103.0], []]
+    assert standby.replicas_in == 1
+
+
+def test_a_status_the_snapshot_has_is_not_applied_again() -> None:
+    central = patrolling([Enu(0.0, 0.0, 1.5), Enu(6.0, 0.0, 1.5)])
+    for seq, x in [(1, 0.0), (2, 3.0), (3, 6.0)]:
+        central.on_status(flying(seq, x, plan_id=7), float(seq))
+    data = json.loads(json.dumps(snapshot(central, 3.5)))
+    standby = CentralTaskManager()
+    heard = [(flying(2, 3.0, plan_id=7), 12.0), (flying(3, 6.0, plan_id=7), 13.0)]
+    restore(standby, data, 13.5, heard)
+    rec = standby.drones["uav1"]
+    assert rec.status == flying(3, 6.0, plan_id=7)
+    assert rec.last_heard == pytest.approx(13.0)  # the snapshot's, on the standby's clock
+    cov = standby.missions["m"].coverage
+    assert cov is not None and [len(v) for v in cov.visits] == [1, 1]  # no visit twice
+
+
+def test_plans_are_numbered_past_a_replayed_status_too() -> None:
+    central = patrolling([Enu(0.0, 0.0, 1.5), Enu(6.0, 0.0, 1.5)])
+    central.on_status(flying(1, 0.0, plan_id=3), 1.0)
+    data = json.loads(json.dumps(snapshot(central, 1.5)))
+    standby = CentralTaskManager()
+    restore(standby, data, 11.5, [(flying(2, 3.0, plan_id=40), 11.6)])  # a plan after it
+    assert next(standby._plan_ids) == 40 + 1 + PLAN_ID_MARGIN
+
+
+def test_a_vehicle_started_again_is_not_taken_back_to_its_old_statuses() -> None:
+    """Its LTM numbers its statuses from 1 again: the standby forgets the ones it kept from
+    before (their numbers are higher), so a replica with the new ones stands."""
+    from drone.sim.world import load_world
+    from server.fleet.failover import CentralRole
+    from server.fleet.service import FleetService
+    from server.graph import Graph
+
+    now = [0.0]
+    service = FleetService(Graph(), load_world("indoor"), clock=lambda: now[0])
+    standby = CentralRole(service, None, "f", "console-b", clock=lambda: now[0])
+    for seq, x, t in [(500, 0.0, 10.0), (501, 3.0, 11.0), (1, 6.0, 12.0)]:  # started again
+        now[0] = t
+        standby._on_ltm("uav1", json.dumps(flying(seq, x).to_dict()).encode())
+    central = patrolling([Enu(0.0, 0.0, 1.5), Enu(6.0, 0.0, 1.5)])
+    central.on_status(flying(1, 6.0), 2.0)
+    now[0] = 12.2
+    standby._on_replica(json.dumps({"console": "a", "ctm": snapshot(central, 2.1)}).encode())
+    rec = service.ctm.drones["uav1"]
+    assert rec.status == flying(1, 6.0)
+    assert rec.last_heard == pytest.approx(12.1)
