@@ -581,7 +581,7 @@ class CentralTaskManager:
     def _failure(self, rec: DroneRecord, now: float) -> str:
         st = rec.status
         heard = rec.last_heard
-        if rec.role is not Role.LOST:
+        if rec.role is not DroneRole.LOST:
             heard = max(heard, self.listening_since)  # claim
         if st is None or now - heard > self.lost_after_s:
             return "silent"

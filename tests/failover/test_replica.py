@@ -15,7 +15,7 @@ from experiments.patrol import LockstepLink, PatrolConfig, PatrolExperiment, Pat
 from server.fleet.ctm import CentralTaskManager, DroneRecord
 from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
-from server.fleet.messages import FlightPlan, LtmStatus, PlanKind, Role
+from server.fleet.messages import DroneRole, FlightPlan, LtmStatus, PlanKind
 from server.fleet.replica import PLAN_ID_MARGIN, restore, snapshot
 
 FAST = {"flight_time_s": 150.0, "swap_s": 20.0}
@@ -184,7 +184,7 @@ def patrolling(route: list[Enu]) -> CentralTaskManager:
     """A central CTM with mission ``m`` on ``route``, ``uav1`` patrolling it."""
     central = CentralTaskManager()
     central.add_mission(route, now=0.0, mission_id="m")
-    central.drones["uav1"] = DroneRecord("uav1", mission="m", role=Role.PATROLLING)
+    central.drones["uav1"] = DroneRecord("uav1", mission="m", role=DroneRole.PATROLLING)
     return central
 
 

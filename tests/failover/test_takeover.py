@@ -12,7 +12,7 @@ from drone.sim.world import load_world
 from server.fleet.ctm import CentralTaskManager
 from server.fleet.failover import CentralRole
 from server.fleet.geo import Enu
-from server.fleet.messages import LtmStatus, Role
+from server.fleet.messages import DroneRole, LtmStatus
 from server.fleet.replica import snapshot
 from server.fleet.service import FleetService
 from server.fleet.states import MissionState
@@ -125,7 +125,7 @@ def test_a_drone_unheard_while_the_old_central_froze_is_not_lost_to_the_new_one(
     ctm = role.ctm
     out = ctm.step(now[0] + 0.1)  # the CtmNode's first round after the claim
     assert out == []  # nobody sent anywhere: the patrol flies on as it was
-    assert ctm.drones[active].role is Role.PATROLLING
+    assert ctm.drones[active].role is DroneRole.PATROLLING
     ms = ctm.missions["m"]
     assert ms.state is MissionState.RUNNING and ms.active == active and ms.replacements == 0
     # its statuses come again (its vehicle on console-b's router): nothing changes
@@ -135,7 +135,7 @@ def test_a_drone_unheard_while_the_old_central_froze_is_not_lost_to_the_new_one(
     now[0] += 0.4
     hear(role, status(active, 9, p, flying=True, plan_id=plan.plan_id))
     assert ctm.step(now[0]) == []
-    assert ctm.drones[active].role is Role.PATROLLING and ms.active == active
+    assert ctm.drones[active].role is DroneRole.PATROLLING and ms.active == active
 
 
 def test_a_drone_still_silent_after_the_claim_is_lost_after_the_usual_silence() -> None:
@@ -147,8 +147,8 @@ def test_a_drone_still_silent_after_the_claim_is_lost_after_the_usual_silence() 
         now[0] = claimed + t
         hear(role, status(other, seq, STATIONS[other], flying=False))
     assert ctm.step(claimed + ctm.lost_after_s - 0.1) == []
-    assert ctm.drones[active].role is Role.PATROLLING
+    assert ctm.drones[active].role is DroneRole.PATROLLING
     out = ctm.step(claimed + ctm.lost_after_s + 0.1)
-    assert ctm.drones[active].role is Role.LOST
+    assert ctm.drones[active].role is DroneRole.LOST
     assert [d.drone for d in out] == [other]  # replaced, as by any central
     assert ctm.missions["m"].replacements == 1
