@@ -20,7 +20,7 @@ from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS audit (
@@ -44,6 +44,7 @@ RECORDING_COLUMN = "ALTER TABLE audit ADD COLUMN recording TEXT NOT NULL DEFAULT
 
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 def _text(value: str) -> str:
@@ -159,13 +160,19 @@ class AuditLog:
         its audit row (a direct emergency or land: ``synchronous=FULL`` costs milliseconds,
         tens under load, and the driver sends from the same loop). A failed write is logged.
         """
+        fut = self.in_order(lambda: self.append(**entry))
+        fut.add_done_callback(_log_failure)
+        return fut
+
+    def in_order(self, write: Callable[[], T]) -> Future[T]:
+        """``write()`` (rows written through this log) on the log's own writer thread, after
+        every write handed to it before: rows written this way and by :meth:`append_later`
+        keep the order they were asked in."""
         with self._lock:
             if self._writer is None:
                 self._writer = ThreadPoolExecutor(1, thread_name_prefix="audit")
             writer = self._writer
-        fut = writer.submit(lambda: self.append(**entry))
-        fut.add_done_callback(_log_failure)
-        return fut
+        return writer.submit(write)
 
     def recent(self, limit: int = 50, drone: str | None = None) -> list[AuditEntry]:
         """The newest ``limit`` entries, newest first (optionally of one drone)."""

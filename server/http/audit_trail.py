@@ -176,7 +176,8 @@ class RestAuditMiddleware:
                 await self.app(scope, receive, send_status)
             finally:
                 result = f"HTTP {status[0]}" if status else "no response"
-                await _in_thread(
+                await _in_order(
+                    self.trail.log,
                     self.trail.both,
                     what,
                     result,
@@ -187,21 +188,36 @@ class RestAuditMiddleware:
                     at=arrived,
                 )
             return
-        iid = await _in_thread(
-            self.trail.intent, what, role="pilot", source="rest", drone=drone, detail=detail
+        iid = await _in_order(
+            self.trail.log,
+            self.trail.intent,
+            what,
+            role="pilot",
+            source="rest",
+            drone=drone,
+            detail=detail,
         )
         try:
             await self.app(scope, receive, send_status)
         finally:
             result = f"HTTP {status[0]}" if status else "no response"
-            await _in_thread(
-                self.trail.outcome, iid, what, result, role="pilot", source="rest", drone=drone
+            await _in_order(
+                self.trail.log,
+                self.trail.outcome,
+                iid,
+                what,
+                result,
+                role="pilot",
+                source="rest",
+                drone=drone,
             )
 
 
-async def _in_thread(fn: Callable[..., Any], *args: Any, **kw: Any) -> Any:
+async def _in_order(log: AuditLog, fn: Callable[..., Any], *args: Any, **kw: Any) -> Any:
+    """``fn(*args, **kw)`` (a write to ``log``) on the log's writer thread, so that its rows
+    keep their order with the rows written there meanwhile (a lease change's)."""
     try:
-        return await asyncio.to_thread(fn, *args, **kw)
+        return await asyncio.wrap_future(log.in_order(lambda: fn(*args, **kw)))
     except AuditError:
         return -1  # the log's own error already names the file; acting is not blocked by it
 
