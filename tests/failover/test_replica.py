@@ -17,6 +17,7 @@ from server.fleet.errors import MessageError
 from server.fleet.geo import Enu
 from server.fleet.messages import DroneRole, FlightPlan, LtmStatus, PlanKind
 from server.fleet.replica import PLAN_ID_MARGIN, restore, snapshot
+from tests.support.ltm_status import ltm_status
 
 FAST = {"flight_time_s": 150.0, "swap_s": 20.0}
 SWITCH_AT_S = 100.0  # mid-shift: the first drone patrols, its relief is not sent yet
@@ -160,21 +161,14 @@ def test_a_snapshot_with_one_field_wrong_is_refused() -> None:
 
 def flying(seq: int, x: float, plan_id: int = 1) -> LtmStatus:
     """Drone ``uav1``'s ``seq``-th status, flying at ``x`` on the line y = 0 at route height."""
-    return LtmStatus(
-        name="uav1",
+    return ltm_status(
         t=float(seq),
         seq=seq,
         x=x,
-        y=0.0,
         z=1.5,
-        yaw_deg=0.0,
-        lat=0.0,
-        lon=0.0,
         battery_pct=90.0,
         flying=True,
         state="FLYING",
-        link_ok=True,
-        emergency=False,
         station=Enu(0.0, -2.0, 0.0),
         plan_id=plan_id,
     )

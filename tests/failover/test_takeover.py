@@ -17,6 +17,7 @@ from server.fleet.replica import snapshot
 from server.fleet.service import FleetService
 from server.fleet.states import MissionState
 from server.graph import Graph
+from tests.support.ltm_status import ltm_status
 
 ROUTE = [Enu(1.5, 1.0, 1.5), Enu(6.5, 1.0, 1.5), Enu(6.5, 5.0, 1.5), Enu(1.5, 5.0, 1.5)]
 STATIONS = {"uav1": Enu(1.5, 0.0, 0.0), "uav2": Enu(3.0, 0.0, 0.0)}
@@ -50,21 +51,16 @@ class FakeCentralBus:
 
 
 def status(name: str, seq: int, p: Enu, *, flying: bool, plan_id: int = 0) -> LtmStatus:
-    return LtmStatus(
-        name=name,
+    return ltm_status(
+        name,
         t=float(seq),
         seq=seq,
         x=p.x,
         y=p.y,
         z=p.z,
-        yaw_deg=0.0,
-        lat=0.0,
-        lon=0.0,
         battery_pct=95.0,
         flying=flying,
         state="FLYING" if flying else "LANDED",
-        link_ok=True,
-        emergency=False,
         station=STATIONS[name],
         plan_id=plan_id,
     )

@@ -24,6 +24,7 @@ from server.fleet.planner import (
     should_dispatch,
     time_to_threshold_s,
 )
+from tests.support.ltm_status import ltm_status
 
 ORIGIN = Geo(36.367164, 127.363472, 60.0)
 SQUARE = (Enu(-15, -15, 5), Enu(15, -15, 5), Enu(15, 15, 5), Enu(-15, 15, 5))
@@ -54,30 +55,8 @@ def test_geo_bad_input(lat: float, lon: float, alt: float) -> None:
 
 
 # ---------------------------------------------------------------- messages
-def status(name: str = "uav1", **kw: Any) -> LtmStatus:
-    base = dict(
-        name=name,
-        t=0.0,
-        seq=1,
-        x=0.0,
-        y=0.0,
-        z=0.0,
-        yaw_deg=0.0,
-        lat=0.0,
-        lon=0.0,
-        battery_pct=100.0,
-        flying=False,
-        state="LANDED",
-        link_ok=True,
-        emergency=False,
-        station=Enu(0.0, 0.0, 0.0),
-    )
-    base.update(kw)
-    return LtmStatus(**base)  # type: ignore[arg-type]
-
-
 def test_messages_roundtrip() -> None:
-    s = status(plan_id=3, task="waypoints")
+    s = ltm_status(plan_id=3, task="waypoints")
     assert LtmStatus.from_dict(s.to_dict()) == s
     p = FlightPlan(7, PlanKind.PATROL, "m1", SQUARE, True, 2, 5.0, 1.0)
     assert FlightPlan.from_dict(p.to_dict()) == p
@@ -95,7 +74,7 @@ def test_messages_roundtrip() -> None:
     ],
 )
 def test_status_bad_fields_named(change: dict[str, Any], field: str) -> None:
-    d = status().to_dict() | change
+    d = ltm_status().to_dict() | change
     with pytest.raises(MessageError, match=field):
         LtmStatus.from_dict(d)
 
@@ -119,7 +98,7 @@ def test_plan_bad_input(plan: Any) -> None:
 @settings(max_examples=100, deadline=None)
 @given(
     st.dictionaries(
-        st.sampled_from([*list(status().to_dict()), "kind", "route"]),
+        st.sampled_from([*list(ltm_status().to_dict()), "kind", "route"]),
         st.none() | st.integers() | st.floats() | st.text() | st.booleans(),
     )
 )
@@ -189,7 +168,7 @@ def test_route_distance() -> None:
 def make_ctm(n: int = 3) -> CentralTaskManager:
     ctm = CentralTaskManager(origin=ORIGIN, lost_after_s=3.0)
     for i in range(n):
-        ctm.on_status(status(f"uav{i + 1}", station=Enu(1.5 * i, 0, 0)), 0.0)
+        ctm.on_status(ltm_status(f"uav{i + 1}", station=Enu(1.5 * i, 0, 0)), 0.0)
     return ctm
 
 
