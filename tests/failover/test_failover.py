@@ -242,6 +242,20 @@ def patrolling(
         yield Patrol(a, b, mission, watcher, phase)
 
 
+def laps_flown(watcher: Watcher, phase: Callable[[str], None], laps: int) -> list[int]:
+    """Each waypoint's visits now (returned), once every one has had ``laps`` more."""
+    at = [len(v) for v in watcher.visits()]
+    what = f"{laps} {'lap' if laps == 1 else 'laps'} after the kill"
+    wait_for(
+        lambda: all(len(v) >= n + laps for v, n in zip(watcher.visits(), at, strict=True)),
+        what,
+        180,
+        period=0.5,
+    )
+    phase(what)
+    return at
+
+
 def test_kill_9_of_the_central_console_mid_patrol(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -277,17 +291,7 @@ def test_kill_9_of_the_central_console_mid_patrol(
         assert after["mission"]["id"] == mission  # the same mission, not a new one
         assert after["state"] == "running"
 
-        visits_at_kill = [len(v) for v in watcher.visits()]
-        wait_for(
-            lambda: all(
-                len(v) >= n + LAPS_AFTER
-                for v, n in zip(watcher.visits(), visits_at_kill, strict=True)
-            ),
-            f"{LAPS_AFTER} laps after the kill",
-            180,
-            period=0.5,
-        )
-        phase(f"{LAPS_AFTER} laps after the kill")
+        visits_at_kill = laps_flown(watcher, phase, LAPS_AFTER)
         final = b.http.get("/api/v1/patrol").json()
         assert final["mission"]["id"] == mission and final["state"] == "running"
         assert final["mission"]["active"] == active  # the same drone flies on
@@ -345,17 +349,7 @@ def test_a_central_console_frozen_before_it_dies_leaves_the_patrol_to_its_drone(
         takeover_s = central_of(b)["claimed_unix"] - killed_wall
         print(f"takeover: console-b holds the role {takeover_s:.3f} s after the kill")
         assert 0 <= takeover_s < TAKEOVER_BOUND_S
-        visits_at_kill = [len(v) for v in watcher.visits()]
-        wait_for(
-            lambda: all(
-                len(v) >= n + FROZEN_LAPS_AFTER
-                for v, n in zip(watcher.visits(), visits_at_kill, strict=True)
-            ),
-            f"{FROZEN_LAPS_AFTER} lap after the kill",
-            180,
-            period=0.5,
-        )
-        phase(f"{FROZEN_LAPS_AFTER} lap after the kill")
+        laps_flown(watcher, phase, FROZEN_LAPS_AFTER)
         final = b.http.get("/api/v1/patrol").json()
         assert final["mission"]["id"] == mission and final["state"] == "running"
         assert final["mission"]["active"] == active  # the same drone flies on
