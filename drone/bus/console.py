@@ -166,7 +166,6 @@ class ConsoleBus:
         self.fleet = keys.segment(fleet)
         self.vehicle_passwords = dict(vehicle_passwords or {})
         self._own_vehicles = {keys.segment(v) for v in vehicles}
-        self.vehicle_names = sorted(self._own_vehicles | set(self.vehicle_passwords))
         wrap = as_tls if tls is not None and tls.cert is not None else str
         self.name = keys.segment(name)
         self.listen = [wrap(e) for e in listen] or [
@@ -189,6 +188,11 @@ class ConsoleBus:
         self._joins: dict[str, Join] = {}
         self._stop = threading.Event()
         self._watch: threading.Thread | None = None
+
+    @property
+    def vehicle_names(self) -> list[str]:
+        """The vehicles with a credential on this bus: its own and the keyed ones."""
+        return sorted(self._own_vehicles | set(self.vehicle_passwords))
 
     def start(self) -> None:
         """Open the router and the console's session, and write ``client.json5`` /
@@ -286,7 +290,6 @@ class ConsoleBus:
             )
             self.vehicle_passwords = passwords
             self._write_keyed()
-            self.vehicle_names = sorted(self._own_vehicles | set(passwords))
             if creds.users == old and self.router is not None:
                 return None
             started = clock()
