@@ -18,7 +18,6 @@ vehicle process can use it without importing it.
 
 from __future__ import annotations
 
-import contextlib
 import hmac
 import os
 import re
@@ -226,16 +225,8 @@ class VehicleKeys:
         return True
 
     def all(self) -> list[VehicleKey]:
-        """Every stored key, by name."""
-        out = []
-        with contextlib.suppress(FileNotFoundError):
-            for path in sorted(self.directory.glob(f"*{KEY_SUFFIX}")):
-                name = path.name[: -len(KEY_SUFFIX)]
-                if not NAME_RE.match(name):
-                    continue
-                with contextlib.suppress(VehicleKeyError):
-                    out.append(VehicleKey(name, read_key_file(path), path))
-        return out
+        """Every stored key, by name (the files that hold none left out: :meth:`scan`)."""
+        return [VehicleKey(n, k, self.path_of(n)) for n, k in self.scan().keys.items()]
 
     def signature(self) -> Signature:
         """What the directory looks like (each file's name, size, inode and change time, and
