@@ -227,6 +227,57 @@ def test_a_killed_vehicle_process_raises_its_alarm_until_a_new_one_speaks(
             60,
         )
         assert alarm(v, "fresh:vehicle:uav1")[0].startswith("uav1: ")  # type: ignore[index]
+        # the new process's camera opening after its telemetry is the restart, not the camera
+        assert alarm(v, "fresh:camera:uav1") is None, v["alarms"]
+    finally:
+        ctx.close()
+
+
+# The rule on an injected clock: a vehicle and its camera; the vehicle silent 3 s and back
+# (or replaced), the camera 4 s later still; then a camera that never comes back.
+RESTART = """async () => {
+  const { Freshness, START_GRACE_S } = await import('/static/js/freshness.js');
+  const run = (how) => {
+    let t = 0;
+    const shown = new Map();
+    const alarms = { raise: (k, x) => shown.set(k, x), update: (k, x) => shown.set(k, x),
+                     clear: (k, x) => shown.set(k, 'back: ' + x), drop: (k) => shown.delete(k) };
+    const f = new Freshness({ now: () => t, alarms });
+    f.source('vehicle', { alarm: (a) => 'no telemetry for ' + a, back: (a) => 'telemetry ' + a });
+    f.source('camera', { upstream: 'vehicle', alarm: (a) => 'no picture for ' + a,
+                         back: (a) => 'picture ' + a });
+    const step = (until, beats) => { while (t < until - 1e-9) {
+      t = Math.round((t + 0.25) * 100) / 100; beats.forEach((b) => f.beat(b)); f.tick(); } };
+    step(2, ['vehicle', 'camera']);
+    step(how === 'rule' ? 5 : 2.5, []);          // the process dies
+    if (how === 'replaced') f.replaced('vehicle', 'restarted');
+    step(9, ['vehicle']);                          // the new one: telemetry, no picture yet
+    const early = Object.fromEntries(shown);
+    const greyed = f.staleAge('camera') !== null;
+    step(9 + START_GRACE_S, ['vehicle']);          // and its camera never comes
+    return { early, greyed, late: Object.fromEntries(shown) };
+  };
+  return { rule: run('rule'), replaced: run('replaced') };
+}"""
+
+
+def test_a_camera_behind_a_restarted_vehicle_gets_time_to_open(
+    rig: tuple[SimThread, Served, Any],
+) -> None:
+    """Seen by the rule (the vehicle silent, then back) or told (a new pid before the rule
+    saw it): the camera, silent 4 s after its vehicle is back, is greyed but not blamed; a
+    camera still silent once the start grace is over raises its own alarm."""
+    _sim, srv, browser = rig
+    ctx = browser.new_context(service_workers="block")
+    page = ctx.new_page()
+    try:
+        page.goto(f"http://{HOST}:{srv.port}/?token={PILOT}")
+        out = page.evaluate(RESTART)
+        rule, replaced = out["rule"], out["replaced"]
+        assert rule["early"] == {"fresh:vehicle": "back: telemetry 3.3 s"}, rule
+        for run in (rule, replaced):
+            assert list(run["early"]) == ["fresh:vehicle"] and run["greyed"], run
+            assert run["late"]["fresh:camera"].startswith("no picture for "), run
     finally:
         ctx.close()
 

@@ -17,12 +17,22 @@
 // A source the page learns was replaced (a vehicle process that died and was restarted: a new
 // pid) raises its alarm even when the new one spoke before the alarm was due, since the
 // silence was no hiccup (replaced()); it says at once that the source is back.
+//
+// A source behind one that comes back or is replaced starts again: a new vehicle process opens
+// its camera after its telemetry flows, so the camera's silence until then is the vehicle's, not
+// its own. Its panel still greys with its age, but its alarm waits START_GRACE_S for its first
+// word (an alarm it raised before the page learnt of the restart is dropped: the vehicle's
+// covers it).
 
 export const STALE_MIN_S = 1.0;
 export const STALE_PERIODS = 2.5;
 export const TICK_MS = 250;
 // A tick this late means the page itself was paused (TICK_MS apart when it runs freely).
 const PAGE_STALL_S = 0.6;
+// How long a source behind a restarted one may take to speak again before its own alarm: a
+// vehicle process's first camera frame (decoder opened, first key frame) comes 0.1–3 s after its
+// telemetry on a loaded 2-core machine; 10 s keeps a camera that never comes back from hiding.
+export const START_GRACE_S = 10;
 
 /** Seconds of silence after which a source with this period is stale (the one rule). */
 export function staleAfterS(periodS = 0) {
@@ -81,6 +91,8 @@ export class Freshness {
       staleSince: null,
       gap: null,
       note: "",
+      upStale: false,
+      graceUntil: null,
     });
     return this;
   }
@@ -93,6 +105,20 @@ export class Freshness {
       s.gap = { from: s.heardAt, to: at }; // its last silence, for replaced()
     }
     if (s.heardAt === null || at > s.heardAt) s.heardAt = at;
+    s.graceUntil = null;
+  }
+
+  /** The sources behind ``name`` start again: their alarms wait START_GRACE_S for a first
+   *  word, and one raised already is dropped (the alarm of ``name`` says why they were silent). */
+  restartBehind(name, now) {
+    for (const [behind, d] of this.sources) {
+      if (d.spec.upstream !== name) continue;
+      d.graceUntil = now + START_GRACE_S;
+      if (d.alarmed && !d.saidBack) {
+        d.alarmed = false;
+        this.alarms?.drop?.(this.alarmKey(behind));
+      }
+    }
   }
 
   /**
@@ -102,6 +128,7 @@ export class Freshness {
   replaced(name, why, now = this.now()) {
     const s = this.sources.get(name);
     if (!s || this.suspended || !this.alarms || !s.spec.alarm) return;
+    this.restartBehind(name, now);
     s.note = why;
     if (s.alarmed) return;
     if (s.saidBack && s.gap && s.gap.from === s.staleSince) {
@@ -231,8 +258,11 @@ export class Freshness {
     const key = this.alarmKey(name);
     const own = !this.suspended && this.ownStale(name, now);
     const upstream = s.spec.upstream ? this.staleAge(s.spec.upstream, now) !== null : false;
+    if (s.upStale && !upstream && !this.suspended) this.restartBehind(s.spec.upstream, now);
+    s.upStale = upstream;
+    const starting = s.graceUntil !== null && now < s.graceUntil;
     const age = ageWords(this.age(name, now));
-    if (own && !s.alarmed && !upstream && s.spec.alarm && this.causeKnown(name, now)) {
+    if (own && !s.alarmed && !upstream && !starting && s.spec.alarm && this.causeKnown(name, now)) {
       s.alarmed = true;
       s.saidBack = false;
       s.staleSince = s.heardAt;
