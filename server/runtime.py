@@ -238,13 +238,10 @@ class Runtime:
             self._captioner.close()
 
     def _lease_changed(self, previous: str | None, holder: str | None, how: str) -> None:
-        """Audit a change of pilot (off the loop: the row is fsynced)."""
-        try:
-            loop = asyncio.get_running_loop()
-        except RuntimeError:
-            self.trail.lease_changed(previous, holder, how)
-            return
-        loop.run_in_executor(None, self.trail.lease_changed, previous, holder, how)
+        """Audit a change of pilot on the audit log's writer thread: off the loop (the row is
+        fsynced) and in order with the REST rows around it (a take-over's intent, then the
+        change, then its outcome)."""
+        self.audit.in_order(lambda: self.trail.lease_changed(previous, holder, how))
 
     # ------------------------------------------------------------------ queries
     @property
