@@ -28,9 +28,11 @@ from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
 SPEED = 3.0
-# A four-minute battery (the AR.Drone's is 12, drone/sim/battery.py): the first handoff comes
-# ~146 s into the mission, so with the minute after it the run takes about a minute of wall time.
-FLIGHT_TIME_S = 240.0
+# A battery of 200 s (the AR.Drone's lasts 12 min, drone/sim/battery.py): the first handoff
+# comes ~117 s into the mission, the second ~222 s; with AFTER_S past the first the run takes
+# about 55 s of wall time.
+FLIGHT_TIME_S = 200.0
+AFTER_S = 45.0
 COVERAGE_PP = 1.0
 GAP_S = 5.0
 TOKEN = "live-clock-pilot-token"
@@ -131,7 +133,7 @@ def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path:
         r = srv.http.post("/api/v1/patrol", json={})
         assert r.status_code == 200, r.text
         assert r.json()["reply"].startswith("Starting the patrol of 4 waypoints with 2 drones")
-        # through the first handoff and a minute of simulated time past it
+        # through the first handoff and AFTER_S of simulated time past it
         first = wait_for(
             lambda: _route(srv),
             lambda s: bool(s.get("mission")) and s["mission"]["handoffs"] >= 1,
@@ -143,10 +145,10 @@ def test_live_patrol_on_a_faster_clock_matches_the_lockstep_experiment(tmp_path:
             lambda: _route(srv),
             lambda s: (
                 bool(s.get("mission"))
-                and s["mission"]["coverage"]["route"]["window_s"] >= t_handoff + 60.0
+                and s["mission"]["coverage"]["route"]["window_s"] >= t_handoff + AFTER_S
             ),
-            60.0 / SPEED + 120.0,
-            "a simulated minute after the handoff",
+            AFTER_S / SPEED + 120.0,
+            f"{AFTER_S:g} simulated seconds after the handoff",
         )
         # each a hover that gives the post away: the machine's delays, not the console's
         silences = srv.log().count("central server silent")
