@@ -51,15 +51,17 @@ run: $(VENV)/.installed-run
 	$(VENV)/bin/uav-console serve --host $(HOST) --port $(PORT) $(ARGS)
 
 # The whole suite is three pytest runs. First every file but the browser tests and the tests
-# marked `serial` in two worker processes, one test file per worker at a time (pytest-xdist;
-# fixtures that several files share take loopback addresses of their worker's own,
-# tests/support/loopback.py), handed out longest file first by the last run's seconds
-# (tests/conftest.py; xdist's own reorder, by test count, is off). Then the browser tests, the
-# same way: each worker has a server and a Chromium of its own, and a browser file waits on
-# flights in real time about as much as it computes. Last the `serial` tests alone: they run
+# marked `serial` in three worker processes on the 2 cores (their files wait on processes and
+# real-time flight a third of the time: 216 s against 256-273 s on two, same machine, 2026-11-27),
+# one test file per worker at a time (pytest-xdist; fixtures that several files share take
+# loopback addresses of their worker's own, tests/support/loopback.py), handed out longest file
+# first by the last run's seconds (tests/conftest.py; xdist's own reorder, by test count, is
+# off). Then the browser tests the same way in two workers: each has a server and a Chromium of
+# its own, and a browser file waits on flights in real time about as much as it computes (in
+# three workers they took longer, 221 s, and three failed). Last the `serial` tests alone: they run
 # real-time loops and failed when a second run shared the 2 cores with them. All three run even
 # if one fails. With ARGS, one serial pytest run.
-PARALLEL := -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial'
+PARALLEL := -n 3 --dist loadfile --no-loadscope-reorder --ignore=tests/browser -m 'not serial'
 BROWSER := -n 2 --dist loadfile --no-loadscope-reorder tests/browser -m browser
 SERIAL := -m 'serial and not browser'
 test: $(VENV)/.installed-test node-deps

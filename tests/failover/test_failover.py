@@ -56,11 +56,11 @@ FROZEN_LAPS_BEFORE = 0
 FROZEN_LAPS_AFTER = 1
 # The fleet (both consoles, the vehicles, their simulators) on a clock this many times faster
 # than the wall clock (server/timewarp.py): a lap of the indoor patrol, ~30 s of the drones'
-# time, takes ~15 s. The camera stays on (indoors the drones localise on its markers; a
+# time, takes ~10 s. The camera stays on (indoors the drones localise on its markers; a
 # simulator behind on its frames drops them). The takeover is judged in wall seconds, as the
 # product judges a link's loss (timewarp.guard_s); the visits carry the vehicles' wall-clock
 # stamps, and the revisit bound is a ratio of two such spans.
-CLOCK_SPEED = 2.0
+CLOCK_SPEED = 3.0
 
 
 START_S = 120.0  # a serve's start on a loaded 2-core machine took 34 s

@@ -27,10 +27,10 @@ from tests.e2e.served import ROOT, serve
 from tests.support.loopback import fresh_address
 from tests.support.polling import wait_for
 
-SPEED = 3.0
+SPEED = 4.0
 # A battery of 200 s (the AR.Drone's lasts 12 min, drone/sim/battery.py): the first handoff
 # comes ~117 s into the mission, the second ~222 s; with AFTER_S past the first the run takes
-# about 55 s of wall time.
+# about 45 s of wall time at ×4.
 FLIGHT_TIME_S = 200.0
 AFTER_S = 45.0
 COVERAGE_PP = 1.0
