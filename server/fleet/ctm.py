@@ -12,8 +12,10 @@ within the lead time of the best idle drone (planner.lead_time_s), that drone is
 is on the route the tired drone gets a return plan (*returning*), lands at its station
 (*charging*, restored by the station) and becomes *idle* when ready. The active drone never
 leaves before its relief is on the route unless its battery is down to the reserve it needs to
-get home. A drone silent for ``lost_after_s``, in emergency, or not hearing its own drone is
-*lost*, and whatever it did is given to another.
+get home. A drone silent for ``lost_after_s``, in emergency, or not hearing its own drone for
+``lost_after_s`` is *lost*, and whatever it did is given to another (a link blip of the drone's
+own, its navdata late 0.5 s on a busy machine, is no reason to replace it or to drop its role in
+a paused mission).
 
 A mission's state follows the one table of ``server.fleet.states``: *waiting* for a drone on
 the route, *running*, *paused* when the operator takes one of its drones (land, hover, stop,
@@ -95,6 +97,7 @@ class DroneRecord:
     lost_reason: str = ""
     lost_from: DroneRole = DroneRole.IDLE  # the role it had when it was lost
     charging_since: float = -math.inf  # when it landed at its station to charge
+    link_down_since: float | None = None  # first status of a run saying its drone link is down
     samples: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=400))
 
     def drain_pct_s(self, default: float) -> float:
@@ -140,7 +143,8 @@ class CentralTaskManager:
     Args:
         model: flight model for lead times and reserves.
         stations: the station model (restore time) for readiness and the bound.
-        lost_after_s: an LTM silent this long is lost.
+        lost_after_s: an LTM silent this long, or reporting its drone's link down this long,
+            is lost.
         corridor_m: a drone this close (horizontally) to the route, at route height ±1.5 m,
             is on the route.
         origin: GPS origin for lat/lon missions and status.
@@ -215,6 +219,10 @@ class CentralTaskManager:
             self.event(now, f"{status.name} joined")
         rec.status = status
         rec.last_heard = now
+        if status.link_ok:
+            rec.link_down_since = None
+        elif rec.link_down_since is None:
+            rec.link_down_since = now
         if status.flying:
             rec.samples.append((now, status.battery_pct))
             while rec.samples and now - rec.samples[0][0] > DRAIN_WINDOW_S:
@@ -587,7 +595,10 @@ class CentralTaskManager:
             return "silent"
         if st.emergency:
             return "emergency"
-        if not st.link_ok:
+        down = rec.link_down_since
+        if not st.link_ok and (
+            rec.role is DroneRole.LOST or (down is not None and now - down >= self.lost_after_s)
+        ):
             return "drone link lost"
         return ""
 

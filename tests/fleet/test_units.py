@@ -236,6 +236,11 @@ def test_ctm_replaces_failed_drone(failure: dict[str, Any] | None, reason: str) 
     t = 2.0 if failure else 5.0
     if failure:
         fly(ctm, a, t, **failure)
+    if reason == "drone link lost":
+        # a blip is not a loss: its drone link must stay down as long as a silence would
+        assert ctm.step(t) == [] and ctm.drones[a].role is DroneRole.PATROLLING
+        t = 5.0
+        fly(ctm, a, t, x=-15, y=-15, z=5, flying=True, state="FLYING", **failure)
     for r in others:
         ctm.on_status(replace(r.status, t=t), t)  # type: ignore[arg-type]
     out = ctm.step(t)
@@ -287,10 +292,15 @@ def test_ctm_leaves_a_manually_flown_drone_alone() -> None:
     for t in range(0, 30):
         fly(ctm, "uav1", float(t), flying=True, z=1.2)
         assert ctm.step(float(t)) == []
-    # nor after a link blip or a silence while it flies (the drone was never the CTM's)
+    # nor after a link lost or a silence while it flies (the drone was never the CTM's)
     fly(ctm, "uav1", 30.0, flying=True, z=1.2, link_ok=False)
-    assert ctm.step(30.0) == [] and ctm.drones["uav1"].role is DroneRole.LOST
-    fly(ctm, "uav1", 31.0, flying=True, z=1.2, link_ok=True)
+    assert ctm.step(30.0) == [] and ctm.drones["uav1"].role is DroneRole.IDLE  # a blip
+    fly(ctm, "uav1", 33.0, flying=True, z=1.2, link_ok=False)
+    assert ctm.step(33.0) == [] and ctm.drones["uav1"].role is DroneRole.LOST
+    assert ctm.drones["uav1"].lost_reason == "drone link lost"
+    fly(ctm, "uav1", 34.0, flying=True, z=1.2, link_ok=True)
+    assert ctm.step(34.0) == [] and ctm.drones["uav1"].role is DroneRole.IDLE
+    fly(ctm, "uav1", 35.0, flying=True, z=1.2, link_ok=True)
     assert ctm.step(40.0) == [] and ctm.drones["uav1"].role is DroneRole.LOST  # silent
     for t in range(41, 50):
         fly(ctm, "uav1", float(t), flying=True, z=1.2)
