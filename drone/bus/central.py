@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -82,7 +83,9 @@ class CentralBus:
         self._replica: zenoh.Publisher | None = None
         self.clock = time.monotonic
         self._last_view: tuple[set[str], set[str]] | None = None  # seen while linked, settled
-        self._linked_since: float | None = None
+        # When the session last linked to its router again (None: off it now). Linked from the
+        # start counts as settled: only a relink waits, never a console's first looks.
+        self._linked_since: float | None = -math.inf
 
     def start(self) -> None:
         lv = self.session.liveliness()

@@ -11,6 +11,7 @@ import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -223,3 +224,47 @@ def test_a_console_that_starts_first_joins_the_other_when_it_comes_and_again_aft
         if a is not None:
             a.close()
         b.close()
+
+
+@dataclass
+class _Sample:
+    key_expr: str
+    kind: object
+
+
+def test_the_view_settles_after_a_relink_only_not_on_a_consoles_first_looks() -> None:
+    """No network: the view as the liveliness callbacks fill it, on an injected clock. A
+    console's first looks follow the bus as its history arrives (they froze on the first one:
+    a central token that came a moment after it was never seen); off its router and for
+    RELINK_SETTLE_S after a relink the view is the last one seen."""
+    import zenoh
+
+    from drone.bus.central import RELINK_SETTLE_S
+
+    routers: list[bytes] = [b"router"]
+    session = SimpleNamespace(info=SimpleNamespace(routers_zid=lambda: list(routers)))
+    now = [100.0]
+    central = CentralBus(
+        session,  # type: ignore[arg-type]
+        "default",
+        "west",
+        None,  # type: ignore[arg-type]
+        on_replica=lambda _b: None,
+        on_ltm=lambda _d, _b: None,
+    )
+    central.clock = lambda: now[0]
+    put, gone = zenoh.SampleKind.PUT, zenoh.SampleKind.DELETE
+    assert central.view() == ({"west"}, set())
+    central._on_console(_Sample("uavc/default/console/east/alive", put))  # type: ignore[arg-type]
+    central._on_holder(_Sample("uavc/default/central/alive/east", put))  # type: ignore[arg-type]
+    seen = ({"west", "east"}, {"east"})
+    assert central.view() == seen  # at the same instant: no settling on first looks
+    routers.clear()  # off its router: east's tokens go with the link
+    central._on_holder(_Sample("uavc/default/central/alive/east", gone))  # type: ignore[arg-type]
+    central._on_console(_Sample("uavc/default/console/east/alive", gone))  # type: ignore[arg-type]
+    assert central.view() == seen
+    routers.append(b"router")  # linked again, the history not back yet
+    now[0] += RELINK_SETTLE_S / 2
+    assert central.view() == seen
+    now[0] += RELINK_SETTLE_S
+    assert central.view() == ({"west"}, set())  # settled: what the bus says
