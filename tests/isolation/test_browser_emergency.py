@@ -106,7 +106,7 @@ def open_page(browser: Any, srv: Served) -> tuple[Any, Any, list[str]]:
 def take_off(sim: SimThread, srv: Served) -> None:
     if sim.truth.flying and sim.truth.z > 0.5:
         return  # still up from a test that failed before its landing
-    assert srv.command("take off")["accepted"], srv.log()
+    assert srv.command_again_if_late("take off")["accepted"], srv.log()
     wait_for(lambda: sim.truth.flying and sim.truth.z > 0.5, "take-off", 30)
 
 

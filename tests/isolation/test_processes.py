@@ -77,7 +77,7 @@ def rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[SimThread, S
 
 
 def take_off(sim: SimThread, srv: Served, *, localise: bool = True) -> None:
-    assert srv.command("take off")["accepted"], srv.log()
+    assert srv.command_again_if_late("take off")["accepted"], srv.log()
     wait_for(lambda: sim.truth.flying and sim.truth.z > 0.6, "take-off", 30)
     if localise:
         wait_for(lambda: srv.drone()["localised"], "the EKF to localise on the markers", 30)
