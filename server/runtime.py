@@ -74,7 +74,7 @@ class Runtime:
         self.audit = AuditLog(s.data_dir / "audit.db")
         self.trail = AuditTrail(self.audit)  # intent/outcome rows of direct actions
         self.bridge.audit = self.trail
-        self.security.lease.on_change = self._lease_changed
+        self.security.lease.on_change = self.trail.lease_changed
         self.security.actions_of = self.actions_of  # lease judged by what an utterance asks
         self._routers: list[APIRouter] = [make_router(self.bridge)]
         self.fleet = FleetService(
@@ -236,12 +236,6 @@ class Runtime:
         self.audit.close()
         if isinstance(self._captioner, Captioner):
             self._captioner.close()
-
-    def _lease_changed(self, previous: str | None, holder: str | None, how: str) -> None:
-        """Audit a change of pilot on the audit log's writer thread: off the loop (the row is
-        fsynced) and in order with the REST rows around it (a take-over's intent, then the
-        change, then its outcome)."""
-        self.audit.in_order(lambda: self.trail.lease_changed(previous, holder, how))
 
     # ------------------------------------------------------------------ queries
     @property

@@ -17,7 +17,6 @@ loop never waits on an fsync.
 from __future__ import annotations
 
 import asyncio
-import logging
 import re
 import time
 from collections.abc import Awaitable, Callable, MutableMapping
@@ -34,7 +33,6 @@ Receive = Callable[[], Awaitable[Message]]
 Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
-log = logging.getLogger("uav_console.audit")
 
 SAFETY = frozenset({"land", "emergency"})
 
@@ -104,15 +102,11 @@ class AuditTrail:
 
     def lease_changed(self, previous: str | None, holder: str | None, how: str) -> None:
         """A change of who holds the pilot lease (one row: the change has already happened,
-        it is made by the lease itself, atomically). Never raises: it runs off the loop, where
-        nobody would see the error; a failed write is logged."""
-        try:
-            self._lease_row(previous, holder, how)
-        except AuditError as exc:
-            log.warning("audit row of a lease change not written: %s", exc)
-
-    def _lease_row(self, previous: str | None, holder: str | None, how: str) -> None:
-        self.log.append(
+        it is made by the lease itself, atomically). Written on the log's writer thread
+        (:meth:`~server.store.AuditLog.append_later`): off the loop (the row is fsynced) and in
+        order with the REST rows around it (a take-over's intent, then the change, then its
+        outcome); a failed write is logged, never raised to the lease."""
+        self.log.append_later(
             utterance=f"{previous or 'nobody'} -> {holder or 'nobody'}",
             commands=[{"action": "lease", "how": how}],
             action=f"lease:{how}",
