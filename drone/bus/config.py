@@ -119,6 +119,11 @@ def vehicle_user(name: str) -> str:
     return VEHICLE_PREFIX + keys.segment(name)
 
 
+def vehicles_among(users: Iterable[str]) -> list[str]:
+    """The vehicle names among bus users (those :func:`vehicle_user` makes), sorted."""
+    return sorted(u.removeprefix(VEHICLE_PREFIX) for u in users if u.startswith(VEHICLE_PREFIX))
+
+
 def access_control(fleet: str, vehicles: Iterable[str]) -> dict[str, Any]:
     """The router's ACL for ``fleet`` and these vehicle names. Zenoh reads it when the router
     opens, so a console restarts its router when the vehicles change

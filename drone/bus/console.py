@@ -28,7 +28,6 @@ from drone.bus.config import (
     CONSOLE_USER,
     OBSERVER_USER,
     PILOT_USER,
-    VEHICLE_PREFIX,
     BusTLS,
     access_control,
     as_tls,
@@ -37,6 +36,7 @@ from drone.bus.config import (
     router_config,
     router_id,
     vehicle_user,
+    vehicles_among,
 )
 from drone.bus.credentials import Credentials, write_private
 from drone.bus.errors import BusConfigError, PayloadError
@@ -315,9 +315,11 @@ class ConsoleBus:
                 break
             time.sleep(RELINK_POLL_S)
         done = Rekeyed(
-            added=_names(set(creds.users) - set(old)),
-            removed=_names(set(old) - set(creds.users)),
-            changed=_names({u for u in set(old) & set(creds.users) if old[u] != creds.users[u]}),
+            added=tuple(vehicles_among(set(creds.users) - set(old))),
+            removed=tuple(vehicles_among(set(old) - set(creds.users))),
+            changed=tuple(
+                vehicles_among(u for u in set(old) & set(creds.users) if old[u] != creds.users[u])
+            ),
             down_s=clock() - started,
         )
         self.rekeys.append(done)
@@ -473,13 +475,6 @@ class ConsoleBus:
             return
         with self._lock:
             self._latest[drone] = telemetry
-
-
-def _names(users: set[str]) -> tuple[str, ...]:
-    """The vehicle names among bus users, sorted."""
-    return tuple(
-        sorted(u.removeprefix(VEHICLE_PREFIX) for u in users if u.startswith(VEHICLE_PREFIX))
-    )
 
 
 def _reachable(endpoint: str) -> str:

@@ -13,8 +13,8 @@ from drone.bus.config import (
     CONSOLE_USER,
     OBSERVER_USER,
     PILOT_USER,
-    VEHICLE_PREFIX,
     vehicle_user,
+    vehicles_among,
 )
 from drone.bus.errors import BusConfigError
 
@@ -36,8 +36,7 @@ class Credentials:
 
     def vehicles(self) -> list[str]:
         """Names of the vehicles that have a credential."""
-        users = self.users
-        return sorted(u.removeprefix(VEHICLE_PREFIX) for u in users if u.startswith(VEHICLE_PREFIX))
+        return vehicles_among(self.users)
 
     @classmethod
     def load_or_create(
