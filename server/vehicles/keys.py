@@ -148,14 +148,12 @@ class KeyWatch:
 
     def __init__(self, quiet_s: float = WATCH_QUIET_S) -> None:
         self.quiet_s = quiet_s
-        self._seen: Signature | None = None
+        self._seen: Signature | None = None  # None: nothing observed yet
         self._changed_at: float | None = None
-        self._started = False
 
     def observe(self, signature: Signature, now: float) -> bool:
         """Whether to read the keys now."""
-        if not self._started or signature != self._seen:
-            self._started = True
+        if signature != self._seen:  # the first observation too (a signature is never None)
             self._seen = signature
             self._changed_at = now
             return False
