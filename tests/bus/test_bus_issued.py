@@ -8,9 +8,6 @@ the vehicle answers ``expired`` and the console says it was not flown. Stops nev
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -20,8 +17,8 @@ from typing import Any
 import pytest
 
 from tests.isolation.conftest import Served, serve, wait_for
-from tests.support.loopback import free_port, fresh_address
-from tests.support.processes import running, vehicle_key
+from tests.support.loopback import free_port
+from tests.support.processes import bus_vehicle, vehicle_key
 
 # serial: a console and a vehicle process on wall-clock deadlines
 pytestmark = pytest.mark.serial
@@ -51,23 +48,6 @@ class Rig:
         return self.vehicle_log.read_text(errors="replace")
 
 
-@contextlib.contextmanager
-def vehicle(tmp: Path, endpoint: str, key: str) -> Iterator[Path]:
-    """``uav-console vehicle --bus-connect`` with its own data directory and deadline."""
-    log_path = tmp / f"{NAME}.log"
-    env = {
-        **os.environ,
-        "UAVC_VEHICLE_KEY": key,
-        "UAVC_DATA_DIR": str(tmp / "drone-computer"),
-        "UAVC_SIM_BASE_ADDR": fresh_address(),
-        "UAVC_COMMAND_DEADLINE_S": str(VEHICLE_DEADLINE_S),
-    }
-    env.pop("UAVC_TOKEN", None)
-    argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", NAME]
-    with running(argv, log_path, env):
-        yield log_path
-
-
 @pytest.fixture
 def rig(tmp_path: Path) -> Iterator[Rig]:
     key = vehicle_key(tmp_path / "data", NAME)
@@ -76,7 +56,9 @@ def rig(tmp_path: Path) -> Iterator[Rig]:
     env = {"UAVC_COMMAND_DEADLINE_S": str(CONSOLE_DEADLINE_S)}
     with (
         serve(tmp_path, "sim", extra=extra, env=env, start_s=120) as srv,
-        vehicle(tmp_path, endpoint, key) as log_path,
+        bus_vehicle(
+            tmp_path, endpoint, NAME, key, {"UAVC_COMMAND_DEADLINE_S": str(VEHICLE_DEADLINE_S)}
+        ) as (_proc, log_path),
     ):
         rig = Rig(srv, log_path)
 

@@ -5,11 +5,6 @@ yet, then the console's router (Zenoh, in this process) opened on that port."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import os
-import subprocess
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,28 +14,13 @@ from drone.bus.commands import CommandReply
 from drone.bus.console import ConsoleBus
 from server.vehicles.keys import new_key
 from tests.isolation.conftest import wait_for
-from tests.support.loopback import free_port, fresh_address
-from tests.support.processes import running
+from tests.support.loopback import free_port
+from tests.support.processes import bus_vehicle
 
 # serial: a vehicle process whose start a second test run on the same 2 cores slows
 pytestmark = pytest.mark.serial
 
 NAME = "uav7"
-
-
-@contextlib.contextmanager
-def vehicle(tmp: Path, endpoint: str, key: str) -> Iterator[tuple[subprocess.Popen[bytes], Path]]:
-    log_path = tmp / f"{NAME}.log"
-    env = {
-        **os.environ,
-        "UAVC_VEHICLE_KEY": key,
-        "UAVC_DATA_DIR": str(tmp / "drone-computer"),
-        "UAVC_SIM_BASE_ADDR": fresh_address(),
-    }
-    env.pop("UAVC_TOKEN", None)
-    argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", NAME]
-    with running(argv, log_path, env) as proc:
-        yield proc, log_path
 
 
 async def ask_telemetry(console: ConsoleBus) -> CommandReply:
@@ -55,7 +35,7 @@ async def ask_telemetry(console: ConsoleBus) -> CommandReply:
 def test_a_vehicle_started_before_its_router_joins_once_the_router_is_up(tmp_path: Path) -> None:
     key = new_key()
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with vehicle(tmp_path, endpoint, key) as (proc, log_path):
+    with bus_vehicle(tmp_path, endpoint, NAME, key) as (proc, log_path):
 
         def vlog() -> str:
             return log_path.read_text(errors="replace")

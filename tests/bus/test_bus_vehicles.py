@@ -8,7 +8,6 @@ import base64
 import contextlib
 import dataclasses
 import json
-import os
 import re
 import subprocess
 import sys
@@ -24,8 +23,8 @@ from websockets.sync.client import connect as ws_connect
 
 from tests.isolation.conftest import HOST, PILOT, Served, wait_for
 from tests.isolation.conftest import serve as serve_quick
-from tests.support.loopback import free_port, fresh_address
-from tests.support.processes import running, vehicle_key
+from tests.support.loopback import free_port
+from tests.support.processes import bus_vehicle, vehicle_key
 
 # serial: real consoles and vehicle processes on wall-clock deadlines (a command 2 s late
 # is refused), which a second test run on the same 2 cores made them miss
@@ -82,24 +81,6 @@ def serve(
         yield srv
 
 
-@contextlib.contextmanager
-def bus_vehicle(
-    tmp: Path, endpoint: str, key: str, extra_env: dict[str, str] | None = None
-) -> Iterator[tuple[subprocess.Popen[bytes], Path]]:
-    log_path = tmp / f"{NAME}.log"
-    env = {
-        **os.environ,
-        "UAVC_VEHICLE_KEY": key,
-        "UAVC_DATA_DIR": str(tmp / "drone-computer"),
-        "UAVC_SIM_BASE_ADDR": fresh_address(),
-        **(extra_env or {}),
-    }
-    env.pop("UAVC_TOKEN", None)
-    argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", NAME]
-    with running(argv, log_path, env) as proc:
-        yield proc, log_path
-
-
 @pytest.fixture(scope="module")
 def shared_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rig]:
     """One console and one bus vehicle for the module's tests that fly it and land it again
@@ -111,7 +92,7 @@ def shared_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rig]:
     extra = ("--fleet", "0", "--bus-listen", endpoint)
     with (
         serve(tmp, "sim", extra=extra) as srv,
-        bus_vehicle(tmp, endpoint, key, LAND_AFTER) as (proc, log_path),
+        bus_vehicle(tmp, endpoint, NAME, key, LAND_AFTER) as (proc, log_path),
     ):
         yield Rig(srv, endpoint, data, proc, log_path)
 
@@ -302,7 +283,7 @@ def test_one_lease_across_two_consoles(tmp_path: Path) -> None:
     with (
         serve(tmp_path, "sim", extra=west_extra) as west,
         serve(tmp_path, "sim", extra=east_extra, port=free_port(HOST)) as east,
-        bus_vehicle(tmp_path, endpoint, key) as (proc, log_path),
+        bus_vehicle(tmp_path, endpoint, NAME, key) as (proc, log_path),
     ):
         rig = Rig(west, endpoint, data, proc, log_path)
         rig.wait_joined(west)
@@ -364,7 +345,7 @@ def test_a_console_started_first_joins_the_one_it_names_when_that_one_comes(
                 port=free_port(HOST),
                 start_s=120,
             ) as west,
-            bus_vehicle(tmp_path, west_bus, key) as (proc, log_path),
+            bus_vehicle(tmp_path, west_bus, NAME, key) as (proc, log_path),
         ):
             rig = Rig(west, west_bus, west_data, proc, log_path)
             wait_for(

@@ -6,14 +6,12 @@ malformed key file leaves the router as it is."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import secrets
 import subprocess
 import sys
 import textwrap
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +19,8 @@ import pytest
 
 from server.cli import main as cli_main
 from tests.isolation.conftest import Served, serve, wait_for
-from tests.support.loopback import free_port, fresh_address
-from tests.support.processes import running, vehicle_key
+from tests.support.loopback import free_port
+from tests.support.processes import bus_vehicle, vehicle_key
 
 # serial: real consoles and vehicle processes on wall-clock deadlines
 pytestmark = pytest.mark.serial
@@ -62,22 +60,6 @@ def probe(endpoint: str, name: str, key: str) -> str:
     return str(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
-@contextlib.contextmanager
-def vehicle(tmp: Path, endpoint: str, name: str, key: str) -> Iterator[Path]:
-    """``uav-console vehicle --bus-connect ENDPOINT --name NAME`` with ``key``; its log."""
-    log_path = tmp / f"{name}.log"
-    env = {
-        **os.environ,
-        "UAVC_VEHICLE_KEY": key,
-        "UAVC_DATA_DIR": str(tmp / f"{name}-computer"),
-        "UAVC_SIM_BASE_ADDR": fresh_address(),
-    }
-    env.pop("UAVC_TOKEN", None)
-    argv = [sys.executable, "-m", "server", "vehicle", "--bus-connect", endpoint, "--name", name]
-    with running(argv, log_path, env):
-        yield log_path
-
-
 def joined(srv: Served, name: str) -> dict[str, Any] | None:
     """``name``'s drone as ``GET /api/v1/drones`` lists it, when its vehicle is on the bus."""
     for drone in srv.http.get("/api/v1/drones").json():
@@ -97,13 +79,13 @@ def test_a_key_made_while_serve_runs_lets_its_vehicle_join(tmp_path: Path) -> No
     extra = ("--vehicles", "process", "--fleet", "0", "--bus-listen", endpoint)
     with (
         serve(tmp_path, "sim", extra=extra, start_s=START_S) as srv,
-        vehicle(tmp_path, endpoint, "uav7", key7) as log7,
+        bus_vehicle(tmp_path, endpoint, "uav7", key7) as (_proc7, log7),
     ):
         wait_for(lambda: joined(srv, "uav7"), "uav7 on the bus", JOIN_S)
         assert probe(endpoint, "uav8", new_key()).startswith("refused")
 
         key8 = vehicle_key(data, "uav8")  # while serve runs
-        with vehicle(tmp_path, endpoint, "uav8", key8):
+        with bus_vehicle(tmp_path, endpoint, "uav8", key8):
             wait_for(lambda: joined(srv, "uav8"), "uav8, keyed while serve ran, joined", JOIN_S)
             # the vehicle already there rejoined the restarted router by itself
             wait_for(lambda: joined(srv, "uav7"), "uav7 back on the bus", 30)
